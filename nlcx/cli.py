@@ -1,0 +1,150 @@
+"""The ``nlcx`` command line."""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import typer
+
+from nlcx import registry
+from nlcx.errors import NlcxError
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    help="Reproducible experiments on the control of nonlinear systems.",
+)
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+ConfigArg = Annotated[Path, typer.Argument(help="Experiment YAML file.", show_default=False)]
+OverridesArg = Annotated[
+    list[str] | None,
+    typer.Argument(
+        help="Overrides key=value with dotted keys, e.g. simulation.t_end=30.", show_default=False
+    ),
+]
+
+
+def one_line_errors(func: F) -> F:
+    """Report nlcx errors as one line on stderr (exit 2) instead of a traceback."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except NlcxError as exc:
+            typer.echo(str(exc), err=True)
+            raise typer.Exit(2) from None
+        except KeyboardInterrupt:
+            typer.echo("interrupted: files already written are complete", err=True)
+            raise typer.Exit(130) from None
+        except Exception as exc:
+            if os.environ.get("NLCX_DEBUG"):
+                raise
+            typer.echo(f"error: {type(exc).__name__}: {exc} (set NLCX_DEBUG=1 for a traceback)", err=True)
+            raise typer.Exit(1) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def _fmt(value: float) -> str:
+    return "—" if value is None or math.isnan(value) else f"{value:.4g}"
+
+
+def _summary(result: Any) -> str:
+    """Per controller and regulated output: the headline metrics of the thesis's tables."""
+    table = result.metrics
+    lines = []
+    for run in result.runs:
+        if run.status != "ok":
+            lines.append(f"  {run.label:<14} {run.status}: {run.reason}")
+            continue
+        rows = table[(table.controller == run.label)]
+        parts = []
+        for signal in dict.fromkeys(rows.signal):
+            sub = rows[rows.signal == signal].set_index("metric")["value"]
+            if "overshoot" in sub:
+                parts.append(
+                    f"{signal}: Mp {_fmt(sub['overshoot'])}% tr {_fmt(sub['rise_time'])}s "
+                    f"ts {_fmt(sub['settling_time'])}s"
+                )
+            elif "peak_deviation" in sub:
+                parts.append(f"{signal}: peak {_fmt(sub['peak_deviation'])} ts {_fmt(sub['settling_time'])}s")
+        lines.append(f"  {run.label:<14} ok    " + " | ".join(parts))
+    return "\n".join(lines)
+
+
+@app.command()
+@one_line_errors
+def run(
+    config: ConfigArg,
+    overrides: OverridesArg = None,
+    out: Annotated[Path | None, typer.Option("--out", help="Run directory (default results/<name>).")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only the run directory.")] = False,
+) -> None:
+    """Run an experiment: every controller of CONFIG on its plant, then write the run directory."""
+    from nlcx import config as cfg
+    from nlcx import engine, report
+
+    start = time.perf_counter()
+    exp = cfg.load(config, overrides or [])
+    loaded = time.perf_counter()
+    result = engine.run_experiment(exp)
+    out_dir = out or Path(exp.section.outputs.dir or Path("results") / exp.name)
+    timings = {"load": loaded - start, **result.timings}
+    report.write_run(result, out_dir, timings, started=start)
+    elapsed = time.perf_counter() - start
+    if quiet:
+        typer.echo(str(out_dir))
+        return
+    typer.echo(
+        f"{exp.name}: {exp.section.plant.name}, {len(result.runs)} controller(s), "
+        f"{result.prepared.grid.n_steps} steps of {result.prepared.grid.dt:g} s"
+    )
+    typer.echo(_summary(result))
+    typer.echo(f"wrote {out_dir}/ in {elapsed:.2f} s")
+
+
+@app.command()
+@one_line_errors
+def validate(config: ConfigArg, overrides: OverridesArg = None) -> None:
+    """Check CONFIG (with overrides) without running it; exit 2 with one line if invalid."""
+    from nlcx import config as cfg
+    from nlcx import engine
+
+    exp = cfg.load(config, overrides or [])
+    engine.prepare(exp)
+    labels = ", ".join(c.label for c in exp.controllers)
+    typer.echo(f"{config}: valid ({exp.section.plant.name}; controllers: {labels})")
+
+
+@app.command("list")
+@one_line_errors
+def list_plugins(
+    kind: Annotated[str | None, typer.Argument(help=f"One of: {', '.join(registry.ALL)}.")] = None,
+) -> None:
+    """List the registered plants, controllers, gain schedules, uncertainties and references."""
+    kinds = [kind] if kind else list(registry.ALL)
+    for name in kinds:
+        if name not in registry.ALL:
+            raise NlcxError(f"unknown kind {name!r}; allowed: {', '.join(registry.ALL)}")
+        typer.echo(f"{name}:")
+        for entry, summary in registry.ALL[name].describe():
+            typer.echo(f"  {entry:<20} {summary}")
+
+
+def main() -> None:  # pragma: no cover - console entry point
+    sys.exit(app())
+
+
+if __name__ == "__main__":  # pragma: no cover - python -m nlcx.cli
+    main()

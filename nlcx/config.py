@@ -1,0 +1,245 @@
+"""Experiment configuration: YAML -> typed, validated model, with ``key=value`` overrides.
+
+Every default lives in the pydantic models below or in a plugin's own model. Loading is two
+stages: the generic sections first, then each plugin section (plant parameters, controllers,
+gain schedules, uncertainties, references) by the model of the plugin its ``name``/``kind``
+selects. Every problem is reported as one :class:`~nlcx.errors.ConfigError` line naming the
+key path, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from nlcx import registry
+from nlcx.errors import MISSING, ConfigError
+from nlcx.validation import join, validate_model
+
+
+class Section(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class PlantSection(Section):
+    #: Registered plant name (``nlcx list plants``).
+    name: str
+    #: Parameter overrides; defaults come from the plant's parameter model.
+    params: dict[str, Any] = {}
+    #: Initial state by state name; unlisted states start at 0.
+    x0: dict[str, float] = {}
+
+
+class SimulationSection(Section):
+    #: Final time, s.
+    t_end: float = Field(20.0, gt=0)
+    #: Integration step and controller sampling period, s.
+    dt: float = Field(1e-3, gt=0)
+    #: Fixed-step explicit Runge-Kutta method.
+    integrator: Literal["rk4", "heun", "euler"] = "rk4"
+    #: A run stops as unstable when |state| exceeds its bound (plants add defaults, e.g.
+    #: |theta| <= pi/2 for the pendulums) or becomes non-finite.
+    bounds: dict[str, float] = {}
+
+    @field_validator("bounds")
+    @classmethod
+    def _positive_bounds(cls, bounds: dict[str, float]) -> dict[str, float]:
+        for key, value in bounds.items():
+            if not value > 0:
+                raise ValueError(f"bound of {key} must be > 0")
+        return bounds
+
+
+class MetricsSection(Section):
+    """Metric definitions, see docs/metrics.md."""
+
+    #: Settling band as a fraction of the step size (step signals) or of the peak
+    #: deviation (regulated signals).
+    settling_band: float = Field(0.02, gt=0, lt=1)
+    #: Rise time between these fractions of the step.
+    rise_limits: tuple[float, float] = (0.1, 0.9)
+    #: Window at the end of the run over which the steady-state value is averaged, s.
+    ss_window: float = Field(1.0, gt=0)
+    #: Absolute floor of the settling band of a regulated signal, in its units.
+    regulation_abs_tol: float = Field(0.0, ge=0)
+
+    @field_validator("rise_limits")
+    @classmethod
+    def _ordered(cls, limits: tuple[float, float]) -> tuple[float, float]:
+        lo, hi = limits
+        if not 0 <= lo < hi <= 1:
+            raise ValueError("rise_limits must satisfy 0 <= low < high <= 1")
+        return limits
+
+
+class OutputsSection(Section):
+    #: Run directory; default results/<name>. ``--out`` overrides it.
+    dir: str | None = None
+    #: Write timeseries.csv (every sample of every controller).
+    timeseries: bool = True
+    #: Write the thesis-style figure (figure.png) and the gains/inputs figure (gains.png).
+    figure: bool = True
+
+
+class ExperimentSection(Section):
+    name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
+    #: Figure title (e.g. the thesis's caption).
+    title: str | None = None
+    #: Root of numpy.random.SeedSequence for everything random in the run.
+    seed: int = Field(0, ge=0)
+    plant: PlantSection
+    #: Controllers compared side by side, by label (e.g. conventional, proposed).
+    controllers: dict[str, dict[str, Any]] = Field(min_length=1)
+    #: Uncertainties by label; each has ``kind`` (default: the label).
+    uncertainty: dict[str, dict[str, Any]] = {}
+    #: References by signal name; outputs not listed are regulated to 0.
+    reference: dict[str, dict[str, Any]] = {}
+    simulation: SimulationSection = SimulationSection()
+    metrics: MetricsSection = MetricsSection()
+    outputs: OutputsSection = OutputsSection()
+
+
+@dataclass(frozen=True)
+class PluginSection:
+    """A plugin section resolved to its registered model and validated configuration."""
+
+    label: str
+    kind: str
+    model: Any
+    config: Any
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A fully validated experiment configuration."""
+
+    raw: dict[str, Any]
+    section: ExperimentSection
+    plant_model: Any
+    plant_params: Any
+    controllers: tuple[PluginSection, ...]
+    uncertainties: tuple[PluginSection, ...]
+    references: dict[str, PluginSection]
+
+    @property
+    def name(self) -> str:
+        return self.section.name
+
+    def resolved(self) -> dict[str, Any]:
+        """The configuration with every default filled in, as written to config.yaml."""
+        sec = self.section
+        return {
+            "name": sec.name,
+            "title": sec.title,
+            "seed": sec.seed,
+            "plant": {
+                "name": sec.plant.name,
+                "params": self.plant_params.model_dump(),
+                "x0": dict(sec.plant.x0),
+            },
+            "controllers": {c.label: c.config.model_dump() for c in self.controllers},
+            "uncertainty": {u.label: u.config.model_dump() for u in self.uncertainties},
+            "reference": {k: r.config.model_dump() for k, r in self.references.items()},
+            "simulation": sec.simulation.model_dump(),
+            "metrics": {**sec.metrics.model_dump(), "rise_limits": list(sec.metrics.rise_limits)},
+            "outputs": sec.outputs.model_dump(),
+        }
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """``a.b.c=value`` -> (["a", "b", "c"], value parsed as YAML)."""
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip() or any(not part for part in key.strip().split(".")):
+        raise ConfigError("", text, "an override must look like section.key=value")
+    try:
+        parsed = yaml.safe_load(value) if value.strip() else None
+    except yaml.YAMLError as exc:
+        raise ConfigError(key.strip(), value, f"not valid YAML: {exc.problem}") from None
+    return key.strip().split("."), parsed
+
+
+def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+    """A copy of ``raw`` with each ``dotted.key=value`` override set (Hydra style)."""
+    data = copy.deepcopy(raw)
+    for text in overrides:
+        parts, value = parse_override(text)
+        node = data
+        for i, part in enumerate(parts[:-1]):
+            child = node.get(part)
+            if child is None:
+                child = node[part] = {}
+            if not isinstance(child, dict):
+                raise ConfigError(".".join(parts[: i + 1]), child, "is not a mapping, so it has no sub-keys")
+            node = child
+        node[parts[-1]] = value
+    return data
+
+
+def read_yaml(path: str | Path) -> dict[str, Any]:
+    """Parse a YAML file with ``yaml.safe_load``; it must hold a mapping."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("", str(path), "config file not found")
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
+        raise ConfigError("", str(path), f"not valid YAML{where}: {getattr(exc, 'problem', exc)}") from None
+    if not isinstance(data, dict):
+        raise ConfigError("", str(path), "a config file must hold a mapping of sections")
+    return data
+
+
+def load(path: str | Path, overrides: list[str] | None = None) -> Experiment:
+    """Read, override and validate an experiment config."""
+    return build(apply_overrides(read_yaml(path), overrides or []))
+
+
+def _plugin(
+    reg: registry.Registry[Any], label: str, data: Any, path: str, default_kind: str | None = None
+) -> PluginSection:
+    """Resolve ``data['kind']`` in ``reg`` and validate ``data`` with that plugin's model."""
+    if not isinstance(data, dict):
+        raise ConfigError(path, data, "must be a mapping of keys to values")
+    kind = data.get("kind", default_kind)
+    if kind is None:
+        raise ConfigError(join(path, "kind"), MISSING, f"required; allowed: {', '.join(reg.names())}")
+    if not isinstance(kind, str):
+        raise ConfigError(join(path, "kind"), kind, f"must be a name; allowed: {', '.join(reg.names())}")
+    model = reg.get(kind, path=join(path, "kind"))
+    cfg = validate_model(model.Config, {**data, "kind": kind}, path)
+    return PluginSection(label=label, kind=kind, model=model, config=cfg)
+
+
+def build(raw: dict[str, Any]) -> Experiment:
+    """Validate a raw config mapping (after overrides)."""
+    section = validate_model(ExperimentSection, raw, "")
+    plant_model = registry.plants.get(section.plant.name, path="plant.name")
+    plant_params = validate_model(plant_model.Params, section.plant.params, "plant.params")
+    controllers = tuple(
+        _plugin(registry.controllers, label, data, join("controllers", label))
+        for label, data in section.controllers.items()
+    )
+    uncertainties = tuple(
+        _plugin(registry.uncertainties, label, data, join("uncertainty", label), default_kind=label)
+        for label, data in section.uncertainty.items()
+    )
+    references = {
+        signal: _plugin(registry.references, signal, data, join("reference", signal))
+        for signal, data in section.reference.items()
+    }
+    return Experiment(
+        raw=raw,
+        section=section,
+        plant_model=plant_model,
+        plant_params=plant_params,
+        controllers=controllers,
+        uncertainties=uncertainties,
+        references=references,
+    )

@@ -1,0 +1,1 @@
+"""Controllers and the gain schedules of the PID controller, registered by name."""

@@ -1,0 +1,45 @@
+"""What a controller is: a compiled step function plus the parameters it reads."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+from nlcx.plants.base import Plant
+
+
+class ControllerConfig(BaseModel):
+    """Base of every controller's configuration: unknown keys are errors."""
+
+    model_config = ConfigDict(extra="forbid")
+    kind: str
+
+
+@dataclass(frozen=True)
+class ControllerInstance:
+    """A configured controller: the step function and the numbers it runs on."""
+
+    label: str
+    kind: str
+    step: Any
+    cp: np.ndarray
+    cs0: np.ndarray
+    #: Names of the reference channels the step function reads, in order.
+    reference_signals: tuple[str, ...]
+    #: Names and units of the values the step function logs every sample.
+    log_names: tuple[str, ...] = ()
+    log_units: tuple[str, ...] = ()
+    config: dict[str, Any] = field(default_factory=dict)
+
+
+class ControllerModel:
+    """A registered controller. Subclasses set ``Config`` and ``step`` and implement build."""
+
+    Config: ClassVar[type[ControllerConfig]] = ControllerConfig
+    step: ClassVar[Any] = None
+
+    def build(self, label: str, cfg: Any, plant: Plant, path: str) -> ControllerInstance:
+        raise NotImplementedError

@@ -1,0 +1,41 @@
+"""Open loop: the plant input is the reference (u = r), for exercising plants."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numba import njit
+
+from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
+from nlcx.kernel import CONTROLLER_SIG
+from nlcx.plants.base import Plant
+
+
+class OpenLoopConfig(ControllerConfig):
+    kind: Literal["open_loop"] = "open_loop"
+
+
+@njit(CONTROLLER_SIG, cache=True)
+def open_loop_step(t, dt, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+    """u_j(t) = r_j(t): the reference channels are the plant inputs."""
+    for j in range(u.shape[0]):
+        u[j] = r[j]
+
+
+class OpenLoop(ControllerModel):
+    """Open loop u = r; the references are named after the plant's inputs."""
+
+    Config = OpenLoopConfig
+    step = staticmethod(open_loop_step)
+
+    def build(self, label: str, cfg: OpenLoopConfig, plant: Plant, path: str) -> ControllerInstance:
+        return ControllerInstance(
+            label=label,
+            kind="open_loop",
+            step=self.step,
+            cp=np.zeros(1),
+            cs0=np.zeros(1),
+            reference_signals=tuple(plant.input_names),
+            config=cfg.model_dump(),
+        )

@@ -1,0 +1,222 @@
+"""One PID implementation for every loop structure and every gain schedule.
+
+Each loop regulates one plant output to its reference and contributes a force to one plant
+input; contributions to the same input are summed (Figs. 2.2, 3.2, 3.25, 4.2):
+
+    u_j = bias_j + sum_{loops i -> j} sign_i * [k_p e_i + k_i I_i + k_d D_i],   e_i = r_i - y_i
+
+with (k_p, k_i, k_d) from the loop's gain schedule (constant = conventional PID, time-AGS
+eqs. 2.17-2.19, error-AGS eqs. 2.20-2.22). I_i = integral of e_i (backward Euler) and D_i
+the derivative of e_i (or of -y_i), a backward difference or filtered by N/(s + N).
+The derivative starts from the first sample (e_{-1} = e_0), so a step at t = 0 gives no kick.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import numpy as np
+from numba import njit
+from pydantic import BaseModel, ConfigDict, Field
+
+from nlcx import registry
+from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
+from nlcx.controllers.schedules import schedule_index
+from nlcx.errors import ConfigError
+from nlcx.kernel import CONTROLLER_SIG
+from nlcx.plants.base import Plant
+from nlcx.validation import join, validate_model
+
+#: Per-loop header in the parameter vector: y index, r index, u index, sign, schedule slot,
+#: derivative method (0 backward, 1 filtered), N, derivative on measurement (0/1),
+#: integral gain inside the integral (0/1), offset and length of the schedule parameters.
+LOOP_FIELDS = 11
+#: Per-loop controller state: integral, previous error, filtered derivative, previous y, started.
+LOOP_STATE = 5
+#: Per-loop logged values: k_p, k_i, k_d and the loop's signed contribution to its input.
+LOOP_LOG = ("kp", "ki", "kd", "u")
+
+
+class DerivativeConfig(BaseModel):
+    """How the derivative term is formed."""
+
+    model_config = ConfigDict(extra="forbid")
+    method: Literal["backward", "filtered"] = "backward"
+    #: Filter coefficient of N s / (s + N), used when method is "filtered".
+    N: float = Field(100.0, gt=0)
+    #: Differentiate the error (textbook PID, eq. 5.11) or the negated measurement.
+    on: Literal["error", "measurement"] = "error"
+
+
+class LoopConfig(BaseModel):
+    """One loop: which output it regulates, which input it drives, with which schedule."""
+
+    model_config = ConfigDict(extra="forbid")
+    #: Plant output regulated by this loop (default: the loop's key).
+    signal: str | None = None
+    #: Plant input the loop drives (default: the plant's default for this output).
+    input: str | None = None
+    #: Sign of the loop's contribution to the summed input (the sum block of Fig. 2.2).
+    sign: Literal[-1, 1] = 1
+    schedule: dict[str, Any]
+    derivative: DerivativeConfig | None = None
+
+
+class PIDConfig(ControllerConfig):
+    kind: Literal["pid"] = "pid"
+    loops: dict[str, LoopConfig] = Field(min_length=1)
+    derivative: DerivativeConfig = DerivativeConfig()
+    #: "outside": u = k_i(t) * integral(e) as eqs. 2.17-2.22 write it;
+    #: "inside": u = integral(k_i(t) e), bumpless when k_i varies.
+    integral: Literal["outside", "inside"] = "outside"
+    #: Constant feed-forward added to an input, e.g. gravity compensation of F_z.
+    bias: dict[str, float] = Field(default_factory=dict)
+
+
+@njit(CONTROLLER_SIG, cache=True)
+def pid_step(t, dt, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+    """Multi-loop PID with pluggable gain schedules (one sample, zero-order hold)."""
+    n_loops = int(cp[0])
+    n_u = int(cp[1])
+    for j in range(n_u):
+        u[j] = cp[2 + j]
+    base = 2 + n_u
+    for i in range(n_loops):
+        h = base + LOOP_FIELDS * i
+        yi = int(cp[h])
+        ri = int(cp[h + 1])
+        ui = int(cp[h + 2])
+        sign = cp[h + 3]
+        slot = int(cp[h + 4])
+        filtered = cp[h + 5] != 0.0
+        N = cp[h + 6]
+        on_measurement = cp[h + 7] != 0.0
+        gain_inside = cp[h + 8] != 0.0
+        off = int(cp[h + 9])
+        n_sp = int(cp[h + 10])
+        c = LOOP_STATE * i
+        e = r[ri] - y[yi]
+        if cs[c + 4] == 0.0:
+            cs[c + 1] = e
+            cs[c + 3] = y[yi]
+            cs[c + 4] = 1.0
+        dv = (cs[c + 3] - y[yi]) if on_measurement else (e - cs[c + 1])
+        if filtered:
+            d = (cs[c + 2] + N * dv) / (1.0 + N * dt)
+            cs[c + 2] = d
+        else:
+            d = dv / dt
+        gains = log[4 * i : 4 * i + 3]
+        schedules[slot](t, e, d, cp[off : off + n_sp], gains)
+        if gain_inside:
+            cs[c] += gains[1] * e * dt
+            integral_term = cs[c]
+        else:
+            cs[c] += e * dt
+            integral_term = gains[1] * cs[c]
+        out = sign * (gains[0] * e + integral_term + gains[2] * d)
+        log[4 * i + 3] = out
+        u[ui] += out
+        cs[c + 1] = e
+        cs[c + 3] = y[yi]
+
+
+class MultiLoopPID(ControllerModel):
+    """PID loops summed per input; gains from a schedule (constant, time_ags, error_ags, ...)."""
+
+    Config = PIDConfig
+    step = staticmethod(pid_step)
+
+    def build(self, label: str, cfg: PIDConfig, plant: Plant, path: str) -> ControllerInstance:
+        outputs = plant.output_names
+        inputs = plant.input_names
+        loops = self._resolve_loops(cfg, plant, path)
+        n_u = len(inputs)
+        bias = np.zeros(n_u)
+        for name, value in cfg.bias.items():
+            if name not in inputs:
+                raise ConfigError(
+                    join(path, "bias", name), value, f"unknown input; allowed: {', '.join(inputs)}"
+                )
+            bias[inputs.index(name)] = value
+        header: list[float] = [len(loops), n_u, *bias]
+        params: list[float] = []
+        sched_start = len(header) + LOOP_FIELDS * len(loops)
+        log_names: list[str] = []
+        log_units: list[str] = []
+        for key, loop, signal, input_name in loops:
+            lpath = join(path, "loops", key)
+            kind = loop.schedule.get("kind")
+            model = registry.schedules.get(kind, path=join(lpath, "schedule", "kind"))
+            sched_cfg = validate_model(model.Config, loop.schedule, join(lpath, "schedule"))
+            sp = np.asarray(model.pack(sched_cfg), dtype=float)
+            deriv = loop.derivative or cfg.derivative
+            header += [
+                outputs.index(signal),
+                outputs.index(signal),
+                inputs.index(input_name),
+                loop.sign,
+                schedule_index(kind),
+                1.0 if deriv.method == "filtered" else 0.0,
+                deriv.N,
+                1.0 if deriv.on == "measurement" else 0.0,
+                1.0 if cfg.integral == "inside" else 0.0,
+                sched_start + len(params),
+                sp.size,
+            ]
+            params += list(sp)
+            unit_in = plant.unit_of(input_name)
+            unit_sig = plant.unit_of(signal)
+            gain_units = (
+                f"{unit_in}/{unit_sig}",
+                f"{unit_in}/({unit_sig}*s)",
+                f"{unit_in}*s/{unit_sig}",
+                unit_in,
+            )
+            for suffix, unit in zip(LOOP_LOG, gain_units, strict=True):
+                log_names.append(f"{key}.{suffix}")
+                log_units.append(unit)
+        return ControllerInstance(
+            label=label,
+            kind="pid",
+            step=self.step,
+            cp=np.array(header + params, dtype=float),
+            cs0=np.zeros(LOOP_STATE * len(loops)),
+            reference_signals=tuple(outputs),
+            log_names=tuple(log_names),
+            log_units=tuple(log_units),
+            config=cfg.model_dump(),
+        )
+
+    @staticmethod
+    def _resolve_loops(cfg: PIDConfig, plant: Plant, path: str) -> list[tuple[str, LoopConfig, str, str]]:
+        """(key, loop, output, input) per loop; exactly one loop per plant output."""
+        outputs = plant.output_names
+        inputs = plant.input_names
+        resolved = []
+        for key, loop in cfg.loops.items():
+            signal = loop.signal or key
+            if signal not in outputs:
+                where = join(path, "loops", key, "signal") if loop.signal else join(path, "loops", key)
+                raise ConfigError(
+                    where, signal, f"not an output of {plant.name}; allowed: {', '.join(outputs)}"
+                )
+            input_name = loop.input or plant.extra.get("loop_inputs", {}).get(signal)
+            if input_name is None and len(inputs) == 1:
+                input_name = inputs[0]
+            if input_name not in inputs:
+                raise ConfigError(
+                    join(path, "loops", key, "input"),
+                    loop.input,
+                    f"must name an input of {plant.name}; allowed: {', '.join(inputs)}",
+                )
+            resolved.append((key, loop, signal, input_name))
+        signals = [s for _, _, s, _ in resolved]
+        if sorted(signals) != sorted(outputs):
+            raise ConfigError(
+                join(path, "loops"),
+                list(cfg.loops),
+                f"{plant.name} needs exactly one loop per output ({len(outputs)}: "
+                f"{', '.join(outputs)}); got {len(signals)} loop(s) on {', '.join(signals)}",
+            )
+        return resolved

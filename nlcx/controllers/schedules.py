@@ -1,0 +1,183 @@
+"""Gain schedules of the PID controller: constant, time-AGS and error-AGS (thesis section 2.3).
+
+A schedule maps (t, e, de/dt) and its parameters to the gains (k_p, k_i, k_d). It is a
+numba function with :data:`nlcx.kernel.SCHEDULE_SIG`; the PID controller calls it once per
+loop and sample. Every registered schedule occupies a slot of the tuple handed to the
+controllers, so third-party schedules registered through the ``nlcx.schedules`` entry point
+group work without touching the PID.
+
+The thesis prints each AGS range as (min, max) but does not order them: Table 3.6 gives the
+z loop k_p from 25 ("min") to 15 ("max"). The formulas are applied literally to the two
+printed end points, so a "min" above "max" simply reverses the direction of travel.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import cache
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+from numba import njit
+from pydantic import BaseModel, ConfigDict, Field
+
+from nlcx import registry
+from nlcx.errors import ConfigError
+from nlcx.kernel import SCHEDULE_SIG, SCHEDULE_SLOTS
+
+
+class ScheduleConfig(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    kind: str
+
+
+class GainRange(BaseModel):
+    """The two end points of a scheduled gain, as the thesis's tables print them."""
+
+    model_config = ConfigDict(extra="forbid")
+    min: float
+    max: float
+
+
+class Rates(BaseModel):
+    """The rate constants k of the exponentials, one per gain (section 2.3)."""
+
+    model_config = ConfigDict(extra="forbid")
+    kp: float = Field(ge=0)
+    ki: float = Field(ge=0)
+    kd: float = Field(ge=0)
+
+
+class ConstantConfig(ScheduleConfig):
+    kind: Literal["constant"] = "constant"
+    kp: float = 0.0
+    ki: float = 0.0
+    kd: float = 0.0
+
+
+class AGSConfig(ScheduleConfig):
+    kp: GainRange
+    ki: GainRange
+    kd: GainRange
+    rate: Rates
+
+
+class TimeAGSConfig(AGSConfig):
+    kind: Literal["time_ags"] = "time_ags"
+
+
+class ErrorAGSConfig(AGSConfig):
+    kind: Literal["error_ags"] = "error_ags"
+    #: Schedule on |e(t)| (default) or on the signed e(t) as eqs. 2.20-2.22 literally print.
+    error: Literal["abs", "signed"] = "abs"
+
+
+@njit(SCHEDULE_SIG, cache=True)
+def constant_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
+    """Conventional PID: fixed gains, sp = (k_p, k_i, k_d)."""
+    gains[0] = sp[0]
+    gains[1] = sp[1]
+    gains[2] = sp[2]
+
+
+@njit(SCHEDULE_SIG, cache=True)
+def time_ags_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
+    """Eqs. 2.17-2.19, sp = (kp_min, kp_max, ki_min, ki_max, kd_min, kd_max, k_p, k_i, k_d).
+
+    k_p(t) = kp_min + (kp_max - kp_min) exp(-k t)     (2.17)
+    k_i(t) = ki_max - (ki_max - ki_min) exp(-k t)     (2.18)
+    k_d(t) = kd_min + (kd_max - kd_min) exp(-k t)     (2.19)
+    """
+    gains[0] = sp[0] + (sp[1] - sp[0]) * math.exp(-sp[6] * t)
+    gains[1] = sp[3] - (sp[3] - sp[2]) * math.exp(-sp[7] * t)
+    gains[2] = sp[4] + (sp[5] - sp[4]) * math.exp(-sp[8] * t)
+
+
+@njit(SCHEDULE_SIG, cache=True)
+def error_ags_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
+    """Eqs. 2.20-2.22 on s = |e| (sp[9] = 1) or s = e (sp[9] = 0), sp as for time-AGS.
+
+    k_p = kp_max - (kp_max - kp_min) exp(-k s)     (2.20)
+    k_i = ki_min - (ki_min - ki_max) exp(-k s)     (2.21)
+    k_d = kd_max - (kd_max - kd_min) exp(-k s)     (2.22)
+    """
+    s = abs(e) if sp[9] != 0.0 else e
+    gains[0] = sp[1] - (sp[1] - sp[0]) * math.exp(-sp[6] * s)
+    gains[1] = sp[2] - (sp[2] - sp[3]) * math.exp(-sp[7] * s)
+    gains[2] = sp[5] - (sp[5] - sp[4]) * math.exp(-sp[8] * s)
+
+
+class ScheduleModel:
+    """A registered gain schedule: its configuration model, packer and compiled function."""
+
+    Config: ClassVar[type[ScheduleConfig]] = ScheduleConfig
+    gains: ClassVar[Any] = None
+
+    def pack(self, cfg: Any) -> np.ndarray:
+        """The schedule parameter vector sp the compiled function reads."""
+        raise NotImplementedError
+
+
+class Constant(ScheduleModel):
+    """Conventional PID: constant k_p, k_i, k_d."""
+
+    Config = ConstantConfig
+    gains = staticmethod(constant_gains)
+
+    def pack(self, cfg: ConstantConfig) -> np.ndarray:
+        return np.array([cfg.kp, cfg.ki, cfg.kd])
+
+
+def _pack_ags(cfg: AGSConfig) -> list[float]:
+    return [
+        cfg.kp.min,
+        cfg.kp.max,
+        cfg.ki.min,
+        cfg.ki.max,
+        cfg.kd.min,
+        cfg.kd.max,
+        cfg.rate.kp,
+        cfg.rate.ki,
+        cfg.rate.kd,
+    ]
+
+
+class TimeAGS(ScheduleModel):
+    """Time adaptive gain scheduling, eqs. 2.17-2.19."""
+
+    Config = TimeAGSConfig
+    gains = staticmethod(time_ags_gains)
+
+    def pack(self, cfg: TimeAGSConfig) -> np.ndarray:
+        return np.array(_pack_ags(cfg))
+
+
+class ErrorAGS(ScheduleModel):
+    """Error adaptive gain scheduling, eqs. 2.20-2.22 (on |e| by default)."""
+
+    Config = ErrorAGSConfig
+    gains = staticmethod(error_ags_gains)
+
+    def pack(self, cfg: ErrorAGSConfig) -> np.ndarray:
+        return np.array([*_pack_ags(cfg), 1.0 if cfg.error == "abs" else 0.0])
+
+
+@cache
+def _slots(names: tuple[str, ...]) -> tuple[Any, ...]:
+    fns = [registry.schedules.get(name).gains for name in names]
+    return tuple(fns + [constant_gains] * (SCHEDULE_SLOTS - len(fns)))
+
+
+def schedule_slots() -> tuple[Any, ...]:
+    """The tuple of compiled schedule functions handed to every controller."""
+    names = tuple(registry.schedules.names())
+    if len(names) > SCHEDULE_SLOTS:
+        raise ConfigError(
+            "schedules", len(names), f"at most {SCHEDULE_SLOTS} gain schedules can be registered"
+        )
+    return _slots(names)
+
+
+def schedule_index(name: str) -> int:
+    """The slot of the schedule registered as ``name``."""
+    return registry.schedules.names().index(name)

@@ -1,0 +1,337 @@
+"""From a validated experiment to closed-loop trajectories and metrics.
+
+The engine assembles the numeric arrays the compiled kernel (:mod:`nlcx.kernel`) reads,
+runs every controller of the experiment through it (controllers sharing a step function go
+through one batched call) and measures the results (:mod:`nlcx.metrics`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from nlcx import metrics as m
+from nlcx import registry
+from nlcx.config import Experiment, MetricsSection
+from nlcx.controllers.base import ControllerInstance
+from nlcx.controllers.schedules import schedule_slots
+from nlcx.errors import ConfigError
+from nlcx.kernel import STATUS_BOUND, STATUS_NONFINITE, simulate
+from nlcx.plants.base import Plant
+from nlcx.references.base import MetricPlan
+from nlcx.uncertainty.base import Perturbations
+
+#: Butcher tableaus (A, b) of the fixed-step explicit Runge-Kutta methods.
+TABLEAUS: dict[str, tuple[np.ndarray, np.ndarray]] = {
+    "euler": (np.zeros((1, 1)), np.array([1.0])),
+    "heun": (np.array([[0.0, 0.0], [1.0, 0.0]]), np.array([0.5, 0.5])),
+    "rk4": (
+        np.array([[0.0, 0, 0, 0], [0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, 1.0, 0]]),
+        np.array([1.0, 2.0, 2.0, 1.0]) / 6.0,
+    ),
+}
+
+
+@dataclass(frozen=True)
+class TimeGrid:
+    """Sampling instants t_k = k dt, k = 0..K, and the Runge-Kutta stage times."""
+
+    dt: float
+    t: np.ndarray
+    stage_times: np.ndarray
+
+    @property
+    def n_steps(self) -> int:
+        return self.t.size - 1
+
+
+def time_grid(t_end: float, dt: float, integrator: str) -> TimeGrid:
+    """The grid of ``t_end / dt`` steps; t_end must be a whole number of steps."""
+    n_steps = round(t_end / dt)
+    if n_steps < 1 or abs(n_steps * dt - t_end) > 1e-9 * max(1.0, t_end):
+        raise ConfigError(
+            "simulation.t_end",
+            t_end,
+            f"must be a whole number (>= 1) of steps dt = {dt} (t_end/dt = {t_end / dt:.6g})",
+        )
+    a, _ = TABLEAUS[integrator]
+    c = a.sum(axis=1)
+    t = np.arange(n_steps + 1) * dt
+    return TimeGrid(dt=dt, t=t, stage_times=t[:-1, None] + c[None, :] * dt)
+
+
+@dataclass
+class Run:
+    """One controller's closed-loop run, truncated where it diverged."""
+
+    controller: ControllerInstance
+    status: str
+    reason: str
+    t: np.ndarray
+    x: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    log: np.ndarray
+    t_fail: float = math.nan
+
+    @property
+    def label(self) -> str:
+        return self.controller.label
+
+
+@dataclass
+class Prepared:
+    """Everything the kernel needs, built from an :class:`Experiment`."""
+
+    experiment: Experiment
+    plant: Plant
+    controllers: list[ControllerInstance]
+    references: dict[str, tuple[Any, Any]]
+    grid: TimeGrid
+    perturbations: Perturbations
+    seed_sequence: np.random.SeedSequence
+
+
+@dataclass
+class Result:
+    prepared: Prepared
+    runs: list[Run]
+    metrics: pd.DataFrame
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def _reference_models(exp: Experiment, plant: Plant) -> dict[str, tuple[Any, Any]]:
+    """(model, config) per signal; outputs without an entry are regulated to 0."""
+    allowed = plant.output_names + plant.input_names
+    refs: dict[str, tuple[Any, Any]] = {}
+    for signal, sec in exp.references.items():
+        if signal not in allowed:
+            raise ConfigError(
+                f"reference.{signal}",
+                sec.kind,
+                f"not an output or input of {plant.name}; allowed: {', '.join(allowed)}",
+            )
+        refs[signal] = (sec.model, sec.config)
+    constant = registry.references.get("constant")
+    for signal in allowed:
+        refs.setdefault(signal, (constant, constant.Config(kind="constant", value=0.0)))
+    return refs
+
+
+def prepare(exp: Experiment) -> Prepared:
+    """Build the plant, controllers, references and perturbations of ``exp``."""
+    sec = exp.section
+    sim = sec.simulation
+    plant = exp.plant_model.build(sec.plant.name, exp.plant_params, sec.plant.x0, sim.bounds)
+    controllers = [c.model.build(c.label, c.config, plant, f"controllers.{c.label}") for c in exp.controllers]
+    grid = time_grid(sim.t_end, sim.dt, sim.integrator)
+    seed_sequence = np.random.SeedSequence(sec.seed)
+    children = seed_sequence.spawn(max(1, len(exp.uncertainties)))
+    perturbations = Perturbations(
+        plant=plant, t=grid.t, stage_times=grid.stage_times, rng=np.random.default_rng(0)
+    )
+    for child, unc in zip(children, exp.uncertainties, strict=False):
+        perturbations.rng = np.random.default_rng(child)
+        unc.model.apply(unc.config, perturbations, f"uncertainty.{unc.label}")
+    return Prepared(
+        experiment=exp,
+        plant=plant,
+        controllers=controllers,
+        references=_reference_models(exp, plant),
+        grid=grid,
+        perturbations=perturbations,
+        seed_sequence=seed_sequence,
+    )
+
+
+def reference_array(prepared: Prepared, signals: tuple[str, ...]) -> np.ndarray:
+    """r_k for the given channels, shape (K+1, n_r)."""
+    t = prepared.grid.t
+    cols = [prepared.references[s][0].values(prepared.references[s][1], t) for s in signals]
+    return np.ascontiguousarray(np.stack(cols, axis=-1) if cols else np.zeros((t.size, 0)))
+
+
+def _pad_rows(rows: list[np.ndarray]) -> np.ndarray:
+    width = max(r.size for r in rows)
+    out = np.zeros((len(rows), width))
+    for i, r in enumerate(rows):
+        out[i, : r.size] = r
+    return out
+
+
+def _failure_reason(plant: Plant, status: int, index: int, t_fail: float) -> str:
+    n = len(plant.states)
+    if status == STATUS_BOUND:
+        name = plant.state_names[index]
+        bound = plant.bounds[index]
+        return f"diverged at t = {t_fail:.4g} s: |{name}| > {bound:.6g} (simulation.bounds)"
+    if status == STATUS_NONFINITE:
+        what = plant.state_names[index] if index < n else plant.input_names[index - n]
+        return f"diverged at t = {t_fail:.4g} s: {what} became non-finite"
+    return ""
+
+
+def simulate_runs(prepared: Prepared) -> list[Run]:
+    """Integrate every controller of the experiment; one kernel call per step function."""
+    plant = prepared.plant
+    grid = prepared.grid
+    a, b = TABLEAUS[prepared.experiment.section.simulation.integrator]
+    dist, dist_map = prepared.perturbations.dist_arrays()
+    n, n_u, n_y = len(plant.states), len(plant.inputs), len(plant.outputs)
+    noise_y = prepared.perturbations.noise_y
+    noise_u = prepared.perturbations.noise_u
+    noise_y = np.zeros((1, 1, n_y)) if noise_y is None else np.ascontiguousarray(noise_y[None])
+    noise_u = np.zeros((1, 1, n_u)) if noise_u is None else np.ascontiguousarray(noise_u[None])
+    groups: dict[tuple[Any, ...], list[int]] = {}
+    for i, c in enumerate(prepared.controllers):
+        groups.setdefault((id(c.step), c.reference_signals, len(c.log_names)), []).append(i)
+    runs: list[Run | None] = [None] * len(prepared.controllers)
+    for indices in groups.values():
+        ctrls = [prepared.controllers[i] for i in indices]
+        n_b = len(ctrls)
+        ref = reference_array(prepared, ctrls[0].reference_signals)[None]
+        n_k = grid.t.size
+        X = np.full((n_b, n_k, n), np.nan)
+        U = np.full((n_b, n_k, n_u), np.nan)
+        LOG = np.full((n_b, n_k, len(ctrls[0].log_names)), np.nan)
+        status = np.zeros(n_b, dtype=np.int64)
+        n_valid = np.zeros(n_b, dtype=np.int64)
+        fail_index = np.zeros(n_b, dtype=np.int64)
+        simulate(
+            plant.rhs,
+            ctrls[0].step,
+            schedule_slots(),
+            a,
+            b,
+            np.ascontiguousarray(np.tile(plant.x0, (n_b, 1))),
+            np.ascontiguousarray(plant.p[None]),
+            np.ascontiguousarray(plant.C),
+            _pad_rows([c.cp for c in ctrls]),
+            _pad_rows([c.cs0 for c in ctrls]),
+            ref,
+            dist,
+            dist_map,
+            noise_y,
+            noise_u,
+            np.ascontiguousarray(plant.bounds),
+            grid.dt,
+            X,
+            U,
+            LOG,
+            status,
+            n_valid,
+            fail_index,
+        )
+        for j, i in enumerate(indices):
+            k = int(n_valid[j])
+            t_fail = float(grid.t[k - 1] + grid.dt) if status[j] else math.nan
+            runs[i] = Run(
+                controller=ctrls[j],
+                status="unstable" if status[j] else "ok",
+                reason=_failure_reason(plant, int(status[j]), int(fail_index[j]), t_fail),
+                t=grid.t[:k],
+                x=X[j, :k],
+                u=U[j, :k],
+                r=ref[0, :k],
+                log=LOG[j, :k],
+                t_fail=t_fail,
+            )
+    return [r for r in runs if r is not None]
+
+
+METRIC_COLUMNS = ["controller", "signal", "metric", "value", "unit", "status", "note"]
+
+
+def _unit(template: str, signal_unit: str) -> str:
+    return template.replace("signal", signal_unit or "1").replace("input", signal_unit or "1")
+
+
+def _signal_metrics(
+    t: np.ndarray, y: np.ndarray, r: np.ndarray, plan: MetricPlan, cfg: MetricsSection
+) -> dict[str, Any]:
+    values: dict[str, Any] = {}
+    if plan.kind == "step":
+        values.update(
+            m.step_response_metrics(
+                t,
+                y,
+                t_step=plan.t_step,
+                final=plan.final,
+                band=cfg.settling_band,
+                rise_limits=tuple(cfg.rise_limits),
+                ss_window=cfg.ss_window,
+            )
+        )
+    elif plan.kind == "regulation":
+        values.update(
+            m.regulation_metrics(
+                t,
+                y,
+                reference=plan.final,
+                band=cfg.settling_band,
+                abs_tol=cfg.regulation_abs_tol,
+                ss_window=cfg.ss_window,
+            )
+        )
+    values.update(m.error_integrals(t, r - y, t0=plan.t_step))
+    return values
+
+
+_NAN_NOTES = {
+    "settling_time": "did not settle within the run",
+    "rise_time": "did not reach the upper rise level",
+}
+
+
+def measure(prepared: Prepared, runs: list[Run]) -> pd.DataFrame:
+    """Long-form metrics of every run (columns METRIC_COLUMNS)."""
+    plant = prepared.plant
+    cfg = prepared.experiment.section.metrics
+    rows: list[list[Any]] = []
+    for run in runs:
+        signals = [s for s in run.controller.reference_signals if s in plant.output_names]
+        label = run.label
+        if run.status != "ok":
+            rows.append([label, "all", "t_fail", run.t_fail, "s", run.status, run.reason])
+            for s in signals:
+                rows.append([label, s, "settling_time", math.nan, "s", run.status, run.reason])
+            continue
+        y_all = run.x @ plant.C.T
+        for s in signals:
+            model, ref_cfg = prepared.references[s]
+            plan = model.metric_plan(ref_cfg)
+            j = plant.output_names.index(s)
+            col = run.controller.reference_signals.index(s)
+            values = _signal_metrics(run.t, y_all[:, j], run.r[:, col], plan, cfg)
+            unit = plant.unit_of(s)
+            for name, value in values.items():
+                v = float(value)
+                note = _NAN_NOTES.get(name, "undefined") if math.isnan(v) else ""
+                rows.append([label, s, name, v, _unit(m.METRIC_UNITS.get(name, ""), unit), "ok", note])
+        for j, name in enumerate(plant.input_names):
+            unit = plant.unit_of(name)
+            for metric, value in m.input_metrics(run.t, run.u[:, j]).items():
+                rows.append(
+                    [label, name, metric, float(value), _unit(m.METRIC_UNITS.get(metric, ""), unit), "ok", ""]
+                )
+    return pd.DataFrame(rows, columns=METRIC_COLUMNS)
+
+
+def run_experiment(exp: Experiment) -> Result:
+    """Prepare, simulate and measure ``exp``; timings in seconds."""
+    timings: dict[str, float] = {}
+    start = time.perf_counter()
+    prepared = prepare(exp)
+    timings["prepare"] = time.perf_counter() - start
+    start = time.perf_counter()
+    runs = simulate_runs(prepared)
+    timings["simulate"] = time.perf_counter() - start
+    start = time.perf_counter()
+    table = measure(prepared, runs)
+    timings["metrics"] = time.perf_counter() - start
+    return Result(prepared=prepared, runs=runs, metrics=table, timings=timings)

@@ -1,0 +1,38 @@
+"""Errors that the command line reports as one line, without a traceback."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class NlcxError(Exception):
+    """Base class of the errors the CLI prints as a single line."""
+
+
+class ConfigError(NlcxError):
+    """A configuration value is invalid: names the key path, the value and what is allowed."""
+
+    def __init__(self, path: str, value: Any, allowed: str) -> None:
+        self.path = path
+        self.value = value
+        self.allowed = allowed
+        super().__init__(self.line())
+
+    def line(self) -> str:
+        """The one-line message: ``config error: <path> = <value>: <allowed>``."""
+        shown = _short_repr(self.value)
+        where = self.path or "<config>"
+        return f"config error: {where} = {shown}: {self.allowed}"
+
+
+_MISSING = object()
+
+
+def _short_repr(value: Any, limit: int = 80) -> str:
+    if value is _MISSING:
+        return "(missing)"
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+MISSING = _MISSING

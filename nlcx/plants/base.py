@@ -1,0 +1,177 @@
+"""What a plant is: its right-hand side f(t, x, u, p) plus metadata.
+
+A registered plant is a :class:`PlantModel` subclass. It names its states, inputs and
+outputs with units, declares its parameters as a pydantic model (the one place their
+defaults live) and supplies a numba-compiled right-hand side with
+:data:`nlcx.kernel.RHS_SIG`. :meth:`PlantModel.build` turns a validated configuration
+into a :class:`Plant`, the numeric instance the engine integrates.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+from nlcx.errors import ConfigError
+
+
+class PlantParams(BaseModel):
+    """Base of every plant's parameter model: unknown keys are errors."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+@dataclass(frozen=True)
+class Signal:
+    """A named signal with its SI unit and the words a figure labels it with."""
+
+    name: str
+    unit: str
+    label: str = ""
+
+    @property
+    def axis_label(self) -> str:
+        """E.g. 'Angle θ (rad)'."""
+        text = self.label or self.name
+        return f"{text} ({self.unit})" if self.unit else text
+
+
+@dataclass(frozen=True)
+class Plant:
+    """A plant ready to simulate: equations, numeric parameters and metadata."""
+
+    name: str
+    states: tuple[Signal, ...]
+    inputs: tuple[Signal, ...]
+    outputs: tuple[Signal, ...]
+    rhs: Any
+    p: np.ndarray
+    C: np.ndarray
+    x0: np.ndarray
+    params: dict[str, Any]
+    param_units: dict[str, str]
+    bounds: np.ndarray
+    velocity_states: tuple[str, ...] = ()
+    energy: Callable[[np.ndarray], np.ndarray] | None = None
+    power: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def state_names(self) -> list[str]:
+        return [s.name for s in self.states]
+
+    @property
+    def input_names(self) -> list[str]:
+        return [s.name for s in self.inputs]
+
+    @property
+    def output_names(self) -> list[str]:
+        return [s.name for s in self.outputs]
+
+    def state_index(self, name: str) -> int:
+        return self.state_names.index(name)
+
+    def unit_of(self, name: str) -> str:
+        for sig in (*self.states, *self.inputs, *self.outputs):
+            if sig.name == name:
+                return sig.unit
+        raise KeyError(name)
+
+
+class PlantModel:
+    """A registered plant. Subclasses set the class attributes and :meth:`parameter_vector`."""
+
+    Params: ClassVar[type[PlantParams]] = PlantParams
+    states: ClassVar[tuple[Signal, ...]] = ()
+    inputs: ClassVar[tuple[Signal, ...]] = ()
+    #: Outputs are states measured directly (y = C x selects them).
+    outputs: ClassVar[tuple[str, ...]] = ()
+    #: States whose derivative is an acceleration (default targets of a disturbance).
+    velocity_states: ClassVar[tuple[str, ...]] = ()
+    #: Default divergence bounds |x_i| <= bound, by state name.
+    default_bounds: ClassVar[Mapping[str, float]] = {}
+    #: Input a PID loop on each output drives unless its config says otherwise.
+    loop_inputs: ClassVar[Mapping[str, str]] = {}
+    rhs: ClassVar[Any] = None
+
+    def parameter_vector(self, params: PlantParams) -> np.ndarray:
+        """The parameter vector p the right-hand side reads."""
+        raise NotImplementedError
+
+    def energy(self, params: PlantParams) -> Callable[[np.ndarray], np.ndarray] | None:
+        """Total mechanical energy E(x) (vectorised over leading axes), if defined."""
+        return None
+
+    def power(self, params: PlantParams) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+        """Power delivered by the inputs, P(x, u) = sum F_i v_i, if defined."""
+        return None
+
+    def build(
+        self,
+        name: str,
+        params: PlantParams,
+        x0: Mapping[str, float],
+        bounds: Mapping[str, float],
+        path: str = "plant",
+    ) -> Plant:
+        """The :class:`Plant` registered as ``name`` with these parameters, x0 and bounds."""
+        states = self.states
+        names = [s.name for s in states]
+        x_init = initial_state(names, x0, path)
+        bound_vec = divergence_bounds(names, {**self.default_bounds, **bounds})
+        outputs = tuple(states[names.index(o)] for o in self.outputs)
+        C = np.zeros((len(outputs), len(states)))
+        for i, o in enumerate(self.outputs):
+            C[i, names.index(o)] = 1.0
+        return Plant(
+            name=name,
+            states=states,
+            inputs=self.inputs,
+            outputs=outputs,
+            rhs=self.rhs,
+            p=np.ascontiguousarray(self.parameter_vector(params), dtype=float),
+            C=C,
+            x0=x_init,
+            params=params.model_dump(),
+            param_units=param_units(type(params)),
+            bounds=bound_vec,
+            velocity_states=self.velocity_states,
+            energy=self.energy(params),
+            power=self.power(params),
+            extra={"loop_inputs": dict(self.loop_inputs)},
+        )
+
+
+def param_units(model: type[BaseModel]) -> dict[str, str]:
+    """Units declared on a parameter model's fields (``json_schema_extra={'unit': ...}``)."""
+    units = {}
+    for name, info in model.model_fields.items():
+        extra = info.json_schema_extra if isinstance(info.json_schema_extra, dict) else {}
+        units[name] = str(extra.get("unit", ""))
+    return units
+
+
+def initial_state(names: list[str], x0: Mapping[str, float], path: str = "plant") -> np.ndarray:
+    """x(0): zero except the states named in ``x0``."""
+    x_init = np.zeros(len(names))
+    for key, value in x0.items():
+        if key not in names:
+            raise ConfigError(f"{path}.x0.{key}", value, f"unknown state; allowed: {', '.join(names)}")
+        x_init[names.index(key)] = float(value)
+    return x_init
+
+
+def divergence_bounds(names: list[str], bounds: Mapping[str, float]) -> np.ndarray:
+    """Per-state bound on |x_i| (inf where none is set)."""
+    bound_vec = np.full(len(names), np.inf)
+    for key, value in bounds.items():
+        if key not in names:
+            raise ConfigError(
+                f"simulation.bounds.{key}", value, f"unknown state; allowed: {', '.join(names)}"
+            )
+        bound_vec[names.index(key)] = float(value)
+    return bound_vec

@@ -1,0 +1,107 @@
+"""A SISO transfer function G(s) = num(s)/den(s), simulated in controllable canonical form."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from numba import njit
+from pydantic import Field, field_validator, model_validator
+
+from nlcx.kernel import RHS_SIG
+from nlcx.plants.base import (
+    Plant,
+    PlantModel,
+    PlantParams,
+    Signal,
+    divergence_bounds,
+    initial_state,
+)
+
+
+class TransferFunctionParams(PlantParams):
+    """Numerator and denominator coefficients in descending powers of s."""
+
+    num: list[float] = Field(min_length=1, description="numerator coefficients, highest power first")
+    den: list[float] = Field(min_length=2, description="denominator coefficients, highest power first")
+    input_name: str = "u"
+    input_unit: str = ""
+    output_name: str = "y"
+    output_unit: str = ""
+
+    @field_validator("den")
+    @classmethod
+    def _leading_nonzero(cls, den: list[float]) -> list[float]:
+        if den[0] == 0:
+            raise ValueError("the leading denominator coefficient must be non-zero")
+        return den
+
+    @model_validator(mode="after")
+    def _strictly_proper(self) -> TransferFunctionParams:
+        num = np.trim_zeros(np.asarray(self.num, dtype=float), "f")
+        if num.size >= len(self.den):
+            raise ValueError(
+                "must be strictly proper (degree of num < degree of den): the controller is "
+                "sampled with a zero-order hold, so a direct feedthrough would be an algebraic loop"
+            )
+        return self
+
+
+@njit(RHS_SIG, cache=True)
+def companion_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
+    """Controllable canonical form: x_i' = x_{i+1}, x_n' = -sum_j a_j x_{j+1} + u, p = a_0..a_{n-1}."""
+    n = x.shape[0]
+    acc = u[0]
+    for j in range(n):
+        acc -= p[j] * x[j]
+    for i in range(n - 1):
+        dx[i] = x[i + 1]
+    dx[n - 1] = acc
+
+
+def canonical_form(num: list[float], den: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """(a, b): den/den[0] = s^n + a_{n-1}s^{n-1} + ... + a_0 and y = sum_j b_j x_{j+1}."""
+    den_arr = np.asarray(den, dtype=float)
+    num_arr = np.asarray(num, dtype=float) / den_arr[0]
+    den_arr = den_arr / den_arr[0]
+    n = den_arr.size - 1
+    a = den_arr[1:][::-1].copy()
+    b = np.zeros(n)
+    trimmed = np.trim_zeros(num_arr, "f")
+    b[: trimmed.size] = trimmed[::-1]
+    return a, b
+
+
+class TransferFunction(PlantModel):
+    """Generic SISO transfer function num(s)/den(s) (strictly proper)."""
+
+    Params = TransferFunctionParams
+    rhs = staticmethod(companion_rhs)
+
+    def build(
+        self,
+        name: str,
+        params: TransferFunctionParams,
+        x0: Mapping[str, float],
+        bounds: Mapping[str, float],
+        path: str = "plant",
+    ) -> Plant:
+        a, b = canonical_form(params.num, params.den)
+        n = a.size
+        states = tuple(Signal(f"x{i + 1}", "") for i in range(n))
+        names = [s.name for s in states]
+        x_init = initial_state(names, x0, path)
+        bound_vec = divergence_bounds(names, bounds)
+        return Plant(
+            name=name,
+            states=states,
+            inputs=(Signal(params.input_name, params.input_unit),),
+            outputs=(Signal(params.output_name, params.output_unit),),
+            rhs=self.rhs,
+            p=a,
+            C=b[None, :].copy(),
+            x0=x_init,
+            params=params.model_dump(),
+            param_units={"num": "", "den": ""},
+            bounds=bound_vec,
+        )

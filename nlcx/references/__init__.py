@@ -1,0 +1,1 @@
+"""Reference signals r(t), registered by name and evaluated on the sampling grid."""

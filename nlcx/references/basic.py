@@ -1,0 +1,67 @@
+"""Constant, step and sinusoidal references (sections 2.3, 2.5.2, 3.5.2, 3.9.2, 4.5.2)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from nlcx.references.base import MetricPlan, ReferenceConfig, ReferenceModel
+
+
+class ConstantConfig(ReferenceConfig):
+    kind: Literal["constant"] = "constant"
+    value: float = 0.0
+
+
+class StepConfig(ReferenceConfig):
+    kind: Literal["step"] = "step"
+    initial: float = 0.0
+    final: float = 1.0
+    #: Time of the step, s; r = final for t >= time.
+    time: float = Field(0.0, ge=0)
+
+
+class SineConfig(ReferenceConfig):
+    kind: Literal["sine"] = "sine"
+    amplitude: float
+    #: Frequency in Hz: the thesis's x_r = 0.3 sin(0.05 pi t) has frequency 0.025 Hz.
+    frequency: float = Field(gt=0)
+    phase: float = 0.0
+    offset: float = 0.0
+
+
+class Constant(ReferenceModel):
+    """r(t) = value; the signal is regulated (default for outputs without a reference)."""
+
+    Config = ConstantConfig
+
+    def values(self, cfg: ConstantConfig, t: np.ndarray) -> np.ndarray:
+        return np.full(t.shape, cfg.value)
+
+    def metric_plan(self, cfg: ConstantConfig) -> MetricPlan:
+        return MetricPlan("regulation", final=cfg.value)
+
+
+class Step(ReferenceModel):
+    """r(t) = initial for t < time, final for t >= time."""
+
+    Config = StepConfig
+
+    def values(self, cfg: StepConfig, t: np.ndarray) -> np.ndarray:
+        return np.where(t >= cfg.time, cfg.final, cfg.initial)
+
+    def metric_plan(self, cfg: StepConfig) -> MetricPlan:
+        if cfg.final == cfg.initial:
+            return MetricPlan("regulation", final=cfg.final)
+        return MetricPlan("step", final=cfg.final, t_step=cfg.time)
+
+
+class Sine(ReferenceModel):
+    """r(t) = offset + amplitude sin(2 pi frequency t + phase), e.g. x_r = 0.3 sin(0.05 pi t)."""
+
+    Config = SineConfig
+
+    def values(self, cfg: SineConfig, t: np.ndarray) -> np.ndarray:
+        return cfg.offset + cfg.amplitude * np.sin(2 * np.pi * cfg.frequency * t + cfg.phase)

@@ -1,0 +1,249 @@
+"""Run directories: metrics.csv, timeseries.csv, figures, config.yaml and manifest.json.
+
+Every file is written atomically (to a temporary file in the same directory, then renamed),
+so an interrupted run never leaves a half-written file behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import tempfile
+import time
+from collections.abc import Callable
+from contextlib import suppress
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+import yaml
+
+import nlcx
+from nlcx.engine import Result, Run
+
+PACKAGES = ("numpy", "scipy", "numba", "llvmlite", "pandas", "pydantic", "matplotlib", "PyYAML", "typer")
+#: Float format of every CSV nlcx writes (deterministic, round-trips to 1e-10 relative).
+FLOAT_FORMAT = "%.10g"
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+LINE_STYLES = (("C0", "-"), ("C3", "--"), ("C2", "-."), ("C1", ":"), ("C4", "-"), ("C5", "--"))
+
+
+def atomic_write(path: Path, writer: Callable[[Path], None]) -> None:
+    """Call ``writer(tmp)`` on a temporary file beside ``path``, then rename it to ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        writer(tmp)
+        os.chmod(tmp, 0o666 & ~_UMASK)
+        os.replace(tmp, path)
+    finally:
+        with suppress(FileNotFoundError):
+            tmp.unlink()
+
+
+def write_text(path: Path, text: str) -> None:
+    atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+def write_csv(path: Path, frame: pd.DataFrame) -> None:
+    atomic_write(
+        path, lambda tmp: frame.to_csv(tmp, index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
+    )
+
+
+def write_figure(path: Path, fig: plt.Figure) -> None:
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
+    plt.close(fig)
+
+
+def timeseries_frame(result: Result) -> pd.DataFrame:
+    """Every sample of every run: t, controller, states, inputs, references, loop logs."""
+    plant = result.prepared.plant
+    frames = []
+    for run in result.runs:
+        cols: dict[str, Any] = {"t": run.t, "controller": run.label}
+        for i, name in enumerate(plant.state_names):
+            cols[name] = run.x[:, i]
+        for i, name in enumerate(plant.input_names):
+            cols[name] = run.u[:, i]
+        for i, name in enumerate(run.controller.reference_signals):
+            cols[f"{name}_ref"] = run.r[:, i]
+        for i, name in enumerate(run.controller.log_names):
+            cols[name] = run.log[:, i]
+        frames.append(pd.DataFrame(cols))
+    return pd.concat(frames, ignore_index=True)
+
+
+def _style(i: int) -> tuple[str, str]:
+    return LINE_STYLES[i % len(LINE_STYLES)]
+
+
+def _run_label(run: Run) -> str:
+    return run.label if run.status == "ok" else f"{run.label} ({run.status})"
+
+
+def output_figure(result: Result, title: str | None = None) -> plt.Figure:
+    """One axes per regulated output, every controller overlaid, reference dotted (thesis layout)."""
+    plant = result.prepared.plant
+    outputs = plant.outputs
+    fig, axes = plt.subplots(len(outputs), 1, figsize=(7.5, 2.9 * len(outputs)), squeeze=False)
+    for k, (ax, sig) in enumerate(zip(axes[:, 0], outputs, strict=True)):
+        j = plant.output_names.index(sig.name)
+        for i, run in enumerate(result.runs):
+            color, ls = _style(i)
+            ax.plot(run.t, run.x @ plant.C[j], color=color, ls=ls, lw=1.3, label=_run_label(run))
+        first = result.runs[0]
+        if sig.name in first.controller.reference_signals:
+            col = first.controller.reference_signals.index(sig.name)
+            ax.plot(first.t, first.r[:, col], color="k", ls=":", lw=1.0, label="reference")
+        ax.set_title(f"({chr(ord('a') + k)}) {sig.label or sig.name} vs time")
+        ax.set_xlabel("Time (s)")
+        ax.set_ylabel(sig.axis_label)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def gains_figure(result: Result) -> plt.Figure:
+    """Plant inputs and every logged controller quantity (gains, loop outputs) against time."""
+    plant = result.prepared.plant
+    names: list[str] = list(plant.input_names)
+    for run in result.runs:
+        names += [n for n in run.controller.log_names if n not in names]
+    n_cols = 4 if len(names) > 4 else len(names)
+    n_rows = -(-len(names) // n_cols)
+    fig, axes = plt.subplots(n_rows, n_cols, figsize=(3.2 * n_cols, 2.3 * n_rows), squeeze=False)
+    for ax, name in zip(axes.flat, names, strict=False):
+        for i, run in enumerate(result.runs):
+            color, ls = _style(i)
+            if name in plant.input_names:
+                values = run.u[:, plant.input_names.index(name)]
+                unit = plant.unit_of(name)
+            elif name in run.controller.log_names:
+                k = run.controller.log_names.index(name)
+                values, unit = run.log[:, k], run.controller.log_units[k]
+            else:
+                continue
+            ax.plot(run.t, values, color=color, ls=ls, lw=1.0, label=run.label)
+        ax.set_title(f"{name} ({unit})" if unit else name, fontsize=9)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, alpha=0.3)
+    for ax in list(axes.flat)[len(names) :]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    axes.flat[-1].set_xlabel("Time (s)")
+    fig.tight_layout()
+    return fig
+
+
+def package_versions() -> dict[str, str]:
+    out = {"python": platform.python_version(), "nlcx": nlcx.__version__}
+    for name in PACKAGES:
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def git_state() -> dict[str, Any]:
+    """Commit and dirty flag of the nlcx source tree, when it is a git checkout."""
+    root = Path(nlcx.__file__).resolve().parent.parent
+    if not (root / ".git").exists():
+        return {"commit": None, "dirty": None}
+    try:
+        head = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--verify", "-q", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
+        commit = head.stdout.strip() if head.returncode == 0 else ""
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return {"commit": None, "dirty": None}
+    return {"commit": commit or None, "dirty": bool(dirty)}
+
+
+def manifest(result: Result, timings: dict[str, float]) -> dict[str, Any]:
+    exp = result.prepared.experiment
+    ss = result.prepared.seed_sequence
+    return {
+        "name": exp.name,
+        "versions": package_versions(),
+        "git": git_state(),
+        "seed": {
+            "entropy": int(ss.entropy),
+            "uncertainty_spawn_keys": [list(c.spawn_key) for c in ss.spawn(0)],
+        },
+        "timings_s": {k: round(v, 4) for k, v in timings.items()},
+        "runs": [
+            {
+                "controller": run.label,
+                "kind": run.controller.kind,
+                "status": run.status,
+                "reason": run.reason,
+                "samples": int(run.t.size),
+                "t_fail": None if np.isnan(run.t_fail) else run.t_fail,
+            }
+            for run in result.runs
+        ],
+        "files": [],
+    }
+
+
+def write_run(
+    result: Result, out_dir: Path, timings: dict[str, float], started: float | None = None
+) -> list[Path]:
+    """Write a run directory; manifest.json last, listing the files and the timings.
+
+    ``started`` (a ``time.perf_counter()`` value) makes the manifest record the wall time
+    from then until the manifest is written.
+    """
+    write_start = time.perf_counter()
+    exp = result.prepared.experiment
+    outputs = exp.section.outputs
+    written: list[Path] = []
+    path = out_dir / "config.yaml"
+    write_text(path, yaml.safe_dump(exp.resolved(), sort_keys=False, allow_unicode=True))
+    written.append(path)
+    path = out_dir / "metrics.csv"
+    write_csv(path, result.metrics)
+    written.append(path)
+    if outputs.timeseries:
+        path = out_dir / "timeseries.csv"
+        write_csv(path, timeseries_frame(result))
+        written.append(path)
+    if outputs.figure:
+        path = out_dir / "figure.png"
+        write_figure(path, output_figure(result, exp.section.title))
+        written.append(path)
+        path = out_dir / "gains.png"
+        write_figure(path, gains_figure(result))
+        written.append(path)
+    timings = {**timings, "write": time.perf_counter() - write_start}
+    if started is not None:
+        timings["wall"] = time.perf_counter() - started
+    info = manifest(result, timings)
+    info["files"] = [p.name for p in written]
+    write_text(out_dir / "manifest.json", json.dumps(info, indent=2) + "\n")
+    return [*written, out_dir / "manifest.json"]

@@ -1,0 +1,1 @@
+"""Uncertainties (disturbance, noise, friction), registered by name and combinable."""

@@ -1,0 +1,47 @@
+"""Fast-acting external disturbance d = A sin(2 pi f t + phase) added to state derivatives.
+
+The thesis adds d = 20 sin(20 pi t) (A = 20, f = 10 Hz) to every acceleration equation
+(eqs. 2.13, 2.15, 3.20-3.26, 3.49-3.53, 4.29-4.37).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from nlcx.errors import ConfigError
+from nlcx.uncertainty.base import Perturbations, UncertaintyConfig, UncertaintyModel
+from nlcx.validation import join
+
+
+class DisturbanceConfig(UncertaintyConfig):
+    kind: Literal["disturbance"] = "disturbance"
+    amplitude: float = 20.0
+    #: Hz; 20 pi t in eq. 2.16 is 10 Hz.
+    frequency: float = Field(10.0, ge=0)
+    phase: float = 0.0
+    #: States whose derivative receives d; default: every velocity state (the accelerations).
+    states: list[str] | None = None
+
+
+class Disturbance(UncertaintyModel):
+    """d(t) = amplitude sin(2 pi frequency t + phase) added to chosen state derivatives."""
+
+    Config = DisturbanceConfig
+
+    def apply(self, cfg: DisturbanceConfig, perturbations: Perturbations, path: str) -> None:
+        plant = perturbations.plant
+        names = plant.state_names
+        targets = cfg.states if cfg.states is not None else list(plant.velocity_states)
+        column = np.zeros(len(names))
+        for i, name in enumerate(targets):
+            if name not in names:
+                raise ConfigError(
+                    join(path, "states", i), name, f"unknown state; allowed: {', '.join(names)}"
+                )
+            column[names.index(name)] = 1.0
+        ts = perturbations.stage_times
+        values = cfg.amplitude * np.sin(2 * np.pi * cfg.frequency * ts + cfg.phase)
+        perturbations.add_disturbance(column, values)

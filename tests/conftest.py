@@ -1,0 +1,57 @@
+"""Shared helpers: build and run experiments from in-memory configs."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from nlcx import config, engine
+
+ROOT = Path(__file__).resolve().parent.parent
+CONFIGS = ROOT / "configs"
+
+
+def load_yaml(name: str) -> dict[str, Any]:
+    return yaml.safe_load((CONFIGS / name).read_text())
+
+
+def run_raw(raw: dict[str, Any]) -> engine.Result:
+    return engine.run_experiment(config.build(copy.deepcopy(raw)))
+
+
+def open_loop_pendulum(
+    force: dict[str, Any] | None,
+    x0: dict[str, float],
+    t_end: float,
+    dt: float = 1e-3,
+    bounds: dict[str, float] | None = None,
+) -> engine.Run:
+    """The x pendulum driven by F_x = reference (open loop)."""
+    raw = {
+        "name": "open_loop_test",
+        "plant": {"name": "x_pendulum", "x0": x0},
+        "controllers": {"open": {"kind": "open_loop"}},
+        "reference": {"F_x": force or {"kind": "constant", "value": 0.0}},
+        "simulation": {"t_end": t_end, "dt": dt, "bounds": bounds or {"theta": 1e9}},
+    }
+    (run,) = run_raw(raw).runs
+    return run
+
+
+@pytest.fixture
+def x_time_raw() -> dict[str, Any]:
+    return load_yaml("x_time_ags.yaml")
+
+
+@pytest.fixture
+def x_error_raw() -> dict[str, Any]:
+    return load_yaml("x_error_ags.yaml")
+
+
+def rel(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))

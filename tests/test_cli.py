@@ -1,0 +1,214 @@
+"""The command line end to end on the real configs."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from nlcx.cli import app
+
+ROOT = Path(__file__).resolve().parent.parent
+runner = CliRunner()
+PENDULUM_COLUMNS = ["t", "controller", "x", "x_dot", "theta", "theta_dot", "F_x", "x_ref", "theta_ref"]
+
+
+@pytest.mark.parametrize("name", ["x_time_ags", "x_error_ags"])
+def test_run_writes_the_run_directory(name: str, tmp_path: Path) -> None:
+    out = tmp_path / name
+    result = runner.invoke(app, ["run", str(ROOT / "configs" / f"{name}.yaml"), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert {p.name for p in out.iterdir()} == {
+        "config.yaml",
+        "metrics.csv",
+        "timeseries.csv",
+        "figure.png",
+        "gains.png",
+        "manifest.json",
+    }
+    metrics = pd.read_csv(out / "metrics.csv")
+    assert list(metrics.columns) == ["controller", "signal", "metric", "value", "unit", "status", "note"]
+    assert set(metrics.controller) == {"conventional", "proposed"}
+    for metric in (
+        "rise_time",
+        "settling_time",
+        "overshoot",
+        "undershoot",
+        "steady_state_error",
+        "ise",
+        "iae",
+        "itae",
+    ):
+        assert ((metrics.signal == "x") & (metrics.metric == metric)).sum() == 2
+    assert ((metrics.signal == "theta") & (metrics.metric == "peak_deviation")).sum() == 2
+    assert ((metrics.signal == "F_x") & (metrics.metric == "control_effort")).sum() == 2
+    ts = pd.read_csv(out / "timeseries.csv")
+    assert list(ts.columns[: len(PENDULUM_COLUMNS)]) == PENDULUM_COLUMNS
+    assert {"theta.kp", "theta.ki", "theta.kd", "x.kp", "x.ki", "x.kd"} <= set(ts.columns)
+    assert len(ts) == 2 * 20001 and ts.t.max() == pytest.approx(20.0)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert {r["status"] for r in manifest["runs"]} == {"ok"}
+    assert manifest["seed"]["entropy"] == 0 and "numpy" in manifest["versions"]
+    assert set(manifest["timings_s"]) >= {"simulate", "write", "wall"}
+    assert "commit" in manifest["git"]
+    assert (out / "figure.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(out.glob(".*.tmp"))
+
+
+def test_resolved_config_reproduces_the_run(tmp_path: Path) -> None:
+    first, second = tmp_path / "first", tmp_path / "second"
+    assert (
+        runner.invoke(app, ["run", str(ROOT / "configs" / "x_error_ags.yaml"), "--out", str(first)]).exit_code
+        == 0
+    )
+    assert runner.invoke(app, ["run", str(first / "config.yaml"), "--out", str(second)]).exit_code == 0
+    for name in ("metrics.csv", "timeseries.csv"):
+        assert (first / name).read_bytes() == (second / name).read_bytes()
+
+
+def test_overrides_and_quiet(tmp_path: Path) -> None:
+    out = tmp_path / "short"
+    result = runner.invoke(
+        app,
+        [
+            "run",
+            str(ROOT / "configs" / "x_time_ags.yaml"),
+            "simulation.t_end=5",
+            "outputs.figure=false",
+            "--out",
+            str(out),
+            "-q",
+        ],
+    )
+    assert result.exit_code == 0 and result.output.strip() == str(out)
+    ts = pd.read_csv(out / "timeseries.csv")
+    assert ts.t.max() == pytest.approx(5.0)
+    assert not (out / "figure.png").exists()
+    assert yaml.safe_load((out / "config.yaml").read_text())["simulation"]["t_end"] == 5
+
+
+def test_unstable_run_is_reported_and_exit_is_zero(tmp_path: Path) -> None:
+    result = runner.invoke(
+        app,
+        [
+            "run",
+            str(ROOT / "configs" / "x_time_ags.yaml"),
+            "controllers.conventional.loops.theta.sign=1",
+            "--out",
+            str(tmp_path / "u"),
+        ],
+    )
+    assert result.exit_code == 0
+    assert "conventional   unstable: diverged at t =" in result.output
+    manifest = json.loads((tmp_path / "u" / "manifest.json").read_text())
+    assert manifest["runs"][0]["status"] == "unstable" and manifest["runs"][0]["t_fail"] > 0
+
+
+def test_list_shows_every_registry() -> None:
+    result = runner.invoke(app, ["list"])
+    assert result.exit_code == 0
+    for name in (
+        "plants:",
+        "x_pendulum",
+        "transfer_function",
+        "controllers:",
+        "pid",
+        "open_loop",
+        "schedules:",
+        "constant",
+        "time_ags",
+        "error_ags",
+        "uncertainties:",
+        "disturbance",
+        "references:",
+        "step",
+        "sine",
+    ):
+        assert name in result.output
+
+
+def test_third_party_plant_through_an_entry_point(tmp_path: Path) -> None:
+    """A package that only declares an nlcx.plants entry point is listed and runs."""
+    (tmp_path / "toyplant.py").write_text(
+        textwrap.dedent('''
+        import numpy as np
+        from numba import njit
+        from pydantic import Field
+        from nlcx.kernel import RHS_SIG
+        from nlcx.plants.base import PlantModel, PlantParams, Signal
+
+        class Params(PlantParams):
+            w: float = Field(2.0, gt=0)
+
+        @njit(RHS_SIG, cache=False)
+        def rhs(t, x, u, p, dx):
+            dx[0] = x[1]
+            dx[1] = -p[0] * p[0] * x[0] + u[0]
+
+        class Oscillator(PlantModel):
+            """Toy harmonic oscillator from a third-party package."""
+            Params = Params
+            states = (Signal("q", "m"), Signal("q_dot", "m/s"))
+            inputs = (Signal("f", "N"),)
+            outputs = ("q",)
+            rhs = staticmethod(rhs)
+
+            def parameter_vector(self, params):
+                return np.array([params.w])
+    ''')
+    )
+    dist = tmp_path / "toyplant-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: toyplant\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[nlcx.plants]\noscillator = toyplant:Oscillator\n")
+    cfg = tmp_path / "toy.yaml"
+    cfg.write_text(
+        yaml.safe_dump(
+            {
+                "name": "toy",
+                "plant": {"name": "oscillator"},
+                "controllers": {
+                    "pd": {
+                        "kind": "pid",
+                        "loops": {"q": {"schedule": {"kind": "constant", "kp": 10, "kd": 3}}},
+                    }
+                },
+                "reference": {"q": {"kind": "step"}},
+                "simulation": {"t_end": 5.0, "dt": 0.001},
+            }
+        )
+    )
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    nlcx = [sys.executable, "-m", "nlcx.cli"]
+    listed = subprocess.run([*nlcx, "list", "plants"], capture_output=True, text=True, env=env, check=True)
+    assert "oscillator" in listed.stdout and "third-party" in listed.stdout
+    ran = subprocess.run(
+        [*nlcx, "run", str(cfg), "--out", str(tmp_path / "out")], capture_output=True, text=True, env=env
+    )
+    assert ran.returncode == 0, ran.stderr
+    metrics = pd.read_csv(tmp_path / "out" / "metrics.csv")
+    ess = metrics[(metrics.signal == "q") & (metrics.metric == "steady_state_error")].value.item()
+    assert abs(ess - (1 - 10 / 14)) < 1e-3  # P-D on w^2 = 4: y_ss = kp / (w^2 + kp)
+
+
+def test_console_script_one_line_error() -> None:
+    proc = subprocess.run(
+        [
+            str(Path(sys.executable).parent / "nlcx"),
+            "run",
+            str(ROOT / "configs" / "x_time_ags.yaml"),
+            "simulation.dt=-1",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == ["config error: simulation.dt = -1: must be greater than 0"]

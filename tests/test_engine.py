@@ -1,0 +1,148 @@
+"""The kernel and engine: accuracy, order, disturbance, divergence, batching, determinism."""
+
+from __future__ import annotations
+
+import math
+
+import control
+import numpy as np
+import pytest
+from conftest import run_raw
+
+from nlcx import config, engine
+from nlcx.errors import ConfigError
+from nlcx.report import write_csv
+
+CSTR = {"num": [-1.117, 3.1472], "den": [1.0, 4.6429, 5.3821]}  # eq. 5.10
+
+
+def tf_raw(params: dict, controllers: dict, reference: dict, t_end: float, dt: float, **extra) -> dict:
+    return {
+        "name": "tf_test",
+        "plant": {"name": "transfer_function", "params": params},
+        "controllers": controllers,
+        "reference": reference,
+        "simulation": {"t_end": t_end, "dt": dt, **extra.pop("simulation", {})},
+        **extra,
+    }
+
+
+def test_open_loop_step_matches_python_control() -> None:
+    raw = tf_raw(CSTR, {"open": {"kind": "open_loop"}}, {"u": {"kind": "step"}}, 5.0, 1e-3)
+    (run,) = run_raw(raw).runs
+    y = (run.x @ np.array(CSTR["num"][::-1])).ravel()
+    _, y_ref = control.step_response(control.tf(CSTR["num"], CSTR["den"]), T=run.t)
+    assert np.max(np.abs(y - y_ref)) < 1e-9
+
+
+@pytest.mark.parametrize(("integrator", "order"), [("euler", 1), ("heun", 2), ("rk4", 4)])
+def test_integrator_convergence_order(integrator: str, order: int) -> None:
+    """Max error of a step response against the exact one falls as dt^order."""
+    G = control.tf(CSTR["num"], CSTR["den"])
+    errs = []
+    for dt in (0.05, 0.025):
+        raw = tf_raw(
+            CSTR,
+            {"open": {"kind": "open_loop"}},
+            {"u": {"kind": "step"}},
+            2.0,
+            dt,
+            simulation={"integrator": integrator},
+        )
+        (run,) = run_raw(raw).runs
+        _, y_exact = control.step_response(G, T=run.t)
+        errs.append(np.max(np.abs(run.x @ np.array(CSTR["num"][::-1]) - np.asarray(y_exact))))
+    assert math.log2(errs[0] / errs[1]) == pytest.approx(order, abs=0.2)
+
+
+def test_closed_loop_pid_matches_continuous_feedback() -> None:
+    """ZOH-sampled PID at dt = 1e-4 against python-control's continuous loop C G / (1 + C G).
+
+    The step comes at t = 0.5 s so that both loops see the derivative kick of the filtered
+    derivative (the discrete PID starts its derivative from the first sample).
+    """
+    kp, ki, kd, N = 1.2, 1.5, 0.1, 50.0
+    ctrl = {
+        "pid": {
+            "kind": "pid",
+            "derivative": {"method": "filtered", "N": N},
+            "loops": {"y": {"schedule": {"kind": "constant", "kp": kp, "ki": ki, "kd": kd}}},
+        }
+    }
+    raw = tf_raw(CSTR, ctrl, {"y": {"kind": "step", "time": 0.5}}, 6.0, 1e-4)
+    (run,) = run_raw(raw).runs
+    y = run.x @ np.array(CSTR["num"][::-1])
+    s = control.tf("s")
+    C = kp + ki / s + kd * N * s / (s + N)
+    T = control.feedback(C * control.tf(CSTR["num"], CSTR["den"]), 1)
+    after = run.t >= 0.5
+    _, y_ref = control.step_response(T, T=run.t[after] - 0.5)
+    assert np.all(y[~after] == 0.0)
+    assert np.max(np.abs(y[after] - np.asarray(y_ref))) < 5e-4  # O(dt) from the zero-order hold
+
+
+def test_disturbance_enters_the_chosen_derivative() -> None:
+    """Double integrator x1'' = d(t), d = A sin(2 pi f t): x1 = A/w (t - sin(w t)/w)."""
+    A, f = 3.0, 2.0
+    raw = tf_raw(
+        {"num": [1.0], "den": [1.0, 0.0, 0.0]},
+        {"open": {"kind": "open_loop"}},
+        {},
+        2.0,
+        1e-3,
+        uncertainty={"d": {"kind": "disturbance", "amplitude": A, "frequency": f, "states": ["x2"]}},
+    )
+    (run,) = run_raw(raw).runs
+    w = 2 * math.pi * f
+    exact = A / w * (run.t - np.sin(w * run.t) / w)
+    assert np.max(np.abs(run.x[:, 0] - exact)) < 1e-10
+
+
+def test_divergence_is_a_result_not_a_crash(x_time_raw: dict) -> None:
+    """A wrong loop sign makes the pendulum fall: status unstable, early stop, metrics say so."""
+    x_time_raw["controllers"]["conventional"]["loops"]["theta"]["sign"] = 1
+    res = run_raw(x_time_raw)
+    conv, prop = res.runs
+    assert conv.status == "unstable" and prop.status == "ok"
+    assert 0 < conv.t_fail < 5 and conv.t.size < prop.t.size
+    assert abs(conv.x[-1, 2]) <= math.pi / 2 < abs(conv.x[-1, 2]) + 0.2
+    assert "theta" in conv.reason and "bounds" in conv.reason
+    rows = res.metrics[res.metrics.controller == "conventional"]
+    assert set(rows.status) == {"unstable"}
+    assert rows.set_index("metric").loc["t_fail", "value"] == pytest.approx(conv.t_fail)
+
+
+def test_non_finite_state_stops_the_run() -> None:
+    raw = tf_raw(
+        {"num": [1.0], "den": [1.0, -400.0]},
+        {"open": {"kind": "open_loop"}},
+        {"u": {"kind": "step"}},
+        5.0,
+        1e-3,
+    )
+    (run,) = run_raw(raw).runs
+    assert run.status == "unstable" and "non-finite" in run.reason
+    assert np.all(np.isfinite(run.x))
+
+
+def test_batch_equals_single_runs_bit_for_bit(x_error_raw: dict) -> None:
+    both = run_raw(x_error_raw)
+    for label in ("conventional", "proposed"):
+        single_raw = {**x_error_raw, "controllers": {label: x_error_raw["controllers"][label]}}
+        (single,) = run_raw(single_raw).runs
+        batched = next(r for r in both.runs if r.label == label)
+        assert np.array_equal(single.x, batched.x) and np.array_equal(single.u, batched.u)
+        assert np.array_equal(single.log, batched.log)
+
+
+def test_same_config_same_bytes(x_time_raw: dict, tmp_path) -> None:
+    a, b = run_raw(x_time_raw), run_raw(x_time_raw)
+    write_csv(tmp_path / "a.csv", a.metrics)
+    write_csv(tmp_path / "b.csv", b.metrics)
+    assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
+
+
+def test_t_end_must_be_whole_steps(x_time_raw: dict) -> None:
+    x_time_raw["simulation"]["dt"] = 0.003
+    with pytest.raises(ConfigError, match=r"simulation\.t_end"):
+        engine.prepare(config.build(x_time_raw))

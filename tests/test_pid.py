@@ -1,0 +1,148 @@
+"""The PID step function against its equations (one controller, several loops)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nlcx import config, engine
+from nlcx.controllers.pid import LOOP_STATE, pid_step
+from nlcx.controllers.schedules import schedule_slots
+
+
+def build(raw_ctrl: dict) -> engine.Prepared:
+    raw = {
+        "name": "pid_test",
+        "plant": {"name": "x_pendulum"},
+        "controllers": {"c": raw_ctrl},
+        "reference": {"x": {"kind": "step", "final": 1.0}},
+        "simulation": {"t_end": 1.0, "dt": 0.01},
+    }
+    return engine.prepare(config.build(raw))
+
+
+def drive(prep: engine.Prepared, ys: np.ndarray, rs: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Call the compiled step on a prescribed measurement sequence; returns (u, log)."""
+    c = prep.controllers[0]
+    cs = c.cs0.copy()
+    us, logs = [], []
+    for k, (y, r) in enumerate(zip(ys, rs, strict=True)):
+        u = np.zeros(1)
+        log = np.zeros(len(c.log_names))
+        pid_step(
+            k * dt, dt, np.ascontiguousarray(y), np.ascontiguousarray(r), c.cp, cs, u, log, schedule_slots()
+        )
+        us.append(u[0])
+        logs.append(log)
+    return np.array(us), np.array(logs)
+
+
+CONST = {
+    "kind": "pid",
+    "loops": {
+        "theta": {"sign": -1, "schedule": {"kind": "constant", "kp": 30, "ki": 2, "kd": 4}},
+        "x": {"sign": 1, "schedule": {"kind": "constant", "kp": -3, "ki": -1, "kd": -2}},
+    },
+}
+
+
+def reference_pid(e: np.ndarray, kp: float, ki: float, kd: float, dt: float) -> np.ndarray:
+    """u_k = kp e_k + ki sum_{j<=k} e_j dt + kd (e_k - e_{k-1})/dt, with e_{-1} = e_0."""
+    integral = np.cumsum(e) * dt
+    de = np.diff(e, prepend=e[0]) / dt
+    return kp * e + ki * integral + kd * de
+
+
+def test_two_loops_sum_into_one_force() -> None:
+    dt = 0.01
+    prep = build(CONST)
+    rng = np.random.default_rng(3)
+    n = 50
+    y = np.column_stack([rng.normal(size=n).cumsum() * 0.01, rng.normal(size=n) * 0.05])  # (x, theta)
+    r = np.column_stack([np.ones(n), np.zeros(n)])
+    u, log = drive(prep, y, r, dt)
+    u_theta = -reference_pid(r[:, 1] - y[:, 1], 30, 2, 4, dt)
+    u_x = reference_pid(r[:, 0] - y[:, 0], -3, -1, -2, dt)
+    assert np.allclose(u, u_theta + u_x, rtol=0, atol=1e-9)
+    names = prep.controllers[0].log_names
+    assert np.allclose(log[:, names.index("theta.u")], u_theta, atol=1e-9)
+    assert np.allclose(log[:, names.index("x.kp")], -3)
+
+
+def test_bias_is_added() -> None:
+    prep = build({**CONST, "bias": {"F_x": 2.5}})
+    u, _ = drive(prep, np.zeros((3, 2)), np.zeros((3, 2)), 0.01)
+    assert np.allclose(u, 2.5)
+
+
+def test_filtered_derivative_is_backward_euler_of_N_s_over_s_plus_N() -> None:
+    dt, N = 0.01, 20.0
+    ctrl = {
+        "kind": "pid",
+        "derivative": {"method": "filtered", "N": N},
+        "loops": {
+            "theta": {"schedule": {"kind": "constant", "kd": 1.0}},
+            "x": {"schedule": {"kind": "constant"}},
+        },
+    }
+    prep = build(ctrl)
+    n = 40
+    theta = np.sin(np.arange(n) * 0.3)
+    y = np.column_stack([np.zeros(n), theta])
+    u, _ = drive(prep, y, np.zeros((n, 2)), dt)
+    e = -theta
+    d = np.zeros(n)
+    for k in range(1, n):
+        d[k] = (d[k - 1] + N * (e[k] - e[k - 1])) / (1 + N * dt)
+    assert np.allclose(u, d, atol=1e-12)
+
+
+def test_derivative_on_measurement_ignores_reference_steps() -> None:
+    dt = 0.01
+    ctrl = {
+        "kind": "pid",
+        "derivative": {"on": "measurement"},
+        "loops": {
+            "x": {"schedule": {"kind": "constant", "kd": 1.0}},
+            "theta": {"schedule": {"kind": "constant"}},
+        },
+    }
+    prep = build(ctrl)
+    r = np.zeros((4, 2))
+    r[2:, 0] = 1.0  # reference step between samples 1 and 2, measurement constant
+    u, _ = drive(prep, np.zeros((4, 2)), r, dt)
+    assert np.allclose(u, 0.0)
+    prep_err = build({**ctrl, "derivative": {"on": "error"}})
+    u_err, _ = drive(prep_err, np.zeros((4, 2)), r, dt)
+    assert u_err[2] == pytest.approx(1.0 / dt)  # the kick
+
+
+@pytest.mark.parametrize("where", ["outside", "inside"])
+def test_integral_with_time_varying_gain(where: str) -> None:
+    """outside: u = k_i(t) * sum(e dt); inside: u = sum(k_i(t) e dt)."""
+    dt = 0.1
+    sched = {
+        "kind": "time_ags",
+        "kp": {"min": 0, "max": 0},
+        "ki": {"min": 1, "max": 3},
+        "kd": {"min": 0, "max": 0},
+        "rate": {"kp": 0, "ki": 0.5, "kd": 0},
+    }
+    ctrl = {
+        "kind": "pid",
+        "integral": where,
+        "loops": {"x": {"schedule": sched}, "theta": {"schedule": {"kind": "constant"}}},
+    }
+    prep = build(ctrl)
+    n = 30
+    r = np.column_stack([np.ones(n), np.zeros(n)])
+    u, _ = drive(prep, np.zeros((n, 2)), r, dt)
+    t = np.arange(n) * dt
+    ki = 3 - 2 * np.exp(-0.5 * t)
+    expected = ki * np.cumsum(np.ones(n)) * dt if where == "outside" else np.cumsum(ki * dt)
+    assert np.allclose(u, expected, atol=1e-12)
+
+
+def test_state_layout_matches_loop_count() -> None:
+    prep = build(CONST)
+    assert prep.controllers[0].cs0.size == 2 * LOOP_STATE
