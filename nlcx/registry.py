@@ -124,6 +124,9 @@ def register_builtins() -> None:
     if "x_pendulum" in plants._entries:
         return
     plants.register("x_pendulum", "nlcx.plants.x_pendulum:XPendulum")
+    plants.register("xy_pendulum", "nlcx.plants.xy_pendulum:XYPendulum")
+    plants.register("xz_pendulum", "nlcx.plants.xz_pendulum:XZPendulum")
+    plants.register("xyz_pendulum", "nlcx.plants.xyz_pendulum:XYZPendulum")
     plants.register("transfer_function", "nlcx.plants.transfer_function:TransferFunction")
     controllers.register("pid", "nlcx.controllers.pid:MultiLoopPID")
     controllers.register("open_loop", "nlcx.controllers.open_loop:OpenLoop")

@@ -201,7 +201,7 @@ class MultiLoopPID(ControllerModel):
                 raise ConfigError(
                     where, signal, f"not an output of {plant.name}; allowed: {', '.join(outputs)}"
                 )
-            input_name = loop.input or plant.extra.get("loop_inputs", {}).get(signal)
+            input_name = loop.input or plant.loop_inputs.get(signal)
             if input_name is None and len(inputs) == 1:
                 input_name = inputs[0]
             if input_name not in inputs:

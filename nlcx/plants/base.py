@@ -58,7 +58,12 @@ class Plant:
     velocity_states: tuple[str, ...] = ()
     energy: Callable[[np.ndarray], np.ndarray] | None = None
     power: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
-    extra: dict[str, Any] = field(default_factory=dict)
+    #: Default input of a PID loop on each output.
+    loop_inputs: dict[str, str] = field(default_factory=dict)
+    #: Velocity state of the coordinate each input force drives (where friction acts).
+    input_axes: dict[str, str] = field(default_factory=dict)
+    #: Weight of the moving assembly, (M + m) g: the normal force of Appendix A's friction.
+    weight: float | None = None
 
     @property
     def state_names(self) -> list[str]:
@@ -96,11 +101,21 @@ class PlantModel:
     default_bounds: ClassVar[Mapping[str, float]] = {}
     #: Input a PID loop on each output drives unless its config says otherwise.
     loop_inputs: ClassVar[Mapping[str, str]] = {}
+    #: Velocity state of the coordinate each input force acts on (friction acts there too).
+    input_axes: ClassVar[Mapping[str, str]] = {}
     rhs: ClassVar[Any] = None
 
     def parameter_vector(self, params: PlantParams) -> np.ndarray:
         """The parameter vector p the right-hand side reads."""
         raise NotImplementedError
+
+    def select_rhs(self, params: PlantParams) -> Any:
+        """The compiled right-hand side for these parameters (e.g. a model variant)."""
+        return self.rhs
+
+    def weight(self, params: PlantParams) -> float | None:
+        """Weight of the moving assembly (the normal force of friction), if defined."""
+        return None
 
     def energy(self, params: PlantParams) -> Callable[[np.ndarray], np.ndarray] | None:
         """Total mechanical energy E(x) (vectorised over leading axes), if defined."""
@@ -132,7 +147,7 @@ class PlantModel:
             states=states,
             inputs=self.inputs,
             outputs=outputs,
-            rhs=self.rhs,
+            rhs=self.select_rhs(params),
             p=np.ascontiguousarray(self.parameter_vector(params), dtype=float),
             C=C,
             x0=x_init,
@@ -142,7 +157,9 @@ class PlantModel:
             velocity_states=self.velocity_states,
             energy=self.energy(params),
             power=self.power(params),
-            extra={"loop_inputs": dict(self.loop_inputs)},
+            loop_inputs=dict(self.loop_inputs),
+            input_axes=dict(self.input_axes),
+            weight=self.weight(params),
         )
 
 
