@@ -180,6 +180,38 @@ def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]
     return data
 
 
+def deep_merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+    """``top`` over ``base``: mappings merge key by key, anything else replaces."""
+    out = copy.deepcopy(base)
+    for key, value in top.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = deep_merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """Read a config file, first merging the files its ``extends`` key names.
+
+    ``extends`` is a path or a list of paths relative to the file; they are merged in order
+    and the file's own keys go on top (see :func:`deep_merge`).
+    """
+    path = Path(path).resolve()
+    if path in _seen:
+        raise ConfigError("extends", str(path), "circular extends")
+    data = read_yaml(path)
+    parents = data.pop("extends", [])
+    if isinstance(parents, str):
+        parents = [parents]
+    if not isinstance(parents, list) or not all(isinstance(p, str) for p in parents):
+        raise ConfigError("extends", parents, "must be a file path or a list of file paths")
+    merged: dict[str, Any] = {}
+    for parent in parents:
+        merged = deep_merge(merged, read_config(path.parent / parent, (*_seen, path)))
+    return deep_merge(merged, data)
+
+
 def read_yaml(path: str | Path) -> dict[str, Any]:
     """Parse a YAML file with ``yaml.safe_load``; it must hold a mapping."""
     path = Path(path)
@@ -198,7 +230,7 @@ def read_yaml(path: str | Path) -> dict[str, Any]:
 
 def load(path: str | Path, overrides: list[str] | None = None) -> Experiment:
     """Read, override and validate an experiment config."""
-    return build(apply_overrides(read_yaml(path), overrides or []))
+    return build(apply_overrides(read_config(path), overrides or []))
 
 
 def _plugin(

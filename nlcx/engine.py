@@ -21,7 +21,7 @@ from nlcx.config import Experiment, MetricsSection
 from nlcx.controllers.base import ControllerInstance
 from nlcx.controllers.schedules import schedule_slots
 from nlcx.errors import ConfigError
-from nlcx.kernel import STATUS_BOUND, STATUS_NONFINITE, simulate
+from nlcx.kernel import FRICTION_FIELDS, STATUS_BOUND, STATUS_NONFINITE, simulate
 from nlcx.plants.base import Plant
 from nlcx.references.base import MetricPlan
 from nlcx.uncertainty.base import Perturbations
@@ -77,6 +77,7 @@ class Run:
     u: np.ndarray
     r: np.ndarray
     log: np.ndarray
+    friction: np.ndarray
     t_fail: float = math.nan
 
     @property
@@ -187,6 +188,8 @@ def simulate_runs(prepared: Prepared) -> list[Run]:
     noise_u = prepared.perturbations.noise_u
     noise_y = np.zeros((1, 1, n_y)) if noise_y is None else np.ascontiguousarray(noise_y[None])
     noise_u = np.zeros((1, 1, n_u)) if noise_u is None else np.ascontiguousarray(noise_u[None])
+    friction = prepared.perturbations.friction
+    fric = np.zeros((1, n_u, FRICTION_FIELDS)) if friction is None else np.ascontiguousarray(friction[None])
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i, c in enumerate(prepared.controllers):
         groups.setdefault((id(c.step), c.reference_signals, len(c.log_names)), []).append(i)
@@ -199,6 +202,7 @@ def simulate_runs(prepared: Prepared) -> list[Run]:
         X = np.full((n_b, n_k, n), np.nan)
         U = np.full((n_b, n_k, n_u), np.nan)
         LOG = np.full((n_b, n_k, len(ctrls[0].log_names)), np.nan)
+        FRIC = np.full((n_b, n_k, n_u), np.nan)
         status = np.zeros(n_b, dtype=np.int64)
         n_valid = np.zeros(n_b, dtype=np.int64)
         fail_index = np.zeros(n_b, dtype=np.int64)
@@ -218,11 +222,13 @@ def simulate_runs(prepared: Prepared) -> list[Run]:
             dist_map,
             noise_y,
             noise_u,
+            fric,
             np.ascontiguousarray(plant.bounds),
             grid.dt,
             X,
             U,
             LOG,
+            FRIC,
             status,
             n_valid,
             fail_index,
@@ -239,6 +245,7 @@ def simulate_runs(prepared: Prepared) -> list[Run]:
                 u=U[j, :k],
                 r=ref[0, :k],
                 log=LOG[j, :k],
+                friction=FRIC[j, :k],
                 t_fail=t_fail,
             )
     return [r for r in runs if r is not None]

@@ -21,6 +21,7 @@ Signatures (all arrays are contiguous float64 vectors):
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -49,6 +50,15 @@ CONTROLLER_SIG = types.void(F64, F64, VEC, VEC, VEC, VEC, VEC, VEC, ScheduleTupl
 RhsFn = types.FunctionType(RHS_SIG)
 ControllerFn = types.FunctionType(CONTROLLER_SIG)
 
+#: Friction parameters per input: model (0 none, 1 simple, 2 exponential), mu_s, mu_c,
+#: viscous coefficient, normal force F_N, Stribeck velocity, form factor, velocity-state index.
+FRICTION_FIELDS = 8
+FRICTION_NONE = 0
+FRICTION_SIMPLE = 1
+FRICTION_EXPONENTIAL = 2
+_SLIP = 1
+_STUCK = 2
+
 #: Run status codes written by :func:`simulate`.
 STATUS_OK = 0
 STATUS_NONFINITE = 1
@@ -70,11 +80,13 @@ SIMULATE_SIG = types.void(
     MAT,  # dist_map (n, n_d): dx += dist_map @ d
     ARR3,  # noise_y (B|1, K+1|1, n_y) added to the measured outputs
     ARR3,  # noise_u (B|1, K+1|1, n_u) added to the controller output
+    ARR3,  # fric (B|1, n_u, FRICTION_FIELDS) friction of each input's axis (model 0: none)
     VEC,  # bounds (n,) |x_i| above bounds[i] stops the run
     F64,  # dt
     ARR3,  # X out (B, K+1, n)
     ARR3,  # U out (B, K+1, n_u)
     ARR3,  # LOG out (B, K+1, n_log)
+    ARR3,  # FRICTION out (B, K+1, n_u) friction force on each input's axis at t_k
     IVEC,  # status out (B,)
     IVEC,  # n_valid out (B,)
     IVEC,  # fail_index out (B,) i < n: state i failed; n + j: input j non-finite; -1: none
@@ -100,6 +112,119 @@ def _derivative(rhs, t, x, u, p, dist_row, dist_map, dx):  # pragma: no cover - 
             dx[i] += acc
 
 
+@njit(cache=True)
+def slip_friction(fric_row, v, direction):  # pragma: no cover - compiled
+    """Friction while sliding in ``direction`` at velocity v (Appendix A).
+
+    simple:      F = -mu_c F_N sgn - eps v
+    exponential: F = -[mu_c + (mu_s - mu_c) exp(-(|v|/v_s)^gamma)] F_N sgn - eps v
+    The sign is the direction of the slip, fixed over a step, so the Runge-Kutta stages
+    never chatter on sgn(v).
+    """
+    model = int(fric_row[0])
+    mu_s, mu_c, eps, f_n = fric_row[1], fric_row[2], fric_row[3], fric_row[4]
+    if model == FRICTION_SIMPLE:
+        mu = mu_c
+    else:
+        mu = mu_c + (mu_s - mu_c) * math.exp(-((abs(v) / fric_row[5]) ** fric_row[6]))
+    return -mu * f_n * direction - eps * v
+
+
+@njit(cache=True)
+def _solve_small(A, b, n):  # pragma: no cover - compiled
+    """Solve A[:n, :n] z = b[:n] in place (Gaussian elimination, partial pivoting)."""
+    for col in range(n):
+        piv = col
+        for r in range(col + 1, n):
+            if abs(A[r, col]) > abs(A[piv, col]):
+                piv = r
+        if piv != col:
+            for c in range(n):
+                A[col, c], A[piv, c] = A[piv, c], A[col, c]
+            b[col], b[piv] = b[piv], b[col]
+        for r in range(col + 1, n):
+            factor = A[r, col] / A[col, col]
+            for c in range(col, n):
+                A[r, c] -= factor * A[col, c]
+            b[r] -= factor * b[col]
+    for col in range(n - 1, -1, -1):
+        acc = b[col]
+        for c in range(col + 1, n):
+            acc -= A[col, c] * b[c]
+        b[col] = acc / A[col, col]
+
+
+@njit(cache=True)
+def _friction_forces(
+    rhs, t, x, u, p, dist_row, dist_map, fric_b, mode, direction, f_out, work, A, rhs_s, dx
+):  # pragma: no cover - compiled
+    """Friction force on every input's axis at state x (written to f_out).
+
+    Sliding axes get :func:`slip_friction`. Stuck axes get the force that keeps their
+    acceleration exactly zero: accelerations are affine in the generalised forces, so with
+    a0 the accelerations of the stuck axes under the other forces and B their response to
+    unit forces on the stuck axes, f_S = -B^{-1} a0 (solved jointly when several stick).
+    """
+    n_u = u.shape[0]
+    n_stuck = 0
+    for j in range(n_u):
+        f_out[j] = 0.0
+        if mode[j] == _SLIP:
+            vi = int(fric_b[j, 7])
+            f_out[j] = slip_friction(fric_b[j], x[vi], direction[j])
+        elif mode[j] == _STUCK:
+            n_stuck += 1
+    if n_stuck == 0:
+        return
+    for j in range(n_u):
+        work[j] = u[j] + f_out[j]
+    _derivative(rhs, t, x, work, p, dist_row, dist_map, dx)
+    k = 0
+    for j in range(n_u):
+        if mode[j] == _STUCK:
+            rhs_s[k] = -dx[int(fric_b[j, 7])]
+            k += 1
+    col = 0
+    for jc in range(n_u):
+        if mode[jc] != _STUCK:
+            continue
+        work[jc] += 1.0
+        _derivative(rhs, t, x, work, p, dist_row, dist_map, dx)
+        work[jc] -= 1.0
+        row = 0
+        for jr in range(n_u):
+            if mode[jr] == _STUCK:
+                A[row, col] = dx[int(fric_b[jr, 7])] + rhs_s[row]
+                row += 1
+        col += 1
+    _solve_small(A, rhs_s, n_stuck)
+    k = 0
+    for j in range(n_u):
+        if mode[j] == _STUCK:
+            f_out[j] = rhs_s[k]
+            k += 1
+
+
+@njit(cache=True)
+def _update_friction_modes(
+    rhs, t, x, u, p, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx
+):  # pragma: no cover - compiled
+    """Breakaway at the start of a step: a stuck axis whose holding force would exceed
+    mu_s F_N starts to slide in the direction of the net force (Appendix A's static case)."""
+    for _ in range(u.shape[0]):
+        _friction_forces(
+            rhs, t, x, u, p, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx
+        )
+        released = False
+        for j in range(u.shape[0]):
+            if mode[j] == _STUCK and abs(f_tmp[j]) > fric_b[j, 1] * fric_b[j, 4]:
+                mode[j] = _SLIP
+                direction[j] = -1.0 if f_tmp[j] > 0 else 1.0
+                released = True
+        if not released:
+            return
+
+
 @njit(SIMULATE_SIG, cache=True)
 def simulate(
     rhs,
@@ -117,11 +242,13 @@ def simulate(
     dist_map,
     noise_y,
     noise_u,
+    fric,
     bounds,
     dt,
     X,
     U,
     LOG,
+    FRICTION,
     status,
     n_valid,
     fail_index,
@@ -131,8 +258,10 @@ def simulate(
     At every sampling instant t_k = k dt the controller reads y_k = C x_k (+ noise) and
     sets u_k, held constant (zero-order hold) while the plant is integrated to t_{k+1}
     with the Butcher tableau (rk_a, rk_b); stage i is evaluated at t_k + c_i dt with
-    c_i = sum_j rk_a[i, j]. A run whose state becomes non-finite or leaves ``bounds``
-    stops early: its status is set and the remaining samples are left untouched (NaN).
+    c_i = sum_j rk_a[i, j]. Friction (Appendix A) acts on the axis of each input: a sliding
+    axis whose velocity reaches zero within a step is stopped there and sticks until its
+    holding force exceeds mu_s F_N. A run whose state becomes non-finite or leaves
+    ``bounds`` stops early: its status is set and the remaining samples are left untouched.
     """
     n_batch = x0.shape[0]
     n = x0.shape[1]
@@ -149,6 +278,14 @@ def simulate(
     xs = np.empty(n)
     y = np.empty(n_y)
     u = np.empty(n_u)
+    u_total = np.empty(n_u)
+    f = np.empty(n_u)
+    mode = np.zeros(n_u, dtype=np.int64)
+    direction = np.zeros(n_u)
+    work = np.empty(n_u)
+    A = np.empty((n_u, n_u))
+    rhs_s = np.empty(n_u)
+    dx = np.empty(n)
     for b in range(n_batch):
         pb = p[_row(p.shape[0], b)]
         cs = cs0[b].copy()
@@ -157,7 +294,16 @@ def simulate(
         db = dist[_row(dist.shape[0], b)]
         nyb = noise_y[_row(noise_y.shape[0], b)]
         nub = noise_u[_row(noise_u.shape[0], b)]
+        fb = fric[_row(fric.shape[0], b)]
         x[:] = x0[b]
+        has_friction = False
+        for j in range(n_u):
+            mode[j] = 0
+            if int(fb[j, 0]) != FRICTION_NONE:
+                has_friction = True
+                v0 = x[int(fb[j, 7])]
+                mode[j] = _STUCK if v0 == 0.0 else _SLIP
+                direction[j] = 1.0 if v0 > 0.0 else -1.0
         status[b] = STATUS_OK
         fail_index[b] = -1
         n_valid[b] = n_steps + 1
@@ -184,19 +330,44 @@ def simulate(
                 fail_index[b] = n + bad_u
                 n_valid[b] = k + 1
                 break
+            drow = db[_row(db.shape[0], k)]
+            if has_friction:
+                _update_friction_modes(
+                    rhs, t, x, u, pb, drow[0], dist_map, fb, mode, direction, f, work, A, rhs_s, dx
+                )
+                _friction_forces(
+                    rhs, t, x, u, pb, drow[0], dist_map, fb, mode, direction, f, work, A, rhs_s, dx
+                )
+                FRICTION[b, k] = f
+            else:
+                FRICTION[b, k] = 0.0
             if k == n_steps:
                 break
-            drow = db[_row(db.shape[0], k)]
             for s in range(n_stage):
                 xs[:] = x
                 for j in range(s):
                     if rk_a[s, j] != 0.0:
                         for i in range(n):
                             xs[i] += dt * rk_a[s, j] * k_stage[j, i]
-                _derivative(rhs, t + c[s] * dt, xs, u, pb, drow[s], dist_map, k_stage[s])
+                ts = t + c[s] * dt
+                if has_friction:
+                    _friction_forces(
+                        rhs, ts, xs, u, pb, drow[s], dist_map, fb, mode, direction, f, work, A, rhs_s, dx
+                    )
+                    for j in range(n_u):
+                        u_total[j] = u[j] + f[j]
+                    _derivative(rhs, ts, xs, u_total, pb, drow[s], dist_map, k_stage[s])
+                else:
+                    _derivative(rhs, ts, xs, u, pb, drow[s], dist_map, k_stage[s])
             for s in range(n_stage):
                 for i in range(n):
                     x[i] += dt * rk_b[s] * k_stage[s, i]
+            if has_friction:
+                for j in range(n_u):
+                    vi = int(fb[j, 7])
+                    if mode[j] == _STUCK or (mode[j] == _SLIP and x[vi] * direction[j] <= 0.0):
+                        x[vi] = 0.0
+                        mode[j] = _STUCK
             bad = -1
             code = STATUS_OK
             for i in range(n):

@@ -134,6 +134,8 @@ def register_builtins() -> None:
     schedules.register("time_ags", "nlcx.controllers.schedules:TimeAGS")
     schedules.register("error_ags", "nlcx.controllers.schedules:ErrorAGS")
     uncertainties.register("disturbance", "nlcx.uncertainty.disturbance:Disturbance")
+    uncertainties.register("noise", "nlcx.uncertainty.noise:Noise")
+    uncertainties.register("friction", "nlcx.uncertainty.friction:Friction")
     references.register("constant", "nlcx.references.basic:Constant")
     references.register("step", "nlcx.references.basic:Step")
     references.register("sine", "nlcx.references.basic:Sine")

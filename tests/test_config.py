@@ -25,7 +25,8 @@ CASES = [
         ["plant.name=x_pendulm"],
         "plant.name",
         "'x_pendulm'",
-        "unknown plant; allowed: transfer_function, x_pendulum (did you mean 'x_pendulum'?)",
+        "unknown plant; allowed: transfer_function, x_pendulum, xy_pendulum, xyz_pendulum, xz_pendulum "
+        "(did you mean 'x_pendulum'?)",
     ),
     (
         ["simulation.t_edn=5"],
@@ -74,10 +75,10 @@ CASES = [
         "unknown reference; allowed: constant, sine, step",
     ),
     (
-        ["uncertainty.noise={}"],
-        "uncertainty.noise.kind",
-        "'noise'",
-        "unknown uncertainty; allowed: disturbance",
+        ["uncertainty.wind={}"],
+        "uncertainty.wind.kind",
+        "'wind'",
+        "unknown uncertainty; allowed: disturbance, friction, noise",
     ),
     (
         ["simulation.dt=0.003"],

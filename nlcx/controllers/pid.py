@@ -24,7 +24,7 @@ from nlcx.controllers.base import ControllerConfig, ControllerInstance, Controll
 from nlcx.controllers.schedules import schedule_index
 from nlcx.errors import ConfigError
 from nlcx.kernel import CONTROLLER_SIG
-from nlcx.plants.base import Plant
+from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join, validate_model
 
 #: Per-loop header in the parameter vector: y index, r index, u index, sign, schedule slot,
@@ -69,8 +69,11 @@ class PIDConfig(ControllerConfig):
     #: "outside": u = k_i(t) * integral(e) as eqs. 2.17-2.22 write it;
     #: "inside": u = integral(k_i(t) e), bumpless when k_i varies.
     integral: Literal["outside", "inside"] = "outside"
-    #: Constant feed-forward added to an input, e.g. gravity compensation of F_z.
+    #: Constant feed-forward added to an input, by input name.
     bias: dict[str, float] = Field(default_factory=dict)
+    #: "equilibrium" adds the input that holds the plant at rest upright, computed from the
+    #: model (for the x-z and x-y-z pendulums: gravity compensation F_z = (M + m) g).
+    feedforward: Literal["none", "equilibrium"] = "none"
 
 
 @njit(CONTROLLER_SIG, cache=True)
@@ -132,13 +135,13 @@ class MultiLoopPID(ControllerModel):
         inputs = plant.input_names
         loops = self._resolve_loops(cfg, plant, path)
         n_u = len(inputs)
-        bias = np.zeros(n_u)
+        bias = equilibrium_input(plant) if cfg.feedforward == "equilibrium" else np.zeros(n_u)
         for name, value in cfg.bias.items():
             if name not in inputs:
                 raise ConfigError(
                     join(path, "bias", name), value, f"unknown input; allowed: {', '.join(inputs)}"
                 )
-            bias[inputs.index(name)] = value
+            bias[inputs.index(name)] += value
         header: list[float] = [len(loops), n_u, *bias]
         params: list[float] = []
         sched_start = len(header) + LOOP_FIELDS * len(loops)

@@ -192,3 +192,28 @@ def divergence_bounds(names: list[str], bounds: Mapping[str, float]) -> np.ndarr
             )
         bound_vec[names.index(key)] = float(value)
     return bound_vec
+
+
+def equilibrium_input(plant: Plant, x_eq: np.ndarray | None = None, tol: float = 1e-9) -> np.ndarray:
+    """The input u* that holds ``x_eq`` (default: all states zero, the upright pendulum at rest).
+
+    The accelerations of a mechanical plant are affine in its generalised forces,
+    f(x, u) = f(x, 0) + B(x) u, so u* solves B u* = -f(x_eq, 0) (least squares). For the
+    x-z and x-y-z pendulums this is the gravity compensation F_z = (M + m) g.
+    """
+    n, m = len(plant.states), len(plant.inputs)
+    x = np.zeros(n) if x_eq is None else np.ascontiguousarray(x_eq, dtype=float)
+    f0 = np.zeros(n)
+    plant.rhs(0.0, x, np.zeros(m), plant.p, f0)
+    B = np.zeros((n, m))
+    for j in range(m):
+        e = np.zeros(m)
+        e[j] = 1.0
+        fj = np.zeros(n)
+        plant.rhs(0.0, x, e, plant.p, fj)
+        B[:, j] = fj - f0
+    u, *_ = np.linalg.lstsq(B, -f0, rcond=None)
+    residual = f0 + B @ u
+    if np.max(np.abs(residual)) > tol * max(1.0, np.max(np.abs(f0))):
+        raise ConfigError("feedforward", "equilibrium", f"no input holds {plant.name} at this state")
+    return u

@@ -32,11 +32,20 @@ class Perturbations:
     dist_values: list[np.ndarray] = field(default_factory=list)
     noise_y: np.ndarray | None = None
     noise_u: np.ndarray | None = None
+    #: (n_u, FRICTION_FIELDS) friction of each input's axis, see nlcx.kernel.
+    friction: np.ndarray | None = None
 
     def add_disturbance(self, column: np.ndarray, values: np.ndarray) -> None:
         """Add d(t) (sampled at ``stage_times``) times ``column`` to dx/dt."""
         self.dist_columns.append(np.asarray(column, dtype=float))
         self.dist_values.append(np.asarray(values, dtype=float))
+
+    def add_noise(self, where: str, values: np.ndarray) -> None:
+        """Add a noise sequence (K+1, n_y) to the measurements or (K+1, n_u) to the inputs."""
+        if where == "measurement":
+            self.noise_y = values if self.noise_y is None else self.noise_y + values
+        else:
+            self.noise_u = values if self.noise_u is None else self.noise_u + values
 
     def dist_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """(dist (1, K, s, n_d), dist_map (n, n_d)) for the kernel."""

@@ -1,0 +1,102 @@
+"""Simple and exponential (Stribeck) friction of Appendix A on every moving base axis.
+
+Appendix A (after Campbell et al.): at rest the friction holds the base up to the
+breakaway force mu_s F_N; sliding, the simple model gives Coulomb plus viscous friction,
+-mu_c F_N sgn(v) - eps v, and the exponential model
+-[mu_c + (mu_s - mu_c) exp(-(|v|/v_s)^gamma)] F_N sgn(v) - eps v with form factor
+gamma = 2 and Stribeck velocity v_s = 0.105 m/s. F_N = (M + m) g.
+
+The stick-slip logic lives in the kernel (nlcx.kernel): a sliding axis whose velocity
+reaches zero within a step stops there and sticks; a stuck axis gets exactly the force that
+keeps its acceleration zero (so it stays at rest, with no chattering from sgn(0)) while
+that force is at most mu_s F_N, and breaks away in the direction of the net force otherwise.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from nlcx.errors import ConfigError
+from nlcx.kernel import FRICTION_EXPONENTIAL, FRICTION_FIELDS, FRICTION_SIMPLE
+from nlcx.uncertainty.base import Perturbations, UncertaintyConfig, UncertaintyModel
+from nlcx.validation import join
+
+#: The input whose axis is vertical: gravity gives it no normal force.
+VERTICAL_INPUT = "F_z"
+
+
+class FrictionConfig(UncertaintyConfig):
+    kind: Literal["friction"] = "friction"
+    model: Literal["simple", "exponential"] = "simple"
+    #: Static (breakaway) friction coefficient.
+    mu_s: float = Field(0.2, ge=0)
+    #: Coulomb (sliding) friction coefficient.
+    mu_c: float = Field(0.15, ge=0)
+    #: Viscous friction coefficient eps, N s/m.
+    viscous: float = Field(0.1, ge=0)
+    #: Stribeck velocity v_s of the exponential model, m/s (Appendix A).
+    stribeck_velocity: float = Field(0.105, gt=0)
+    #: Form factor gamma of the exponential model (Appendix A).
+    form_factor: float = Field(2.0, gt=0)
+    #: Normal force F_N, N; "weight" is (M + m) g as Appendix A defines it.
+    normal_force: Literal["weight"] | float = "weight"
+    #: The vertical (z) axis: "same" applies F_N = (M + m) g as Appendix A literally does;
+    #: "viscous_only" keeps only eps z_dot (gravity gives a vertical guide no normal force);
+    #: "none" removes friction from z.
+    vertical: Literal["same", "viscous_only", "none"] = "same"
+    #: Inputs whose axes have friction; default: every input with an axis.
+    axes: list[str] | None = None
+
+    @model_validator(mode="after")
+    def _static_at_least_sliding(self) -> FrictionConfig:
+        if self.mu_s < self.mu_c:
+            raise ValueError(f"mu_s ({self.mu_s}) must be >= mu_c ({self.mu_c})")
+        return self
+
+
+class Friction(UncertaintyModel):
+    """Appendix A friction (simple or exponential) with true stiction on each base axis."""
+
+    Config = FrictionConfig
+
+    def apply(self, cfg: FrictionConfig, perturbations: Perturbations, path: str) -> None:
+        plant = perturbations.plant
+        if perturbations.friction is not None:
+            raise ConfigError(path, cfg.kind, "only one friction model can act on a plant")
+        if not plant.input_axes:
+            raise ConfigError(
+                join(path, "kind"), cfg.kind, f"{plant.name} has no mechanical axes for friction"
+            )
+        axes = cfg.axes if cfg.axes is not None else list(plant.input_axes)
+        if cfg.normal_force == "weight":
+            if plant.weight is None:
+                raise ConfigError(
+                    join(path, "normal_force"), "weight", f"{plant.name} defines no weight; give a number"
+                )
+            f_n = plant.weight
+        else:
+            f_n = float(cfg.normal_force)
+        table = np.zeros((len(plant.inputs), FRICTION_FIELDS))
+        model = FRICTION_SIMPLE if cfg.model == "simple" else FRICTION_EXPONENTIAL
+        for i, name in enumerate(axes):
+            if name not in plant.input_axes:
+                raise ConfigError(
+                    join(path, "axes", i),
+                    name,
+                    f"allowed: {', '.join(plant.input_axes)} (inputs with an axis)",
+                )
+            normal = f_n
+            if name == VERTICAL_INPUT and cfg.vertical != "same":
+                if cfg.vertical == "none":
+                    continue
+                normal = 0.0
+            row = plant.input_names.index(name)
+            velocity = plant.state_names.index(plant.input_axes[name])
+            table[row] = [
+                model, cfg.mu_s, cfg.mu_c, cfg.viscous, normal,
+                cfg.stribeck_velocity, cfg.form_factor, velocity,
+            ]  # fmt: skip
+        perturbations.friction = table
