@@ -28,9 +28,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 ConfigArg = Annotated[Path, typer.Argument(help="Experiment YAML file.", show_default=False)]
 OverridesArg = Annotated[
     list[str] | None,
-    typer.Argument(
-        help="Overrides key=value with dotted keys, e.g. simulation.t_end=30.", show_default=False
-    ),
+    typer.Argument(help="Overrides key=value with dotted keys, e.g. simulation.t_end=30.", show_default=False),
 ]
 
 
@@ -125,6 +123,38 @@ def validate(config: ConfigArg, overrides: OverridesArg = None) -> None:
     engine.prepare(exp)
     labels = ", ".join(c.label for c in exp.controllers)
     typer.echo(f"{config}: valid ({exp.section.plant.name}; controllers: {labels})")
+
+
+@app.command()
+@one_line_errors
+def reproduce(
+    chapter: Annotated[
+        list[int] | None, typer.Option("--chapter", "-c", help="Chapter(s) to reproduce (2, 3, 4).")
+    ] = None,
+    only: Annotated[str | None, typer.Option("--only", help="Comma-separated keys, e.g. fig-2.4,table-2.3.")] = None,
+    jobs: Annotated[int | None, typer.Option("--jobs", "-j", help="Worker processes (default: all cores).")] = None,
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("results/thesis"),
+    configs: Annotated[Path, typer.Option("--configs", help="Thesis experiment configs.")] = Path("configs/thesis"),
+) -> None:
+    """Regenerate the thesis's figures and tables (ours beside theirs) and check its claims."""
+    from nlcx.thesis.reproduce import reproduce as run_reproduce
+
+    start = time.perf_counter()
+    keys = [k for k in (only or "").split(",") if k.strip()]
+    done = [0]
+
+    def progress(record: Any) -> None:
+        done[0] += 1
+        bad = [c for c, s in record.status.items() if s != "ok"]
+        note = f" ({', '.join(bad)} unstable)" if bad else ""
+        typer.echo(f"  [{done[0]:>3}] {record.name:<12} {record.wall:5.2f} s{note}")
+
+    summary = run_reproduce(configs, out, chapters=chapter, only=keys, jobs=jobs, progress=progress)
+    typer.echo(f"{len(summary['figures'])} figures, {len(summary['tables'])} tables -> {out}/")
+    if "claims" in summary:
+        counts = summary["claims"].reproduced.value_counts().to_dict()
+        typer.echo("claims: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    typer.echo(f"done in {time.perf_counter() - start:.1f} s")
 
 
 @app.command("list")

@@ -181,10 +181,18 @@ def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]
 
 
 def deep_merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
-    """``top`` over ``base``: mappings merge key by key, anything else replaces."""
+    """``top`` over ``base``: mappings merge key by key, anything else replaces.
+
+    A plugin section whose ``kind`` changes (e.g. a step reference replaced by a sine) is
+    replaced whole, since the two kinds have different keys.
+    """
     out = copy.deepcopy(base)
     for key, value in top.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
+        old = out.get(key)
+        changes_kind = (
+            isinstance(old, dict) and isinstance(value, dict) and value.get("kind", old.get("kind")) != old.get("kind")
+        )
+        if isinstance(value, dict) and isinstance(old, dict) and not changes_kind:
             out[key] = deep_merge(out[key], value)
         else:
             out[key] = copy.deepcopy(value)

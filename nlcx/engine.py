@@ -133,9 +133,7 @@ def prepare(exp: Experiment) -> Prepared:
     grid = time_grid(sim.t_end, sim.dt, sim.integrator)
     seed_sequence = np.random.SeedSequence(sec.seed)
     children = seed_sequence.spawn(max(1, len(exp.uncertainties)))
-    perturbations = Perturbations(
-        plant=plant, t=grid.t, stage_times=grid.stage_times, rng=np.random.default_rng(0)
-    )
+    perturbations = Perturbations(plant=plant, t=grid.t, stage_times=grid.stage_times, rng=np.random.default_rng(0))
     for child, unc in zip(children, exp.uncertainties, strict=False):
         perturbations.rng = np.random.default_rng(child)
         unc.model.apply(unc.config, perturbations, f"uncertainty.{unc.label}")
@@ -323,9 +321,7 @@ def measure(prepared: Prepared, runs: list[Run]) -> pd.DataFrame:
         for j, name in enumerate(plant.input_names):
             unit = plant.unit_of(name)
             for metric, value in m.input_metrics(run.t, run.u[:, j]).items():
-                rows.append(
-                    [label, name, metric, float(value), _unit(m.METRIC_UNITS.get(metric, ""), unit), "ok", ""]
-                )
+                rows.append([label, name, metric, float(value), _unit(m.METRIC_UNITS.get(metric, ""), unit), "ok", ""])
     return pd.DataFrame(rows, columns=METRIC_COLUMNS)
 
 

@@ -18,6 +18,9 @@ class ConfigError(NlcxError):
         self.allowed = allowed
         super().__init__(self.line())
 
+    def __reduce__(self) -> tuple[type, tuple[str, Any, str]]:
+        return (type(self), (self.path, self.value, self.allowed))
+
     def line(self) -> str:
         """The one-line message: ``config error: <path> = <value>: <allowed>``."""
         shown = _short_repr(self.value)

@@ -212,9 +212,7 @@ def _update_friction_modes(
     """Breakaway at the start of a step: a stuck axis whose holding force would exceed
     mu_s F_N starts to slide in the direction of the net force (Appendix A's static case)."""
     for _ in range(u.shape[0]):
-        _friction_forces(
-            rhs, t, x, u, p, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx
-        )
+        _friction_forces(rhs, t, x, u, p, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx)
         released = False
         for j in range(u.shape[0]):
             if mode[j] == _STUCK and abs(f_tmp[j]) > fric_b[j, 1] * fric_b[j, 4]:
@@ -332,12 +330,8 @@ def simulate(
                 break
             drow = db[_row(db.shape[0], k)]
             if has_friction:
-                _update_friction_modes(
-                    rhs, t, x, u, pb, drow[0], dist_map, fb, mode, direction, f, work, A, rhs_s, dx
-                )
-                _friction_forces(
-                    rhs, t, x, u, pb, drow[0], dist_map, fb, mode, direction, f, work, A, rhs_s, dx
-                )
+                _update_friction_modes(rhs, t, x, u, pb, drow[0], dist_map, fb, mode, direction, f, work, A, rhs_s, dx)
+                _friction_forces(rhs, t, x, u, pb, drow[0], dist_map, fb, mode, direction, f, work, A, rhs_s, dx)
                 FRICTION[b, k] = f
             else:
                 FRICTION[b, k] = 0.0
@@ -351,9 +345,7 @@ def simulate(
                             xs[i] += dt * rk_a[s, j] * k_stage[j, i]
                 ts = t + c[s] * dt
                 if has_friction:
-                    _friction_forces(
-                        rhs, ts, xs, u, pb, drow[s], dist_map, fb, mode, direction, f, work, A, rhs_s, dx
-                    )
+                    _friction_forces(rhs, ts, xs, u, pb, drow[s], dist_map, fb, mode, direction, f, work, A, rhs_s, dx)
                     for j in range(n_u):
                         u_total[j] = u[j] + f[j]
                     _derivative(rhs, ts, xs, u_total, pb, drow[s], dist_map, k_stage[s])

@@ -57,9 +57,7 @@ def write_text(path: Path, text: str) -> None:
 
 
 def write_csv(path: Path, frame: pd.DataFrame) -> None:
-    atomic_write(
-        path, lambda tmp: frame.to_csv(tmp, index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
-    )
+    atomic_write(path, lambda tmp: frame.to_csv(tmp, index=False, float_format=FLOAT_FORMAT, lineterminator="\n"))
 
 
 def write_figure(path: Path, fig: plt.Figure) -> None:
@@ -211,9 +209,7 @@ def manifest(result: Result, timings: dict[str, float]) -> dict[str, Any]:
     }
 
 
-def write_run(
-    result: Result, out_dir: Path, timings: dict[str, float], started: float | None = None
-) -> list[Path]:
+def write_run(result: Result, out_dir: Path, timings: dict[str, float], started: float | None = None) -> list[Path]:
     """Write a run directory; manifest.json last, listing the files and the timings.
 
     ``started`` (a ``time.perf_counter()`` value) makes the manifest record the wall time

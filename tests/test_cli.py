@@ -65,10 +65,7 @@ def test_run_writes_the_run_directory(name: str, tmp_path: Path) -> None:
 
 def test_resolved_config_reproduces_the_run(tmp_path: Path) -> None:
     first, second = tmp_path / "first", tmp_path / "second"
-    assert (
-        runner.invoke(app, ["run", str(ROOT / "configs" / "x_error_ags.yaml"), "--out", str(first)]).exit_code
-        == 0
-    )
+    assert runner.invoke(app, ["run", str(ROOT / "configs" / "x_error_ags.yaml"), "--out", str(first)]).exit_code == 0
     assert runner.invoke(app, ["run", str(first / "config.yaml"), "--out", str(second)]).exit_code == 0
     for name in ("metrics.csv", "timeseries.csv"):
         assert (first / name).read_bytes() == (second / name).read_bytes()

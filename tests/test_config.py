@@ -42,7 +42,7 @@ CASES = [
         "'rk5'",
         "allowed values: 'rk4', 'heun' or 'euler'",
     ),
-    (["plant.params.mass=2"], "plant.params.mass", "2", "unknown key; allowed keys: M, g, l, m"),
+    (["plant.params.mass=2"], "plant.params.mass", "2", "unknown key; allowed keys: M, equations, g, l, m"),
     (["plant.params.M=0"], "plant.params.M", "0", "must be greater than 0"),
     (
         ["controllers.proposed.loops.x.schedule.kind=time_agss"],
@@ -139,7 +139,7 @@ def test_valid_config_and_defaults_in_one_place() -> None:
     exp = load(CONFIG, ["simulation.t_end=5"])
     resolved = exp.resolved()
     assert resolved["simulation"]["t_end"] == 5
-    assert resolved["plant"]["params"] == {"M": 1.0, "m": 0.1, "l": 0.3, "g": 9.8}
+    assert resolved["plant"]["params"] == {"M": 1.0, "m": 0.1, "l": 0.3, "g": 9.8, "equations": "derived"}
     assert resolved["controllers"]["proposed"]["derivative"] == {
         "method": "backward",
         "N": 100.0,

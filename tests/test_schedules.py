@@ -94,9 +94,7 @@ def test_error_ags_signed_follows_the_printed_formula() -> None:
 
 def test_reversed_range_as_printed_for_the_z_loop() -> None:
     """Table 3.6 prints kp 'min' 25 and 'max' 15: the formulas are applied literally."""
-    cfg = TimeAGSConfig(
-        kp={"min": 25, "max": 15}, ki={"min": 15, "max": 10}, kd={"min": 15, "max": 10}, rate=RATES
-    )
+    cfg = TimeAGSConfig(kp={"min": 25, "max": 15}, ki={"min": 15, "max": 10}, kd={"min": 15, "max": 10}, rate=RATES)
     sp = TimeAGS().pack(cfg)
     assert np.allclose(gains(time_ags_gains, sp, t=0), [15, 15, 10])
     assert np.allclose(gains(time_ags_gains, sp, t=1e4), [25, 10, 15])

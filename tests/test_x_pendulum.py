@@ -16,9 +16,7 @@ M, m, l, g = P.M, P.m, P.l, P.g
 
 def f(x: np.ndarray, F: float) -> np.ndarray:
     dx = np.zeros(4)
-    x_pendulum_rhs(
-        0.0, np.ascontiguousarray(x, dtype=float), np.array([float(F)]), np.array([M, m, l, g]), dx
-    )
+    x_pendulum_rhs(0.0, np.ascontiguousarray(x, dtype=float), np.array([float(F)]), np.array([M, m, l, g]), dx)
     return dx
 
 
@@ -87,9 +85,7 @@ def test_small_angles_follow_the_linearisation() -> None:
         ]
     )
     B = np.array([0, 1 / M, 0, -1 / (M * l)])
-    lin = solve_ivp(
-        lambda t, x: A @ x + B * F0, (0, 1.0), [0, 0, 1e-3, 0], t_eval=run.t, rtol=1e-11, atol=1e-14
-    )
+    lin = solve_ivp(lambda t, x: A @ x + B * F0, (0, 1.0), [0, 0, 1e-3, 0], t_eval=run.t, rtol=1e-11, atol=1e-14)
     theta_lin = lin.y[2]
     err = np.max(np.abs(run.x[:, 2] - theta_lin))
     amp = np.max(np.abs(theta_lin))

@@ -138,9 +138,7 @@ class MultiLoopPID(ControllerModel):
         bias = equilibrium_input(plant) if cfg.feedforward == "equilibrium" else np.zeros(n_u)
         for name, value in cfg.bias.items():
             if name not in inputs:
-                raise ConfigError(
-                    join(path, "bias", name), value, f"unknown input; allowed: {', '.join(inputs)}"
-                )
+                raise ConfigError(join(path, "bias", name), value, f"unknown input; allowed: {', '.join(inputs)}")
             bias[inputs.index(name)] += value
         header: list[float] = [len(loops), n_u, *bias]
         params: list[float] = []
@@ -201,9 +199,7 @@ class MultiLoopPID(ControllerModel):
             signal = loop.signal or key
             if signal not in outputs:
                 where = join(path, "loops", key, "signal") if loop.signal else join(path, "loops", key)
-                raise ConfigError(
-                    where, signal, f"not an output of {plant.name}; allowed: {', '.join(outputs)}"
-                )
+                raise ConfigError(where, signal, f"not an output of {plant.name}; allowed: {', '.join(outputs)}")
             input_name = loop.input or plant.loop_inputs.get(signal)
             if input_name is None and len(inputs) == 1:
                 input_name = inputs[0]

@@ -172,9 +172,7 @@ def schedule_slots() -> tuple[Any, ...]:
     """The tuple of compiled schedule functions handed to every controller."""
     names = tuple(registry.schedules.names())
     if len(names) > SCHEDULE_SLOTS:
-        raise ConfigError(
-            "schedules", len(names), f"at most {SCHEDULE_SLOTS} gain schedules can be registered"
-        )
+        raise ConfigError("schedules", len(names), f"at most {SCHEDULE_SLOTS} gain schedules can be registered")
     return _slots(names)
 
 

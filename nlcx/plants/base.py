@@ -187,9 +187,7 @@ def divergence_bounds(names: list[str], bounds: Mapping[str, float]) -> np.ndarr
     bound_vec = np.full(len(names), np.inf)
     for key, value in bounds.items():
         if key not in names:
-            raise ConfigError(
-                f"simulation.bounds.{key}", value, f"unknown state; allowed: {', '.join(names)}"
-            )
+            raise ConfigError(f"simulation.bounds.{key}", value, f"unknown state; allowed: {', '.join(names)}")
         bound_vec[names.index(key)] = float(value)
     return bound_vec
 

@@ -3,41 +3,38 @@
 States x1..x4 = (x, x_dot, theta, theta_dot), input F_x, outputs x and theta.
 Parameters of Table 2.1: base mass M, pendulum mass m, distance l from pivot to the
 pendulum's centre of mass (the rod is 2l long), gravity g.
+
+``equations: derived`` (default) integrates the Euler-Lagrange equations of the Lagrangian
+2.6 (generated, :func:`nlcx.plants.generated.pendulums.x_derived_rhs`); ``equations:
+printed`` the printed state equations 2.8-2.11 (:func:`x_pendulum_rhs`). For this pendulum
+the two agree (to rounding).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from types import MappingProxyType
 
-import numpy as np
 from numba import njit
-from pydantic import Field
 
 from nlcx.kernel import RHS_SIG
-from nlcx.plants.base import PlantModel, PlantParams, Signal
+from nlcx.plants.generated.pendulums import x_derived_rhs, x_energy
+from nlcx.plants.pendulum import (
+    ANGLE_BOUND,
+    PendulumModel,
+    PendulumParams,
+    coordinate_signals,
+    force_signals,
+)
 
 
-class XPendulumParams(PlantParams):
+class XPendulumParams(PendulumParams):
     """Table 2.1 parameters."""
-
-    M: float = Field(1.0, gt=0, description="mass of the base", json_schema_extra={"unit": "kg"})
-    m: float = Field(0.1, gt=0, description="mass of the pendulum", json_schema_extra={"unit": "kg"})
-    l: float = Field(
-        0.3,
-        gt=0,
-        description="pivot to pendulum centre of mass (half the rod)",
-        json_schema_extra={"unit": "m"},
-    )
-    g: float = Field(
-        9.8, gt=0, description="acceleration due to gravity", json_schema_extra={"unit": "m/s^2"}
-    )
 
 
 @njit(RHS_SIG, cache=True)
 def x_pendulum_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-    """Eqs. 2.8-2.11 with p = (M, m, l, g) and u = (F_x,)."""
+    """Eqs. 2.8-2.11 as printed, with p = (M, m, l, g) and u = (F_x,)."""
     M, m, l, g = p[0], p[1], p[2], p[3]
     theta, theta_dot = x[2], x[3]
     F = u[0]
@@ -50,42 +47,21 @@ def x_pendulum_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     dx[3] = (-m * l * c * s * theta_dot * theta_dot - c * F + (M + m) * g * s) / (l * den)  # eq. 2.11
 
 
-class XPendulum(PlantModel):
-    """x inverted pendulum, eqs. 2.8-2.11 (Table 2.1 parameters)."""
+#: The printed variant under the name the other pendulums use.
+x_printed_rhs = x_pendulum_rhs
+
+
+class XPendulum(PendulumModel):
+    """x inverted pendulum, Lagrangian eq. 2.6 (state equations 2.8-2.11; Table 2.1 parameters)."""
 
     Params = XPendulumParams
-    states = (
-        Signal("x", "m", "Position x"),
-        Signal("x_dot", "m/s", "Velocity x"),
-        Signal("theta", "rad", "Angle θ"),
-        Signal("theta_dot", "rad/s", "Angular velocity θ"),
-    )
-    inputs = (Signal("F_x", "N", "Force F_x"),)
+    states = coordinate_signals("x", "theta")
+    inputs = force_signals("x")
     loop_inputs = MappingProxyType({"x": "F_x", "theta": "F_x"})
+    input_axes = MappingProxyType({"F_x": "x_dot"})
     outputs = ("x", "theta")
     velocity_states = ("x_dot", "theta_dot")
-    default_bounds = MappingProxyType({"theta": math.pi / 2})
-    rhs = staticmethod(x_pendulum_rhs)
-
-    def parameter_vector(self, params: XPendulumParams) -> np.ndarray:
-        return np.array([params.M, params.m, params.l, params.g])
-
-    def energy(self, params: XPendulumParams) -> Callable[[np.ndarray], np.ndarray]:
-        """V of eq. 2.24 with z = 0: kinetic plus potential energy (the Lyapunov function)."""
-        M, m, l, g = params.M, params.m, params.l, params.g
-
-        def energy(x: np.ndarray) -> np.ndarray:
-            x_dot, theta, theta_dot = x[..., 1], x[..., 2], x[..., 3]
-            xp_dot = x_dot + l * np.cos(theta) * theta_dot  # eq. 2.1c
-            zp_dot = -l * np.sin(theta) * theta_dot  # eq. 2.1d with z_dot = 0
-            return 0.5 * M * x_dot**2 + 0.5 * m * (xp_dot**2 + zp_dot**2) + m * g * l * np.cos(theta)
-
-        return energy
-
-    def power(self, params: XPendulumParams) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-        """F_x x_dot, the right-hand side of eq. 2.31."""
-
-        def power(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-            return u[..., 0] * x[..., 1]
-
-        return power
+    default_bounds = MappingProxyType({"theta": ANGLE_BOUND})
+    rhs = staticmethod(x_derived_rhs)
+    printed_rhs = staticmethod(x_pendulum_rhs)
+    energy_function = staticmethod(x_energy)

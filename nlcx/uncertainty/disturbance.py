@@ -38,9 +38,7 @@ class Disturbance(UncertaintyModel):
         column = np.zeros(len(names))
         for i, name in enumerate(targets):
             if name not in names:
-                raise ConfigError(
-                    join(path, "states", i), name, f"unknown state; allowed: {', '.join(names)}"
-                )
+                raise ConfigError(join(path, "states", i), name, f"unknown state; allowed: {', '.join(names)}")
             column[names.index(name)] = 1.0
         ts = perturbations.stage_times
         values = cfg.amplitude * np.sin(2 * np.pi * cfg.frequency * ts + cfg.phase)

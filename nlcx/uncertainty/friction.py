@@ -67,9 +67,7 @@ class Friction(UncertaintyModel):
         if perturbations.friction is not None:
             raise ConfigError(path, cfg.kind, "only one friction model can act on a plant")
         if not plant.input_axes:
-            raise ConfigError(
-                join(path, "kind"), cfg.kind, f"{plant.name} has no mechanical axes for friction"
-            )
+            raise ConfigError(join(path, "kind"), cfg.kind, f"{plant.name} has no mechanical axes for friction")
         axes = cfg.axes if cfg.axes is not None else list(plant.input_axes)
         if cfg.normal_force == "weight":
             if plant.weight is None:

@@ -1,0 +1,60 @@
+"""The x-z inverted pendulum: a base moving horizontally (x) and vertically (z) (thesis 3.6).
+
+States x1..x6 = (x, x_dot, z, z_dot, theta, theta_dot), inputs F_x and F_z, outputs x, z
+and theta. Gravity acts on the base too (P.E. = M g z + m g z_p, eq. 3.36b): the base holds
+its height with F_z = (M + m) g and free-falls with F_z = 0.
+
+``equations: derived`` (default) integrates the Euler-Lagrange equations of the Lagrangian
+3.38 as its energies 3.36-3.37 define it (generated,
+:func:`nlcx.plants.generated.pendulums.xz_derived_rhs`); ``equations: printed`` the
+printed state equations 3.42-3.47 (:func:`xz_printed_rhs`), which disagree with the
+Lagrangian (docs/errata.md).
+"""
+
+from __future__ import annotations
+
+import math
+from types import MappingProxyType
+
+from numba import njit
+
+from nlcx.kernel import RHS_SIG
+from nlcx.plants.generated.pendulums import xz_derived_rhs, xz_energy
+from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
+
+
+@njit(RHS_SIG, cache=True)
+def xz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
+    """Eqs. 3.42-3.47 transcribed literally (typos included), p = (M, m, l, g), u = (F_x, F_z).
+
+    The printed equations write theta and theta_dot for x5 and x6.
+    """
+    M, m, l, g = p[0], p[1], p[2], p[3]
+    F_x, F_z = u[0], u[1]
+    theta, theta_dot = x[4], x[5]
+    s, c = math.sin(theta), math.cos(theta)
+    dx[0] = x[1]  # eq. 3.42
+    dx[1] = (  # eq. 3.43
+        -m * s * c * F_z + F_x * (M + m - m * s**2) + M * m * l * s * theta_dot**2
+    ) / (M * (M + m))
+    dx[2] = x[3]  # eq. 3.44
+    dx[3] = (  # eq. 3.45
+        m * F_z * (1 - c**2) - m * s * c * F_x + M * (F_z - M * g) + M * m * l * c * theta_dot**2
+    ) / (M * (M + m))
+    dx[4] = x[5]  # eq. 3.46
+    dx[5] = (-c * F_x + s * F_z) / (M * l)  # eq. 3.47
+
+
+class XZPendulum(PendulumModel):
+    """x-z inverted pendulum, energies 3.36-3.37 (state equations 3.42-3.47; Table 2.1 parameters)."""
+
+    states = coordinate_signals("x", "z", "theta")
+    inputs = force_signals("x", "z")
+    loop_inputs = MappingProxyType({"x": "F_x", "theta": "F_x", "z": "F_z"})
+    input_axes = MappingProxyType({"F_x": "x_dot", "F_z": "z_dot"})
+    outputs = ("x", "z", "theta")
+    velocity_states = ("x_dot", "z_dot", "theta_dot")
+    default_bounds = MappingProxyType({"theta": ANGLE_BOUND})
+    rhs = staticmethod(xz_derived_rhs)
+    printed_rhs = staticmethod(xz_printed_rhs)
+    energy_function = staticmethod(xz_energy)

@@ -1,0 +1,1 @@
+"""The thesis reproduced: its numbers (data/, transcribed extracts), experiments and claims."""

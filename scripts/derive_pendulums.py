@@ -1,0 +1,420 @@
+"""Derive the four pendulums' equations of motion from the thesis's Lagrangians and emit numba code.
+
+Run ``python scripts/derive_pendulums.py`` to (re)write ``nlcx/plants/generated/pendulums.py``
+(and the package's ``__init__.py``); ``--check`` only compares and exits 1 on a difference.
+
+For each model the kinetic and potential energy are written as the thesis prints them: the
+base (mass M) at (x, y, z), the point mass m at distance l with (eqs. 2.1, 3.1, 4.1)
+
+    x_p = x + l sin(theta),  y_p = y + l cos(theta) sin(phi),  z_p = z + l cos(theta) cos(phi),
+
+velocities eqs. 4.1d-f (2.1c-d and 3.1d-f are their special cases),
+K.E. = 1/2 M (x'^2 + y'^2 + z'^2) + 1/2 m (x_p'^2 + y_p'^2 + z_p'^2) (eqs. 2.4a, 3.4a, 3.36a,
+4.4a) and P.E. = M g z + m g z_p (eqs. 3.36b, 4.4b; with z fixed at 0 this is the m g z_p of
+eqs. 2.4b and 3.4b). The coordinates a model does not have are fixed at zero (phi = 0 for the
+planar models, z = 0 for the x and x-y pendulums), which reproduces eqs. 2.5, 3.5 and 3.37.
+
+The Euler-Lagrange equations d/dt(dL/dq') - dL/dq = Q with the generalised forces Q (F_x on x,
+F_y on y, F_z on z, none on the angles; eqs. 2.2, 3.2, 3.34, 4.2) are written as
+
+    M(q) q'' = b(q, q', u),   M_ij = d^2 T / dq'_i dq'_j,
+    b = Q - (d/dq (dT/dq')) q' + dT/dq - dV/dq,
+
+and are NOT solved symbolically: the emitted right-hand side evaluates the entries of M and
+b as scalar expressions (common subexpressions shared via sympy's ``cse``) and solves
+M q'' = b with an unrolled LDL^T factorisation written as scalar statements, so it
+allocates nothing. Structural zeros of M are skipped. M is symmetric positive definite (for
+the spherical models away from cos(theta) = 0, where the coordinates are singular).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import sympy as sp
+from sympy.printing.pycode import PythonCodePrinter
+
+ROOT = Path(__file__).resolve().parent.parent
+TARGET = ROOT / "nlcx" / "plants" / "generated" / "pendulums.py"
+INIT = ROOT / "nlcx" / "plants" / "generated" / "__init__.py"
+COMMAND = "python scripts/derive_pendulums.py"
+LINE_LENGTH = 110
+
+# Parameters p = (M, m, l, g) of Table 2.1.
+M, m, l, g = sp.symbols("M m l g", positive=True)
+PARAMS = (M, m, l, g)
+# Generalised coordinates, their rates and the forces (all real scalars).
+COORDS = {name: sp.Symbol(name, real=True) for name in ("x", "y", "z", "theta", "phi")}
+RATES = {name: sp.Symbol(f"{name}_dot", real=True) for name in COORDS}
+FORCES = {name: sp.Symbol(f"F_{name}", real=True) for name in ("x", "y", "z")}
+#: Code names of symbols whose own names would clash with the rhs arguments (t, x, u, p, dx).
+CODE_NAMES = {"x": "x_pos", "y": "y_pos", "z": "z_pos"}
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """One pendulum: its generalised coordinates (in the thesis's state order) and forces."""
+
+    key: str
+    title: str
+    coords: tuple[str, ...]
+    #: Axes with an applied force, in input order (F_x, F_y, F_z).
+    forced: tuple[str, ...]
+    #: Where the thesis writes the model: Lagrangian, energies, Lagrange and state equations.
+    source: str
+    energy_eqs: str
+
+
+MODELS: dict[str, ModelSpec] = {
+    "x": ModelSpec(
+        "x", "x inverted pendulum", ("x", "theta"), ("x",),
+        "eqs. 2.1, 2.4-2.6 (Lagrange eqs. 2.2, 2.7)", "eqs. 2.23-2.24 with z = 0",
+    ),
+    "xy": ModelSpec(
+        "xy", "x-y inverted pendulum", ("x", "y", "theta", "phi"), ("x", "y"),
+        "eqs. 3.1, 3.4-3.6 (Lagrange eqs. 3.2, 3.7-3.10)", "eqs. 3.29-3.30 with z = 0",
+    ),
+    "xz": ModelSpec(
+        "xz", "x-z inverted pendulum", ("x", "z", "theta"), ("x", "z"),
+        "eqs. 3.36-3.38 (Lagrange eqs. 3.34, 3.39-3.41)", "eqs. 3.55-3.56",
+    ),
+    "xyz": ModelSpec(
+        "xyz", "x-y-z inverted pendulum", ("x", "y", "z", "theta", "phi"), ("x", "y", "z"),
+        "eqs. 4.1, 4.4-4.5 (Lagrange eqs. 4.2, 4.8-4.12)", "eqs. 4.40-4.41; P.E. of eq. 4.4b, not 4.6",
+    ),
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Derivation:
+    """The sympy expressions of one model (not simplified unless asked)."""
+
+    spec: ModelSpec
+    q: tuple[sp.Symbol, ...]
+    qd: tuple[sp.Symbol, ...]
+    u: tuple[sp.Symbol, ...]
+    params: tuple[sp.Symbol, ...]
+    #: Mass matrix M(q), n x n.
+    mass: sp.Matrix
+    #: b(q, q', u) = Q - C(q, q') q' - dV/dq, n x 1.
+    b: sp.Matrix
+    kinetic: sp.Expr
+    potential: sp.Expr
+
+    @property
+    def energy(self) -> sp.Expr:
+        """E = T + V (the Lyapunov function V of eqs. 2.23, 3.29, 3.55, 4.40)."""
+        return self.kinetic + self.potential
+
+    @property
+    def states(self) -> tuple[sp.Symbol, ...]:
+        """State vector (q1, q1', q2, q2', ...): the thesis's x1..xn order."""
+        return tuple(s for pair in zip(self.q, self.qd, strict=True) for s in pair)
+
+
+def energies(spec: ModelSpec) -> tuple[sp.Expr, sp.Expr]:
+    """K.E. and P.E. of eqs. 4.4-4.5 with the model's absent coordinates fixed at 0.
+
+    Also checks that the printed velocities (4.1d-f) are the time derivatives of the
+    printed positions (4.1a-c).
+    """
+    x, y, z, theta, phi = (COORDS[k] for k in ("x", "y", "z", "theta", "phi"))
+    xd, yd, zd, thetad, phid = (RATES[k] for k in ("x", "y", "z", "theta", "phi"))
+    xp = x + l * sp.sin(theta)  # eq. 4.1a
+    yp = y + l * sp.cos(theta) * sp.sin(phi)  # eq. 4.1b
+    zp = z + l * sp.cos(theta) * sp.cos(phi)  # eq. 4.1c
+    xp_dot = xd + l * sp.cos(theta) * thetad  # eq. 4.1d
+    yp_dot = yd + l * sp.cos(theta) * sp.cos(phi) * phid - l * sp.sin(theta) * sp.sin(phi) * thetad  # 4.1e
+    zp_dot = zd - l * sp.sin(theta) * sp.cos(phi) * thetad - l * sp.cos(theta) * sp.sin(phi) * phid  # 4.1f
+    coords = [COORDS[k] for k in COORDS]
+    rates = [RATES[k] for k in COORDS]
+    for pos, vel in ((xp, xp_dot), (yp, yp_dot), (zp, zp_dot)):
+        chain = sum(sp.diff(pos, c) * r for c, r in zip(coords, rates, strict=True))
+        assert sp.simplify(chain - vel) == 0, "printed velocity is not d/dt of the printed position"
+    kinetic = sp.Rational(1, 2) * M * (xd**2 + yd**2 + zd**2) + sp.Rational(1, 2) * m * (
+        xp_dot**2 + yp_dot**2 + zp_dot**2
+    )  # eq. 4.4a / 4.5a
+    potential = M * g * z + m * g * zp  # eq. 4.4b / 4.5b
+    absent = {COORDS[k]: 0 for k in COORDS if k not in spec.coords}
+    absent.update({RATES[k]: 0 for k in COORDS if k not in spec.coords})
+    return kinetic.subs(absent), potential.subs(absent)
+
+
+def derive(key: str, simplify: bool = False) -> Derivation:
+    """Mass matrix, b and energies of model ``key`` ("x", "xy", "xz" or "xyz")."""
+    spec = MODELS[key]
+    q = tuple(COORDS[c] for c in spec.coords)
+    qd = tuple(RATES[c] for c in spec.coords)
+    u = tuple(FORCES[a] for a in spec.forced)
+    kinetic, potential = energies(spec)
+    n = len(q)
+    momenta = [sp.diff(kinetic, v) for v in qd]
+    mass = sp.Matrix(n, n, lambda i, j: sp.diff(momenta[i], qd[j]))
+    generalised = [FORCES[c] if c in spec.forced else sp.S.Zero for c in spec.coords]
+    b = sp.Matrix(
+        [
+            generalised[i]
+            - sum(sp.diff(momenta[i], q[j]) * qd[j] for j in range(n))
+            + sp.diff(kinetic, q[i])
+            - sp.diff(potential, q[i])
+            for i in range(n)
+        ]
+    )
+    if simplify:
+        mass = mass.applyfunc(_simplify)
+        b = b.applyfunc(_simplify)
+        kinetic = _simplify(kinetic)
+        potential = _simplify(potential)
+    return Derivation(spec, q, qd, u, PARAMS, mass, b, kinetic, potential)
+
+
+def _simplify(expr: sp.Expr) -> sp.Expr:
+    return sp.trigsimp(sp.expand(expr))
+
+
+# --------------------------------------------------------------------------- code emission
+
+
+class _Printer(PythonCodePrinter):
+    """Python code with sin/cos from ``module`` (math for numba, np for arrays) and renames."""
+
+    def __init__(self, module: str, names: dict[sp.Symbol, str]) -> None:
+        super().__init__({"standard": "python3"})
+        self.fn_module = module
+        self.names = names
+
+    def _print_Symbol(self, expr: sp.Symbol) -> str:
+        return self.names.get(expr, expr.name)
+
+    def _print_sin(self, expr: sp.Expr) -> str:
+        return f"{self.fn_module}.sin({self._print(expr.args[0])})"
+
+    def _print_cos(self, expr: sp.Expr) -> str:
+        return f"{self.fn_module}.cos({self._print(expr.args[0])})"
+
+
+def _code_names() -> dict[sp.Symbol, str]:
+    return {COORDS[k]: v for k, v in CODE_NAMES.items()}
+
+
+def _split_top(text: str) -> list[str]:
+    """Split an expression at its top-level binary + and - (kept at the head of each part)."""
+    parts, depth, start = [], 0, 0
+    for i, ch in enumerate(text):
+        if ch in "([":
+            depth += 1
+        elif ch in ")]":
+            depth -= 1
+        elif depth == 0 and ch in "+-" and i > 0 and text[i - 1] == " " and text[i + 1 : i + 2] == " ":
+            parts.append(text[start:i].rstrip())
+            start = i
+    parts.append(text[start:])
+    return [p for p in parts if p]
+
+
+def _assign(indent: str, target: str, text: str) -> list[str]:
+    """``target = text``, wrapped in parentheses at top-level +/- if the line is too long."""
+    line = f"{indent}{target} = {text}"
+    if len(line) <= LINE_LENGTH:
+        return [line]
+    inner = indent + "    "
+    lines = [f"{indent}{target} = ("]
+    current = ""
+    for part in _split_top(text):
+        candidate = f"{current} {part}" if current else part
+        if current and len(inner) + len(candidate) > LINE_LENGTH:
+            lines.append(inner + current)
+            current = part
+        else:
+            current = candidate
+    lines.append(inner + current)
+    lines.append(f"{indent})")
+    if any(len(x) > LINE_LENGTH for x in lines):
+        raise ValueError(f"cannot wrap {target} = {text[:60]}...")
+    return lines
+
+
+def _cse(exprs: list[sp.Expr], prefix: str) -> tuple[list[tuple[sp.Symbol, sp.Expr]], list[sp.Expr]]:
+    return sp.cse(exprs, symbols=sp.numbered_symbols(prefix), order="canonical")
+
+
+def _ldl_solve(n: int, zero: list[list[bool]], indent: str) -> list[str]:
+    """Scalar statements solving M a = b for a_0..a_{n-1} by LDL^T (M given as m{i}{j}, i >= j).
+
+    ``zero[i][j]`` marks structural zeros of M; fill-in is tracked so that no statement
+    multiplies by a known zero.
+    """
+    lines = [f"{indent}# M q'' = b by LDL^T: M = L D L^T with unit lower-triangular L"]
+    nz = [[not zero[i][j] for j in range(n)] for i in range(n)]  # L's nonzero pattern (i > j)
+    for j in range(n):
+        terms = [f"L{j}{k} * L{j}{k} * d{k}" for k in range(j) if nz[j][k]]
+        rhs = " - ".join([f"m{j}{j}", *terms])
+        lines += _assign(indent, f"d{j}", rhs)
+        lines.append(f"{indent}r{j} = 1.0 / d{j}")
+        for i in range(j + 1, n):
+            terms = [f"L{i}{k} * L{j}{k} * d{k}" for k in range(j) if nz[i][k] and nz[j][k]]
+            if zero[i][j] and not terms:
+                nz[i][j] = False
+                continue
+            nz[i][j] = True
+            head = "0.0" if zero[i][j] else f"m{i}{j}"
+            body = " - ".join([head, *terms]) if terms else head
+            if terms:
+                lines += _assign(indent, f"L{i}{j}", f"({body}) * r{j}")
+            else:
+                lines += _assign(indent, f"L{i}{j}", f"{body} * r{j}")
+    lines.append(f"{indent}# forward substitution L z = b, then z / D, then back substitution L^T a = z / D")
+    for i in range(n):
+        terms = [f"L{i}{k} * z{k}" for k in range(i) if nz[i][k]]
+        lines += _assign(indent, f"z{i}", " - ".join([f"b{i}", *terms]))
+    for i in reversed(range(n)):
+        terms = [f"L{k}{i} * a{k}" for k in range(i + 1, n) if nz[k][i]]
+        lines += _assign(indent, f"a{i}", " - ".join([f"z{i} * r{i}", *terms]))
+    return lines
+
+
+def _load(indent: str, symbols: list[sp.Symbol], source: dict[sp.Symbol, str], names: dict) -> list[str]:
+    return [f"{indent}{names.get(s, s.name)} = {source[s]}" for s in symbols]
+
+
+def emit_rhs(d: Derivation) -> str:
+    """The numba right-hand side ``{key}_derived_rhs(t, x, u, p, dx)`` of one model."""
+    key, n = d.spec.key, len(d.q)
+    names = _code_names()
+    printer = _Printer("math", names)
+    lower = [(i, j) for i in range(n) for j in range(i + 1)]
+    zero = [[d.mass[i, j] == 0 for j in range(n)] for i in range(n)]
+    entries = [d.mass[i, j] for i, j in lower if not zero[i][j]]
+    repl, reduced = _cse([*entries, *list(d.b)], "w")
+    nonzero = [ij for ij in lower if not zero[ij[0]][ij[1]]]
+    mass_out = dict(zip(nonzero, reduced[: len(entries)], strict=True))
+    b_out = reduced[len(entries) :]
+
+    used = set()
+    for _, e in repl:
+        used |= e.free_symbols
+    for e in reduced:
+        used |= e.free_symbols
+    source = {s: f"p[{i}]" for i, s in enumerate(d.params)}
+    source.update({s: f"x[{i}]" for i, s in enumerate(d.states)})
+    source.update({s: f"u[{i}]" for i, s in enumerate(d.u)})
+    order = [*d.params, *d.states, *d.u]
+    ind = "    "
+    doc = (
+        f'{ind}"""The {d.spec.title} derived from {d.spec.source}.\n\n'
+        f"{ind}State ({', '.join(s.name for s in d.states)}), input ({', '.join(s.name for s in d.u)}),\n"
+        f"{ind}p = (M, m, l, g). Solves M(q) q'' = b(q, q', u) without allocating.\n"
+        f'{ind}"""'
+    )
+    lines = [
+        "@njit(RHS_SIG, cache=True)",
+        f"def {key}_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled",
+        doc,
+    ]
+    lines += _load(ind, [s for s in order if s in used], source, names)
+    for sym, e in repl:
+        lines += _assign(ind, sym.name, printer.doprint(e))
+    lines.append(f"{ind}# mass matrix M(q) (lower triangle, structural zeros omitted)")
+    for (i, j), e in mass_out.items():
+        lines += _assign(ind, f"m{i}{j}", printer.doprint(e))
+    lines.append(f"{ind}# b(q, q', u) = Q(u) - C(q, q') q' - dV/dq")
+    for i, e in enumerate(b_out):
+        lines += _assign(ind, f"b{i}", printer.doprint(e))
+    lines += _ldl_solve(n, zero, ind)
+    for i in range(n):
+        lines.append(f"{ind}dx[{2 * i}] = x[{2 * i + 1}]")
+        lines.append(f"{ind}dx[{2 * i + 1}] = a{i}")
+    return "\n".join(lines) + "\n"
+
+
+def emit_energy(d: Derivation) -> str:
+    """The numpy function ``{key}_energy(x, p)``: E = T + V over the last axis of x."""
+    key = d.spec.key
+    names = _code_names()
+    printer = _Printer("np", names)
+    repl, (reduced,) = _cse([d.energy], "w")
+    used = set(reduced.free_symbols)
+    for _, e in repl:
+        used |= e.free_symbols
+    source = {s: f"p[{i}]" for i, s in enumerate(d.params)}
+    source.update({s: f"x[..., {i}]" for i, s in enumerate(d.states)})
+    order = [*d.params, *d.states]
+    ind = "    "
+    lines = [
+        "def " + f"{key}_energy(x: np.ndarray, p: Sequence[float]) -> np.ndarray:",
+        f'{ind}"""E = K.E. + P.E. of the {d.spec.title} ({d.spec.energy_eqs}).\n\n'
+        f"{ind}x holds the state ({', '.join(s.name for s in d.states)}) on its last axis;\n"
+        f"{ind}leading (batch, time) axes are kept. p = (M, m, l, g).\n"
+        f'{ind}"""',
+        f"{ind}x = np.asarray(x, dtype=float)",
+    ]
+    lines += _load(ind, [s for s in order if s in used], source, names)
+    for sym, e in repl:
+        lines += _assign(ind, sym.name, printer.doprint(e))
+    lines += _assign(ind, "energy", printer.doprint(reduced))
+    lines.append(f"{ind}return energy")
+    return "\n".join(lines) + "\n"
+
+
+HEADER = f'''"""Equations of motion of the four inverted pendulums, derived from the thesis's Lagrangians.
+
+GENERATED by ``{COMMAND}`` -- do not edit; rerun the script instead.
+
+Each ``*_derived_rhs(t, x, u, p, dx)`` (numba, ``nlcx.kernel.RHS_SIG``) evaluates the mass
+matrix M(q) and b(q, q', u) = Q(u) - C(q, q') q' - dV/dq of the Euler-Lagrange equations and
+solves M q'' = b by an unrolled LDL^T factorisation; p = (M, m, l, g). Each ``*_energy(x, p)``
+is the total energy T + V, vectorised over leading axes of x.
+"""
+'''
+
+
+def emit_module() -> str:
+    """The full text of ``nlcx/plants/generated/pendulums.py``."""
+    derivations = [derive(k, simplify=True) for k in MODELS]
+    parts = [
+        HEADER,
+        "from __future__ import annotations\n",
+        "import math\nfrom collections.abc import Sequence\n",
+        "import numpy as np\nfrom numba import njit\n",
+        "from nlcx.kernel import RHS_SIG\n",
+    ]
+    text = "\n".join(parts)
+    for d in derivations:
+        text += "\n\n" + emit_rhs(d)
+    for d in derivations:
+        text += "\n\n" + emit_energy(d)
+    text = re.sub(r"[ \t]+\n", "\n", text)
+    too_long = [ln for ln in text.splitlines() if len(ln) > LINE_LENGTH]
+    if too_long:
+        raise ValueError(f"emitted lines longer than {LINE_LENGTH}: {too_long[:2]}")
+    return text
+
+
+def emit_init() -> str:
+    """The text of ``nlcx/plants/generated/__init__.py``."""
+    return f'"""Code generated by ``{COMMAND}`` (do not edit): see ``pendulums.py``."""\n'
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true", help="compare with the committed files only")
+    args = parser.parse_args(argv)
+    outputs = {TARGET: emit_module(), INIT: emit_init()}
+    if args.check:
+        stale = [p for p, text in outputs.items() if not p.exists() or p.read_text() != text]
+        for p in stale:
+            print(f"out of date: {p.relative_to(ROOT)}")
+        return 1 if stale else 0
+    TARGET.parent.mkdir(parents=True, exist_ok=True)
+    for p, text in outputs.items():
+        p.write_text(text)
+        print(f"wrote {p.relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
