@@ -157,6 +157,35 @@ def reproduce(
     typer.echo(f"done in {time.perf_counter() - start:.1f} s")
 
 
+@app.command()
+@one_line_errors
+def calibrate(
+    spec: Annotated[Path, typer.Argument(help="Calibration spec YAML.", show_default=False)],
+    overrides: OverridesArg = None,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Worker processes evaluating the population.")] = 1,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Output directory (default results/calibration/<name>).")
+    ] = None,
+    write: Annotated[bool, typer.Option("--write", help="Write the fitted values into the spec's write.file.")] = False,
+) -> None:
+    """Fit unprinted numbers (e.g. the conventional gains) to a thesis table with the seeded GA."""
+    from nlcx.tuning.calibrate import calibrate as run_calibration
+    from nlcx.tuning.calibrate import load_spec, write_back
+
+    name = load_spec(spec, overrides or []).name
+    out_dir = out or Path("results/calibration") / name
+
+    def progress(generation: int, best: float) -> None:
+        typer.echo(f"  generation {generation:>3}: best loss {best:.5g}")
+
+    outcome = run_calibration(spec, out_dir, jobs=jobs, overrides=overrides or [], progress=progress)
+    typer.echo(outcome["tuning"].to_string(index=False))
+    typer.echo(outcome["fit"].to_string(index=False))
+    if write:
+        typer.echo(f"wrote {write_back(spec, outcome)}")
+    typer.echo(f"loss {outcome['result'].f:.5g}; results in {out_dir}/")
+
+
 @app.command("list")
 @one_line_errors
 def list_plugins(

@@ -10,6 +10,7 @@ key path, the value and what is allowed.
 from __future__ import annotations
 
 import copy
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -236,9 +237,45 @@ def read_yaml(path: str | Path) -> dict[str, Any]:
     return data
 
 
+_REFERENCE = re.compile(r"\$\{([A-Za-z0-9_.\-]+)\}")
+
+
+def interpolate(raw: dict[str, Any]) -> dict[str, Any]:
+    """Replace every value ``"${dotted.key}"`` by a copy of that key's value, then drop ``vars``.
+
+    ``vars`` is a free section for named values that other keys refer to, e.g. the
+    conventional gains shared by the x and y loops of the thesis's pendulums.
+    """
+
+    def lookup(path: str, trail: tuple[str, ...]) -> Any:
+        if path in trail:
+            raise ConfigError(path, "${" + path + "}", "circular reference")
+        node: Any = raw
+        for part in path.split("."):
+            if not isinstance(node, dict) or part not in node:
+                raise ConfigError(
+                    trail[-1] if trail else path, "${" + path + "}", "refers to a key that does not exist"
+                )
+            node = node[part]
+        return resolve(node, (*trail, path))
+
+    def resolve(node: Any, trail: tuple[str, ...]) -> Any:
+        if isinstance(node, dict):
+            return {k: resolve(v, trail) for k, v in node.items()}
+        if isinstance(node, list):
+            return [resolve(v, trail) for v in node]
+        if isinstance(node, str) and (match := _REFERENCE.fullmatch(node.strip())):
+            return copy.deepcopy(lookup(match.group(1), trail))
+        return node
+
+    out = resolve(raw, ())
+    out.pop("vars", None)
+    return out
+
+
 def load(path: str | Path, overrides: list[str] | None = None) -> Experiment:
-    """Read, override and validate an experiment config."""
-    return build(apply_overrides(read_config(path), overrides or []))
+    """Read, override, interpolate and validate an experiment config."""
+    return build(interpolate(apply_overrides(read_config(path), overrides or [])))
 
 
 def _plugin(
@@ -265,6 +302,10 @@ def build(raw: dict[str, Any]) -> Experiment:
     controllers = tuple(
         _plugin(registry.controllers, label, data, join("controllers", label))
         for label, data in section.controllers.items()
+    )
+    controllers = tuple(
+        PluginSection(c.label, c.kind, c.model, c.model.normalize(c.config, join("controllers", c.label)))
+        for c in controllers
     )
     uncertainties = tuple(
         _plugin(registry.uncertainties, label, data, join("uncertainty", label), default_kind=label)

@@ -41,5 +41,9 @@ class ControllerModel:
     Config: ClassVar[type[ControllerConfig]] = ControllerConfig
     step: ClassVar[Any] = None
 
+    def normalize(self, cfg: Any, path: str) -> Any:
+        """Validate nested plugin sections (e.g. gain schedules) and fill their defaults."""
+        return cfg
+
     def build(self, label: str, cfg: Any, plant: Plant, path: str) -> ControllerInstance:
         raise NotImplementedError

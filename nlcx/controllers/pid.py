@@ -130,6 +130,16 @@ class MultiLoopPID(ControllerModel):
     Config = PIDConfig
     step = staticmethod(pid_step)
 
+    def normalize(self, cfg: PIDConfig, path: str) -> PIDConfig:
+        """Validate each loop's gain schedule by its registered model, defaults filled in."""
+        loops = {}
+        for key, loop in cfg.loops.items():
+            spath = join(path, "loops", key, "schedule")
+            model = registry.schedules.get(loop.schedule.get("kind"), path=join(spath, "kind"))
+            sched = validate_model(model.Config, loop.schedule, spath)
+            loops[key] = loop.model_copy(update={"schedule": sched.model_dump()})
+        return cfg.model_copy(update={"loops": loops})
+
     def build(self, label: str, cfg: PIDConfig, plant: Plant, path: str) -> ControllerInstance:
         outputs = plant.output_names
         inputs = plant.input_names

@@ -1,0 +1,1 @@
+"""Tuners: calibration of unprinted numbers and (chapter 5) controller tuning."""
