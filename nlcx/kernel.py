@@ -51,8 +51,9 @@ RhsFn = types.FunctionType(RHS_SIG)
 ControllerFn = types.FunctionType(CONTROLLER_SIG)
 
 #: Friction parameters per input: model (0 none, 1 simple, 2 exponential), mu_s, mu_c,
-#: viscous coefficient, normal force F_N, Stribeck velocity, form factor, velocity-state index.
-FRICTION_FIELDS = 8
+#: viscous coefficient, normal force F_N, Stribeck velocity, form factor, velocity-state
+#: index, position-state index.
+FRICTION_FIELDS = 9
 FRICTION_NONE = 0
 FRICTION_SIMPLE = 1
 FRICTION_EXPONENTIAL = 2
@@ -223,6 +224,87 @@ def _update_friction_modes(
             return
 
 
+@njit(cache=True)
+def _disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
+    """d at fraction ``position`` of the step, interpolated linearly between the stage nodes c."""
+    n_stage = c.shape[0]
+    lo, hi = 0, 0
+    for s in range(n_stage):
+        if c[s] <= position and c[s] >= c[lo]:
+            lo = s
+        if c[s] >= position and (c[hi] < position or c[s] <= c[hi]):
+            hi = s
+    if c[hi] < position:
+        hi = lo
+    w = 0.0 if c[hi] == c[lo] else (position - c[lo]) / (c[hi] - c[lo])
+    for j in range(out.shape[0]):
+        out[j] = (1.0 - w) * drow[lo, j] + w * drow[hi, j]
+
+
+@njit(cache=True)
+def _rk_step(
+    rhs,
+    t,
+    h,
+    frac0,
+    h_frac,
+    x_in,
+    x_out,
+    u,
+    pb,
+    drow,
+    c,
+    dist_map,
+    fb,
+    mode,
+    direction,
+    has_friction,
+    rk_a,
+    rk_b,
+    k_stage,
+    xs,
+    f,
+    u_total,
+    work,
+    A,
+    rhs_s,
+    dx,
+    d_tmp,
+):  # pragma: no cover - compiled
+    """One explicit Runge-Kutta step of size h from x_in at t (u held) into x_out.
+
+    The step covers the fraction [frac0, frac0 + h_frac] of the sampling step; the
+    disturbance is exact at the stage nodes of a full step and interpolated between them
+    for a partial step (one that ends where a sliding axis stops).
+    """
+    n = x_in.shape[0]
+    n_stage = rk_b.shape[0]
+    partial = frac0 != 0.0 or h_frac != 1.0
+    for s in range(n_stage):
+        xs[:] = x_in
+        for j in range(s):
+            if rk_a[s, j] != 0.0:
+                for i in range(n):
+                    xs[i] += h * rk_a[s, j] * k_stage[j, i]
+        ts = t + c[s] * h
+        if partial:
+            _disturbance_at(drow, c, frac0 + c[s] * h_frac, d_tmp)
+            d_s = d_tmp
+        else:
+            d_s = drow[s]
+        if has_friction:
+            _friction_forces(rhs, ts, xs, u, pb, d_s, dist_map, fb, mode, direction, f, work, A, rhs_s, dx)
+            for j in range(u.shape[0]):
+                u_total[j] = u[j] + f[j]
+            _derivative(rhs, ts, xs, u_total, pb, d_s, dist_map, k_stage[s])
+        else:
+            _derivative(rhs, ts, xs, u, pb, d_s, dist_map, k_stage[s])
+    x_out[:] = x_in
+    for s in range(n_stage):
+        for i in range(n):
+            x_out[i] += h * rk_b[s] * k_stage[s, i]
+
+
 @njit(SIMULATE_SIG, cache=True)
 def simulate(
     rhs,
@@ -284,6 +366,10 @@ def simulate(
     A = np.empty((n_u, n_u))
     rhs_s = np.empty(n_u)
     dx = np.empty(n)
+    x_new = np.empty(n)
+    x_mid = np.empty(n)
+    hold = np.zeros(n_u)
+    d_tmp = np.empty(dist.shape[3])
     for b in range(n_batch):
         pb = p[_row(p.shape[0], b)]
         cs = cs0[b].copy()
@@ -302,6 +388,7 @@ def simulate(
                 v0 = x[int(fb[j, 7])]
                 mode[j] = _STUCK if v0 == 0.0 else _SLIP
                 direction[j] = 1.0 if v0 > 0.0 else -1.0
+                hold[j] = x[int(fb[j, 8])]
         status[b] = STATUS_OK
         fail_index[b] = -1
         n_valid[b] = n_steps + 1
@@ -337,29 +424,121 @@ def simulate(
                 FRICTION[b, k] = 0.0
             if k == n_steps:
                 break
-            for s in range(n_stage):
-                xs[:] = x
-                for j in range(s):
-                    if rk_a[s, j] != 0.0:
-                        for i in range(n):
-                            xs[i] += dt * rk_a[s, j] * k_stage[j, i]
-                ts = t + c[s] * dt
-                if has_friction:
-                    _friction_forces(rhs, ts, xs, u, pb, drow[s], dist_map, fb, mode, direction, f, work, A, rhs_s, dx)
-                    for j in range(n_u):
-                        u_total[j] = u[j] + f[j]
-                    _derivative(rhs, ts, xs, u_total, pb, drow[s], dist_map, k_stage[s])
-                else:
-                    _derivative(rhs, ts, xs, u, pb, drow[s], dist_map, k_stage[s])
-            for s in range(n_stage):
-                for i in range(n):
-                    x[i] += dt * rk_b[s] * k_stage[s, i]
+            _rk_step(
+                rhs,
+                t,
+                dt,
+                0.0,
+                1.0,
+                x,
+                x_new,
+                u,
+                pb,
+                drow,
+                c,
+                dist_map,
+                fb,
+                mode,
+                direction,
+                has_friction,
+                rk_a,
+                rk_b,
+                k_stage,
+                xs,
+                f,
+                u_total,
+                work,
+                A,
+                rhs_s,
+                dx,
+                d_tmp,
+            )
             if has_friction:
+                # event: a sliding axis whose velocity reaches zero inside the step stops there
+                frac = 1.0
                 for j in range(n_u):
                     vi = int(fb[j, 7])
-                    if mode[j] == _STUCK or (mode[j] == _SLIP and x[vi] * direction[j] <= 0.0):
-                        x[vi] = 0.0
+                    if mode[j] == _SLIP and x_new[vi] * direction[j] <= 0.0 and x[vi] != x_new[vi]:
+                        frac = min(frac, x[vi] / (x[vi] - x_new[vi]))
+                if frac < 1.0:
+                    h1 = frac * dt
+                    _rk_step(
+                        rhs,
+                        t,
+                        h1,
+                        0.0,
+                        frac,
+                        x,
+                        x_mid,
+                        u,
+                        pb,
+                        drow,
+                        c,
+                        dist_map,
+                        fb,
+                        mode,
+                        direction,
+                        has_friction,
+                        rk_a,
+                        rk_b,
+                        k_stage,
+                        xs,
+                        f,
+                        u_total,
+                        work,
+                        A,
+                        rhs_s,
+                        dx,
+                        d_tmp,
+                    )
+                    for j in range(n_u):
+                        vi = int(fb[j, 7])
+                        if mode[j] == _SLIP and x_new[vi] * direction[j] <= 0.0:
+                            x_mid[vi] = 0.0
+                            mode[j] = _STUCK
+                            hold[j] = x_mid[int(fb[j, 8])]
+                    _disturbance_at(drow, c, frac, d_tmp)
+                    _update_friction_modes(
+                        rhs, t + h1, x_mid, u, pb, d_tmp, dist_map, fb, mode, direction, f, work, A, rhs_s, dx
+                    )
+                    _rk_step(
+                        rhs,
+                        t + h1,
+                        dt - h1,
+                        frac,
+                        1.0 - frac,
+                        x_mid,
+                        x_new,
+                        u,
+                        pb,
+                        drow,
+                        c,
+                        dist_map,
+                        fb,
+                        mode,
+                        direction,
+                        has_friction,
+                        rk_a,
+                        rk_b,
+                        k_stage,
+                        xs,
+                        f,
+                        u_total,
+                        work,
+                        A,
+                        rhs_s,
+                        dx,
+                        d_tmp,
+                    )
+                for j in range(n_u):
+                    vi = int(fb[j, 7])
+                    if mode[j] == _SLIP and x_new[vi] * direction[j] <= 0.0:  # a second stop: rare
                         mode[j] = _STUCK
+                        hold[j] = x_new[int(fb[j, 8])]
+                    if mode[j] == _STUCK:
+                        x_new[vi] = 0.0
+                        x_new[int(fb[j, 8])] = hold[j]
+            x[:] = x_new
             bad = -1
             code = STATUS_OK
             for i in range(n):

@@ -144,7 +144,7 @@ def _metrics_table(spec: TableSpec, record: Record) -> pd.DataFrame:
     imp_thesis, imp_ours = [], []
     for row in table.itertuples(index=False):
         other = table[(table.signal == row.signal) & (table.metric == row.metric)].set_index("controller")
-        if row.controller != "proposed" or "conventional" not in other.index:
+        if row.controller != "proposed" or "conventional" not in other.index or row.metric == "ess":
             imp_thesis.append(math.nan)
             imp_ours.append(math.nan)
             continue

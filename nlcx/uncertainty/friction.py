@@ -92,9 +92,11 @@ class Friction(UncertaintyModel):
                     continue
                 normal = 0.0
             row = plant.input_names.index(name)
-            velocity = plant.state_names.index(plant.input_axes[name])
+            velocity_name = plant.input_axes[name]
+            velocity = plant.state_names.index(velocity_name)
+            position = plant.state_names.index(velocity_name.removesuffix("_dot"))
             table[row] = [
                 model, cfg.mu_s, cfg.mu_c, cfg.viscous, normal,
-                cfg.stribeck_velocity, cfg.form_factor, velocity,
+                cfg.stribeck_velocity, cfg.form_factor, velocity, position,
             ]  # fmt: skip
         perturbations.friction = table
