@@ -4,8 +4,9 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.nlcx-installed
+JOBS ?= 2
 
-.PHONY: install run test lint clean
+.PHONY: install run test lint reproduce reproduce-pendulums calibrate configs errata clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -16,10 +17,9 @@ $(STAMP): pyproject.toml
 ## install: create .venv and install nlcx with its test tools
 install: $(STAMP)
 
-## run: the main job, the chapter-2 x pendulum experiments (time- and error-AGS)
+## run: the main job, the x-y-z pendulum under conventional vs error-AGS PID
 run: install
-	$(BIN)/nlcx run configs/x_time_ags.yaml
-	$(BIN)/nlcx run configs/x_error_ags.yaml
+	$(BIN)/nlcx run configs/xyz_error_ags.yaml
 
 ## test: the whole test suite, ruff included (what CI runs)
 test: install
@@ -27,7 +27,27 @@ test: install
 
 ## lint: ruff on the package, tests and scripts
 lint: install
-	$(BIN)/ruff check nlcx tests
+	$(BIN)/ruff check nlcx tests scripts
+
+## reproduce-pendulums: every figure and table of chapters 2-4, and claims.csv, in results/thesis/
+reproduce-pendulums: install
+	$(BIN)/nlcx reproduce --chapter 2 --chapter 3 --chapter 4 --jobs $(JOBS)
+
+reproduce: reproduce-pendulums
+
+## calibrate: refit the unprinted conventional gains (writes configs/thesis/gains/conventional.yaml)
+calibrate: install
+	$(BIN)/nlcx calibrate configs/thesis/calibration/x_conventional.yaml --jobs $(JOBS) --write
+	$(BIN)/nlcx calibrate configs/thesis/calibration/xz_z.yaml --jobs $(JOBS) --write
+
+## configs: regenerate configs/thesis/ch*/fig_*.yaml from the figure list
+configs: install
+	$(BIN)/python scripts/make_thesis_configs.py
+
+## errata: regenerate the derived models and docs/errata.md
+errata: install
+	$(BIN)/python scripts/derive_pendulums.py
+	$(BIN)/python scripts/errata.py
 
 clean:
 	rm -rf $(VENV) results/*/ .pytest_cache .ruff_cache

@@ -135,6 +135,10 @@ def reproduce(
     jobs: Annotated[int | None, typer.Option("--jobs", "-j", help="Worker processes (default: all cores).")] = None,
     out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("results/thesis"),
     configs: Annotated[Path, typer.Option("--configs", help="Thesis experiment configs.")] = Path("configs/thesis"),
+    set_: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="Override for every experiment, e.g. plant.params.equations=printed."),
+    ] = None,
 ) -> None:
     """Regenerate the thesis's figures and tables (ours beside theirs) and check its claims."""
     from nlcx.thesis.reproduce import reproduce as run_reproduce
@@ -149,7 +153,9 @@ def reproduce(
         note = f" ({', '.join(bad)} unstable)" if bad else ""
         typer.echo(f"  [{done[0]:>3}] {record.name:<12} {record.wall:5.2f} s{note}")
 
-    summary = run_reproduce(configs, out, chapters=chapter, only=keys, jobs=jobs, progress=progress)
+    summary = run_reproduce(
+        configs, out, chapters=chapter, only=keys, jobs=jobs, progress=progress, overrides=tuple(set_ or ())
+    )
     typer.echo(f"{len(summary['figures'])} figures, {len(summary['tables'])} tables -> {out}/")
     if "claims" in summary:
         counts = summary["claims"].reproduced.value_counts().to_dict()

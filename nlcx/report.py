@@ -11,6 +11,7 @@ import os
 import platform
 import subprocess
 import tempfile
+import textwrap
 import time
 from collections.abc import Callable
 from contextlib import suppress
@@ -111,7 +112,7 @@ def output_figure(result: Result, title: str | None = None) -> plt.Figure:
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=8)
     if title:
-        fig.suptitle(title, fontsize=10)
+        fig.suptitle(textwrap.fill(title, 90), fontsize=9)
     fig.tight_layout()
     return fig
 

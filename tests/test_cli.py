@@ -9,6 +9,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
@@ -209,3 +210,47 @@ def test_console_script_one_line_error() -> None:
     )
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == ["config error: simulation.dt = -1: must be greater than 0"]
+
+
+def test_reproduce_only_some_figures_and_tables(tmp_path: Path) -> None:
+    out = tmp_path / "thesis"
+    result = runner.invoke(
+        app,
+        [
+            "reproduce",
+            "--only",
+            "fig-2.4,fig-2.3,table-2.3,table-2.1,table-2.2",
+            "--jobs",
+            "2",
+            "--out",
+            str(out),
+            "--configs",
+            str(ROOT / "configs" / "thesis"),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert {p.name for p in (out / "figures").iterdir()} == {"fig_2_4.png", "fig_2_3.png"}
+    assert {p.name for p in (out / "tables").iterdir()} == {"table_2_3.csv", "table_2_1.csv", "table_2_2.csv"}
+    table = pd.read_csv(out / "tables" / "table_2_3.csv")
+    assert list(table.columns[:6]) == ["signal", "metric", "controller", "thesis", "nlcx", "delta"]
+    assert len(table) == 14  # every printed cell of Table 2.3
+    row = table[(table.signal == "x") & (table.metric == "Mp") & (table.controller == "proposed")].iloc[0]
+    assert row.improvement_thesis_pct == pytest.approx((0.5 - 0.33) / 0.33 * 100)
+    params = pd.read_csv(out / "tables" / "table_2_2.csv")
+    printed = params[(params.schedule == "time_ags") & (params.parameter.str.endswith(("min", "max")))]
+    assert np.allclose(printed.nlcx, printed.thesis)  # the ranges run are Table 2.2's
+    bad = runner.invoke(app, ["reproduce", "--only", "fig-9.9", "--out", str(out)])
+    assert bad.exit_code == 2 and "unknown fig-9.9" in bad.stderr
+
+
+def test_calibration_is_reproducible_serial_or_parallel(tmp_path: Path) -> None:
+    spec = str(ROOT / "configs" / "thesis" / "calibration" / "x_conventional.yaml")
+    small = ["optimiser.pop_size=6", "optimiser.generations=2"]
+    outs = []
+    for name, jobs in (("serial", "1"), ("parallel", "2"), ("again", "1")):
+        result = runner.invoke(app, ["calibrate", spec, *small, "--jobs", jobs, "--out", str(tmp_path / name)])
+        assert result.exit_code == 0, result.output
+        outs.append((tmp_path / name / "tuning.csv").read_bytes())
+    assert outs[0] == outs[1] == outs[2]
+    fit = pd.read_csv(tmp_path / "serial" / "fit.csv")
+    assert set(fit.signal) == {"x", "theta"} and {"thesis", "nlcx", "residual"} <= set(fit.columns)

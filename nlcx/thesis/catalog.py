@@ -130,7 +130,7 @@ def figures(root: Path) -> list[FigureSpec]:
                 ags=row["ags"],
                 mode=row["mode"],
                 uncertainty=row["uncertainty"],
-                title=f"Figure {row['figure']} {row['title']}",
+                title=f"Figure {row['figure']} {row['title']}".replace("dot{V}", "V̇"),
                 configs=configs,
             )
         )

@@ -533,6 +533,6 @@ def lyapunov_figure(spec: FigureSpec, records: list[Any]) -> plt.Figure:
         ax.set_ylabel("V̇ (W)")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
-    fig.suptitle(spec.title, fontsize=10)
+    fig.suptitle(spec.title, fontsize=9)
     fig.tight_layout()
     return fig

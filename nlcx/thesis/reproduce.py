@@ -87,7 +87,7 @@ def _extras(result: Any) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["controller", "signal", "metric", "value"])
 
 
-def run_config(config: Path, out_dir: Path, figure: tuple[str, str] | None) -> Record:
+def run_config(config: Path, out_dir: Path, figure: tuple[str, str] | None, overrides: tuple[str, ...] = ()) -> Record:
     """Run one experiment, write its run directory and (optionally) its figure."""
     import time
 
@@ -96,7 +96,7 @@ def run_config(config: Path, out_dir: Path, figure: tuple[str, str] | None) -> R
     from nlcx.thesis.lyapunov import lyapunov_rate
 
     start = time.perf_counter()
-    exp = cfg.load(config, ["outputs.timeseries=false", "outputs.figure=false"])
+    exp = cfg.load(config, [*overrides, "outputs.timeseries=false", "outputs.figure=false"])
     result = engine.run_experiment(exp)
     report.write_run(result, out_dir / "runs" / exp.name, result.timings, started=start)
     if figure is not None:
@@ -206,6 +206,7 @@ def reproduce(
     only: Iterable[str] | None = None,
     jobs: int | None = None,
     progress: Any = None,
+    overrides: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """Run what the selected figures and tables need, then write them and the claims."""
     from nlcx import report
@@ -221,13 +222,13 @@ def reproduce(
         raise NlcxError(f"missing experiment config(s): {', '.join(missing[:3])}")
     for config in needed:  # fail fast, in this process, on a bad config
         try:
-            load_config(config)
+            load_config(config, list(overrides))
         except ConfigError as exc:
             raise NlcxError(f"{config}: {exc}") from None
     jobs = jobs or os.cpu_count() or 1
     records: dict[Path, Record] = {}
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = {c: pool.submit(run_config, c, out_dir, response_titles.get(c)) for c in needed}
+        futures = {c: pool.submit(run_config, c, out_dir, response_titles.get(c), overrides) for c in needed}
         for config, future in futures.items():
             records[config] = future.result()
             if progress is not None:
