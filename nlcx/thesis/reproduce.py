@@ -29,6 +29,13 @@ from nlcx.thesis import catalog
 from nlcx.thesis.catalog import FigureSpec, TableSpec
 
 ANGLES = ("theta", "phi")
+#: The rates k of section 2.3 (data/ags_rates.csv): angle loops, position loops; z: not printed.
+PRINTED_RATES = {
+    "theta": {"kp": 0.1, "ki": 0.1, "kd": 0.05},
+    "phi": {"kp": 0.1, "ki": 0.1, "kd": 0.05},
+    "x": {"kp": 0.1, "ki": 0.1, "kd": 0.25},
+    "y": {"kp": 0.1, "ki": 0.1, "kd": 0.25},
+}
 #: Thesis metric -> nlcx metric for position signals (unit step) and angles (regulated to 0).
 POSITION_METRICS = {"Mp": "overshoot", "tr": "rise_time", "ts": "settling_time", "ess": "steady_state_error"}
 ANGLE_METRICS = {"Mp": "peak_deviation", "ts": "settling_time", "ess": "steady_state_error"}
@@ -176,7 +183,16 @@ def _ags_table(spec: TableSpec, records: list[Record]) -> pd.DataFrame:
                 for end in ("min", "max"):
                     thesis = printed.loc[signal, f"{gain}_{end}"] if signal in printed.index else math.nan
                     rows.append([sched["kind"], pid, signal, f"{gain}_{end}", sched[gain][end], thesis])
-                rows.append([sched["kind"], pid, signal, f"rate_{gain}", sched["rate"][gain], math.nan])
+                rows.append(
+                    [
+                        sched["kind"],
+                        pid,
+                        signal,
+                        f"rate_{gain}",
+                        sched["rate"][gain],
+                        PRINTED_RATES.get(signal, {}).get(gain, math.nan),
+                    ]
+                )
     return pd.DataFrame(rows, columns=["schedule", "loop", "signal", "parameter", "nlcx", "thesis"])
 
 
