@@ -148,10 +148,16 @@ def prepare(exp: Experiment) -> Prepared:
     )
 
 
-def reference_array(prepared: Prepared, signals: tuple[str, ...]) -> np.ndarray:
-    """r_k for the given channels, shape (K+1, n_r)."""
+def reference_array(
+    prepared: Prepared, signals: tuple[str, ...], offsets: tuple[float, ...] | None = None
+) -> np.ndarray:
+    """r_k for the given channels, shape (K+1, n_r); channel i is read at t + offsets[i]."""
     t = prepared.grid.t
-    cols = [prepared.references[s][0].values(prepared.references[s][1], t) for s in signals]
+    offsets = offsets or (0.0,) * len(signals)
+    cols = [
+        prepared.references[s][0].values(prepared.references[s][1], t + off)
+        for s, off in zip(signals, offsets, strict=True)
+    ]
     return np.ascontiguousarray(np.stack(cols, axis=-1) if cols else np.zeros((t.size, 0)))
 
 
@@ -190,12 +196,12 @@ def simulate_runs(prepared: Prepared) -> list[Run]:
     fric = np.zeros((1, n_u, FRICTION_FIELDS)) if friction is None else np.ascontiguousarray(friction[None])
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i, c in enumerate(prepared.controllers):
-        groups.setdefault((id(c.step), c.reference_signals, len(c.log_names)), []).append(i)
+        groups.setdefault((id(c.step), c.reference_signals, c.reference_offsets, len(c.log_names)), []).append(i)
     runs: list[Run | None] = [None] * len(prepared.controllers)
     for indices in groups.values():
         ctrls = [prepared.controllers[i] for i in indices]
         n_b = len(ctrls)
-        ref = reference_array(prepared, ctrls[0].reference_signals)[None]
+        ref = reference_array(prepared, ctrls[0].reference_signals, ctrls[0].reference_offsets)[None]
         n_k = grid.t.size
         X = np.full((n_b, n_k, n), np.nan)
         U = np.full((n_b, n_k, n_u), np.nan)

@@ -13,8 +13,9 @@ Signatures (all arrays are contiguous float64 vectors):
 ``schedule(t, e, edot, sp, gains)``
     Gain schedule: writes (k_p, k_i, k_d) into ``gains`` from time, error, error rate and
     the loop's schedule parameters ``sp``.
-``controller(t, dt, y, r, cp, cs, u, log, schedules)``
-    Controller sampled at t: reads measured outputs ``y`` and references ``r``, updates its
+``controller(t, dt, x, y, r, cp, cs, u, log, schedules)``
+    Controller sampled at t: reads measured outputs ``y`` (and, if it is a full-information
+    controller, the plant state ``x``) and references ``r``, updates its
     state ``cs`` in place, writes the plant input ``u`` (held constant over the step: zero-
     order hold) and the values it wants recorded into ``log``.
 """
@@ -44,8 +45,8 @@ SCHEDULE_SIG = types.void(F64, F64, F64, VEC, VEC)
 #: Number of gain-schedule slots handed to every controller (registered schedules + padding).
 SCHEDULE_SLOTS = 16
 ScheduleTuple = types.UniTuple(types.FunctionType(SCHEDULE_SIG), SCHEDULE_SLOTS)
-#: Controller step ``controller(t, dt, y, r, cp, cs, u, log, schedules)``.
-CONTROLLER_SIG = types.void(F64, F64, VEC, VEC, VEC, VEC, VEC, VEC, ScheduleTuple)
+#: Controller step ``controller(t, dt, x, y, r, cp, cs, u, log, schedules)``.
+CONTROLLER_SIG = types.void(F64, F64, VEC, VEC, VEC, VEC, VEC, VEC, VEC, ScheduleTuple)
 
 RhsFn = types.FunctionType(RHS_SIG)
 ControllerFn = types.FunctionType(CONTROLLER_SIG)
@@ -401,7 +402,7 @@ def simulate(
                     acc += C[i, j] * x[j]
                 y[i] = acc + nyb[_row(nyb.shape[0], k), i]
             u[:] = 0.0
-            controller(t, dt, y, rb[_row(rb.shape[0], k)], cpb, cs, u, LOG[b, k], schedules)
+            controller(t, dt, x, y, rb[_row(rb.shape[0], k)], cpb, cs, u, LOG[b, k], schedules)
             for i in range(n_u):
                 u[i] += nub[_row(nub.shape[0], k), i]
             U[b, k] = u

@@ -76,8 +76,9 @@ def timeseries_frame(result: Result) -> pd.DataFrame:
             cols[name] = run.x[:, i]
         for i, name in enumerate(plant.input_names):
             cols[name] = run.u[:, i]
-        for i, name in enumerate(run.controller.reference_signals):
-            cols[f"{name}_ref"] = run.r[:, i]
+        offsets = run.controller.reference_offsets or (0.0,) * len(run.controller.reference_signals)
+        for i, (name, off) in enumerate(zip(run.controller.reference_signals, offsets, strict=True)):
+            cols[f"{name}_ref" if off == 0 else f"{name}_ref{off:+g}"] = run.r[:, i]
         for i, name in enumerate(run.controller.log_names):
             cols[name] = run.log[:, i]
         frames.append(pd.DataFrame(cols))

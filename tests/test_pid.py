@@ -29,7 +29,18 @@ def drive(prep: engine.Prepared, ys: np.ndarray, rs: np.ndarray, dt: float) -> t
     for k, (y, r) in enumerate(zip(ys, rs, strict=True)):
         u = np.zeros(1)
         log = np.zeros(len(c.log_names))
-        pid_step(k * dt, dt, np.ascontiguousarray(y), np.ascontiguousarray(r), c.cp, cs, u, log, schedule_slots())
+        pid_step(
+            k * dt,
+            dt,
+            np.zeros(4),
+            np.ascontiguousarray(y),
+            np.ascontiguousarray(r),
+            c.cp,
+            cs,
+            u,
+            log,
+            schedule_slots(),
+        )
         us.append(u[0])
         logs.append(log)
     return np.array(us), np.array(logs)

@@ -29,6 +29,9 @@ class ControllerInstance:
     cs0: np.ndarray
     #: Names of the reference channels the step function reads, in order.
     reference_signals: tuple[str, ...]
+    #: Time shift of each reference channel, s: r_i(t) = reference(t + offset_i). A preview
+    #: controller reads the same signal at several future times (default: no shift).
+    reference_offsets: tuple[float, ...] | None = None
     #: Names and units of the values the step function logs every sample.
     log_names: tuple[str, ...] = ()
     log_units: tuple[str, ...] = ()

@@ -17,7 +17,7 @@ class OpenLoopConfig(ControllerConfig):
 
 
 @njit(CONTROLLER_SIG, cache=True)
-def open_loop_step(t, dt, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+def open_loop_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
     """u_j(t) = r_j(t): the reference channels are the plant inputs."""
     for j in range(u.shape[0]):
         u[j] = r[j]

@@ -77,7 +77,7 @@ class PIDConfig(ControllerConfig):
 
 
 @njit(CONTROLLER_SIG, cache=True)
-def pid_step(t, dt, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+def pid_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
     """Multi-loop PID with pluggable gain schedules (one sample, zero-order hold)."""
     n_loops = int(cp[0])
     n_u = int(cp[1])
