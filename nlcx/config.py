@@ -113,6 +113,8 @@ class PluginSection:
     kind: str
     model: Any
     config: Any
+    #: Tuners applied to a controller before it is built (``tune:``), in order.
+    tuners: tuple[PluginSection, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -143,7 +145,13 @@ class Experiment:
                 "params": self.plant_params.model_dump(),
                 "x0": dict(sec.plant.x0),
             },
-            "controllers": {c.label: c.config.model_dump() for c in self.controllers},
+            "controllers": {
+                c.label: {
+                    **c.config.model_dump(),
+                    **({"tune": [t.config.model_dump() for t in c.tuners]} if c.tuners else {}),
+                }
+                for c in self.controllers
+            },
             "uncertainty": {u.label: u.config.model_dump() for u in self.uncertainties},
             "reference": {k: r.config.model_dump() for k, r in self.references.items()},
             "simulation": sec.simulation.model_dump(),
@@ -294,18 +302,28 @@ def _plugin(
     return PluginSection(label=label, kind=kind, model=model, config=cfg)
 
 
+def controller_section(label: str, data: Any, path: str) -> PluginSection:
+    """A controller section validated by its registered model, with its tuners."""
+    if isinstance(data, dict) and "tune" in data:
+        data = dict(data)
+        tune = data.pop("tune")
+        tune = [tune] if isinstance(tune, dict) else tune
+        if not isinstance(tune, list):
+            raise ConfigError(join(path, "tune"), tune, "must be a tuner mapping or a list of them")
+        tuners = tuple(_plugin(registry.tuners, str(i), t, join(path, "tune", str(i))) for i, t in enumerate(tune))
+    else:
+        tuners = ()
+    c = _plugin(registry.controllers, label, data, path)
+    return PluginSection(c.label, c.kind, c.model, c.model.normalize(c.config, path), tuners)
+
+
 def build(raw: dict[str, Any]) -> Experiment:
     """Validate a raw config mapping (after overrides)."""
     section = validate_model(ExperimentSection, raw, "")
     plant_model = registry.plants.get(section.plant.name, path="plant.name")
     plant_params = validate_model(plant_model.Params, section.plant.params, "plant.params")
     controllers = tuple(
-        _plugin(registry.controllers, label, data, join("controllers", label))
-        for label, data in section.controllers.items()
-    )
-    controllers = tuple(
-        PluginSection(c.label, c.kind, c.model, c.model.normalize(c.config, join("controllers", c.label)))
-        for c in controllers
+        controller_section(label, data, join("controllers", label)) for label, data in section.controllers.items()
     )
     uncertainties = tuple(
         _plugin(registry.uncertainties, label, data, join("uncertainty", label), default_kind=label)

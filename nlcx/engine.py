@@ -17,13 +17,14 @@ import pandas as pd
 
 from nlcx import metrics as m
 from nlcx import registry
-from nlcx.config import Experiment, MetricsSection
+from nlcx.config import Experiment, MetricsSection, controller_section
 from nlcx.controllers.base import ControllerInstance
 from nlcx.controllers.schedules import schedule_slots
 from nlcx.errors import ConfigError
 from nlcx.kernel import FRICTION_FIELDS, STATUS_BOUND, STATUS_NONFINITE, simulate
 from nlcx.plants.base import Plant
 from nlcx.references.base import MetricPlan
+from nlcx.tuning.base import TuneContext
 from nlcx.uncertainty.base import Perturbations
 
 #: Butcher tableaus (A, b) of the fixed-step explicit Runge-Kutta methods.
@@ -96,6 +97,8 @@ class Prepared:
     grid: TimeGrid
     perturbations: Perturbations
     seed_sequence: np.random.SeedSequence
+    #: Rows of tuning.csv: what the tuners of each controller found.
+    tuning: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -129,7 +132,19 @@ def prepare(exp: Experiment) -> Prepared:
     sec = exp.section
     sim = sec.simulation
     plant = exp.plant_model.build(sec.plant.name, exp.plant_params, sec.plant.x0, sim.bounds)
-    controllers = [c.model.build(c.label, c.config, plant, f"controllers.{c.label}") for c in exp.controllers]
+    tuning: list[dict[str, Any]] = []
+    controllers = []
+    for c in exp.controllers:
+        path = f"controllers.{c.label}"
+        section = c
+        if c.tuners:
+            ctx = TuneContext(experiment=exp, plant=plant, label=c.label, path=path)
+            data = c.config.model_dump()
+            for tuner in c.tuners:
+                data = tuner.model.tune(data, tuner.config, ctx)
+            section = controller_section(c.label, data, path)
+            tuning += ctx.rows
+        controllers.append(section.model.build(c.label, section.config, plant, path))
     grid = time_grid(sim.t_end, sim.dt, sim.integrator)
     seed_sequence = np.random.SeedSequence(sec.seed)
     children = seed_sequence.spawn(max(1, len(exp.uncertainties)))
@@ -141,6 +156,7 @@ def prepare(exp: Experiment) -> Prepared:
         experiment=exp,
         plant=plant,
         controllers=controllers,
+        tuning=tuning,
         references=_reference_models(exp, plant),
         grid=grid,
         perturbations=perturbations,

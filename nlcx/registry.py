@@ -109,6 +109,7 @@ controllers: Registry[Any] = Registry("controller", "nlcx.controllers")
 schedules: Registry[Any] = Registry("gain schedule", "nlcx.schedules")
 uncertainties: Registry[Any] = Registry("uncertainty", "nlcx.uncertainties")
 references: Registry[Any] = Registry("reference", "nlcx.references")
+tuners: Registry[Any] = Registry("tuner", "nlcx.tuners")
 
 ALL: dict[str, Registry[Any]] = {
     "plants": plants,
@@ -116,6 +117,7 @@ ALL: dict[str, Registry[Any]] = {
     "schedules": schedules,
     "uncertainties": uncertainties,
     "references": references,
+    "tuners": tuners,
 }
 
 
@@ -128,8 +130,10 @@ def register_builtins() -> None:
     plants.register("xz_pendulum", "nlcx.plants.xz_pendulum:XZPendulum")
     plants.register("xyz_pendulum", "nlcx.plants.xyz_pendulum:XYZPendulum")
     plants.register("transfer_function", "nlcx.plants.transfer_function:TransferFunction")
+    plants.register("cstr", "nlcx.plants.cstr:CSTR")
     controllers.register("pid", "nlcx.controllers.pid:MultiLoopPID")
     controllers.register("open_loop", "nlcx.controllers.open_loop:OpenLoop")
+    controllers.register("single_neuron", "nlcx.controllers.neuron:SingleNeuron")
     schedules.register("constant", "nlcx.controllers.schedules:Constant")
     schedules.register("time_ags", "nlcx.controllers.schedules:TimeAGS")
     schedules.register("error_ags", "nlcx.controllers.schedules:ErrorAGS")
@@ -139,6 +143,8 @@ def register_builtins() -> None:
     references.register("constant", "nlcx.references.basic:Constant")
     references.register("step", "nlcx.references.basic:Step")
     references.register("sine", "nlcx.references.basic:Sine")
+    tuners.register("ziegler_nichols", "nlcx.tuning.ziegler_nichols:ZieglerNichols")
+    tuners.register("ga", "nlcx.tuning.ga:GATuner")
 
 
 register_builtins()

@@ -227,6 +227,10 @@ def write_run(result: Result, out_dir: Path, timings: dict[str, float], started:
     path = out_dir / "metrics.csv"
     write_csv(path, result.metrics)
     written.append(path)
+    if result.prepared.tuning:
+        path = out_dir / "tuning.csv"
+        write_csv(path, pd.DataFrame(result.prepared.tuning, columns=["controller", "tuner", "parameter", "value"]))
+        written.append(path)
     if outputs.timeseries:
         path = out_dir / "timeseries.csv"
         write_csv(path, timeseries_frame(result))

@@ -25,7 +25,7 @@ CASES = [
         ["plant.name=x_pendulm"],
         "plant.name",
         "'x_pendulm'",
-        "unknown plant; allowed: transfer_function, x_pendulum, xy_pendulum, xyz_pendulum, xz_pendulum "
+        "unknown plant; allowed: cstr, transfer_function, x_pendulum, xy_pendulum, xyz_pendulum, xz_pendulum "
         "(did you mean 'x_pendulum'?)",
     ),
     (

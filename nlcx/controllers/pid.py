@@ -9,6 +9,7 @@ with (k_p, k_i, k_d) from the loop's gain schedule (constant = conventional PID,
 eqs. 2.17-2.19, error-AGS eqs. 2.20-2.22). I_i = integral of e_i (backward Euler) and D_i
 the derivative of e_i (or of -y_i), a backward difference or filtered by N/(s + N).
 The derivative starts from the first sample (e_{-1} = e_0), so a step at t = 0 gives no kick.
+With a set-point weight b the proportional term acts on b r - y instead of e.
 """
 
 from __future__ import annotations
@@ -29,8 +30,9 @@ from nlcx.validation import join, validate_model
 
 #: Per-loop header in the parameter vector: y index, r index, u index, sign, schedule slot,
 #: derivative method (0 backward, 1 filtered), N, derivative on measurement (0/1),
-#: integral gain inside the integral (0/1), offset and length of the schedule parameters.
-LOOP_FIELDS = 11
+#: integral gain inside the integral (0/1), offset and length of the schedule parameters,
+#: set-point weight b of the proportional term.
+LOOP_FIELDS = 12
 #: Per-loop controller state: integral, previous error, filtered derivative, previous y, started.
 LOOP_STATE = 5
 #: Per-loop logged values: k_p, k_i, k_d and the loop's signed contribution to its input.
@@ -71,9 +73,11 @@ class PIDConfig(ControllerConfig):
     integral: Literal["outside", "inside"] = "outside"
     #: Constant feed-forward added to an input, by input name.
     bias: dict[str, float] = Field(default_factory=dict)
-    #: "equilibrium" adds the input that holds the plant at rest upright, computed from the
-    #: model (for the x-z and x-y-z pendulums: gravity compensation F_z = (M + m) g).
+    #: "equilibrium" adds the input that holds the plant at its operating point, computed
+    #: from the model (for the x-z and x-y-z pendulums: gravity compensation F_z = (M + m) g).
     feedforward: Literal["none", "equilibrium"] = "none"
+    #: Set-point weight b: the proportional term acts on b r - y (b = 1: on the error).
+    setpoint_weight: float = 1.0
 
 
 @njit(CONTROLLER_SIG, cache=True)
@@ -97,6 +101,7 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - c
         gain_inside = cp[h + 8] != 0.0
         off = int(cp[h + 9])
         n_sp = int(cp[h + 10])
+        b_weight = cp[h + 11]
         c = LOOP_STATE * i
         e = r[ri] - y[yi]
         if cs[c + 4] == 0.0:
@@ -117,7 +122,7 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - c
         else:
             cs[c] += e * dt
             integral_term = gains[1] * cs[c]
-        out = sign * (gains[0] * e + integral_term + gains[2] * d)
+        out = sign * (gains[0] * (b_weight * r[ri] - y[yi]) + integral_term + gains[2] * d)
         log[4 * i + 3] = out
         u[ui] += out
         cs[c + 1] = e
@@ -174,6 +179,7 @@ class MultiLoopPID(ControllerModel):
                 1.0 if cfg.integral == "inside" else 0.0,
                 sched_start + len(params),
                 sp.size,
+                cfg.setpoint_weight,
             ]
             params += list(sp)
             unit_in = plant.unit_of(input_name)

@@ -64,6 +64,8 @@ class Plant:
     input_axes: dict[str, str] = field(default_factory=dict)
     #: Weight of the moving assembly, (M + m) g: the normal force of Appendix A's friction.
     weight: float | None = None
+    #: Operating point (an equilibrium state) for feed-forward and linearisation.
+    x_op: np.ndarray | None = None
 
     @property
     def state_names(self) -> list[str]:
@@ -117,6 +119,12 @@ class PlantModel:
         """Weight of the moving assembly (the normal force of friction), if defined."""
         return None
 
+    def operating_point(self, params: PlantParams) -> dict[str, float]:
+        """The equilibrium state the plant is operated about (default: every state 0).
+
+        It is also the default initial state."""
+        return {}
+
     def energy(self, params: PlantParams) -> Callable[[np.ndarray], np.ndarray] | None:
         """Total mechanical energy E(x) (vectorised over leading axes), if defined."""
         return None
@@ -136,7 +144,8 @@ class PlantModel:
         """The :class:`Plant` registered as ``name`` with these parameters, x0 and bounds."""
         states = self.states
         names = [s.name for s in states]
-        x_init = initial_state(names, x0, path)
+        x_op = initial_state(names, self.operating_point(params), path)
+        x_init = initial_state(names, {**self.operating_point(params), **x0}, path)
         bound_vec = divergence_bounds(names, {**self.default_bounds, **bounds})
         outputs = tuple(states[names.index(o)] for o in self.outputs)
         C = np.zeros((len(outputs), len(states)))
@@ -160,6 +169,7 @@ class PlantModel:
             loop_inputs=dict(self.loop_inputs),
             input_axes=dict(self.input_axes),
             weight=self.weight(params),
+            x_op=x_op,
         )
 
 
@@ -193,14 +203,17 @@ def divergence_bounds(names: list[str], bounds: Mapping[str, float]) -> np.ndarr
 
 
 def equilibrium_input(plant: Plant, x_eq: np.ndarray | None = None, tol: float = 1e-9) -> np.ndarray:
-    """The input u* that holds ``x_eq`` (default: all states zero, the upright pendulum at rest).
+    """The input u* that holds ``x_eq`` (default: the plant's operating point; for the
+    pendulums every state zero, upright at rest).
 
     The accelerations of a mechanical plant are affine in its generalised forces,
     f(x, u) = f(x, 0) + B(x) u, so u* solves B u* = -f(x_eq, 0) (least squares). For the
     x-z and x-y-z pendulums this is the gravity compensation F_z = (M + m) g.
     """
     n, m = len(plant.states), len(plant.inputs)
-    x = np.zeros(n) if x_eq is None else np.ascontiguousarray(x_eq, dtype=float)
+    if x_eq is None:
+        x_eq = plant.x_op if plant.x_op is not None else np.zeros(n)
+    x = np.ascontiguousarray(x_eq, dtype=float)
     f0 = np.zeros(n)
     plant.rhs(0.0, x, np.zeros(m), plant.p, f0)
     B = np.zeros((n, m))
@@ -215,3 +228,24 @@ def equilibrium_input(plant: Plant, x_eq: np.ndarray | None = None, tol: float =
     if np.max(np.abs(residual)) > tol * max(1.0, np.max(np.abs(f0))):
         raise ConfigError("feedforward", "equilibrium", f"no input holds {plant.name} at this state")
     return u
+
+
+def linearize(
+    plant: Plant, x_op: np.ndarray | None = None, u_op: np.ndarray | None = None, h: float = 1e-6
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, C) of dx/dt = f(x, u) about (x_op, u_op) by central differences (y = C x).
+
+    Defaults: the operating point and the input that holds it (:func:`equilibrium_input`).
+    """
+    n, m = len(plant.states), len(plant.inputs)
+    x0 = (plant.x_op if plant.x_op is not None else np.zeros(n)) if x_op is None else np.asarray(x_op, float)
+    u0 = equilibrium_input(plant, x0) if u_op is None else np.asarray(u_op, float)
+
+    def f(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        out = np.zeros(n)
+        plant.rhs(0.0, np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(u, dtype=float), plant.p, out)
+        return out
+
+    A = np.column_stack([(f(x0 + h * e, u0) - f(x0 - h * e, u0)) / (2 * h) for e in np.eye(n)])
+    B = np.column_stack([(f(x0, u0 + h * e) - f(x0, u0 - h * e)) / (2 * h) for e in np.eye(m)])
+    return A, B, plant.C.copy()

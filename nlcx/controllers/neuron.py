@@ -1,0 +1,139 @@
+"""Single-neuron adaptive PID (section 5.4.2, eqs. 5.15-5.19; Liu, 2008).
+
+At each controller sample k (period ``sample_time``, the input held in between):
+
+    x1(k) = e(k) - e(k-1)                       (eq. 5.15, proportional)
+    x2(k) = e(k)                                (eq. 5.16, integral)
+    x3(k) = e(k) - 2 e(k-1) + e(k-2)            (eq. 5.17; printed with - e(k-2))
+    u(k)  = u(k-1) + K sum_i w_i'(k) x_i(k)     (eq. 5.18, K the neuron gain eta)
+
+with the weights adapted by the supervised Hebbian rule of Liu (2008),
+w_i(k) = w_i(k-1) + eta_i e(k) u(k-1) x_i(k), or literally as eq. 5.19 prints it,
+w_i(k) = w_i(k-1) + eta_i e(k-1) u(k-1); w_i' = w_i / sum_j |w_j| when ``normalize``.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numba import njit
+from pydantic import BaseModel, ConfigDict, Field
+
+from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
+from nlcx.errors import ConfigError
+from nlcx.kernel import CONTROLLER_SIG
+from nlcx.plants.base import Plant, equilibrium_input
+from nlcx.validation import join
+
+
+class LearningRates(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    p: float = Field(0.4, ge=0)
+    i: float = Field(0.35, ge=0)
+    d: float = Field(0.4, ge=0)
+
+
+class NeuronConfig(ControllerConfig):
+    kind: Literal["single_neuron"] = "single_neuron"
+    #: Plant output the neuron regulates (default: the plant's only output).
+    signal: str | None = None
+    #: Neuron gain K (the eta of eq. 5.18).
+    gain: float = Field(0.12, gt=0)
+    learning: LearningRates = LearningRates()
+    #: Initial weights (w1, w2, w3).
+    weights: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    #: Eq. 5.17: "standard" e(k) - 2e(k-1) + e(k-2), or "printed" e(k) - 2e(k-1) - e(k-2).
+    second_difference: Literal["standard", "printed"] = "standard"
+    #: "hebbian": Liu's supervised Hebbian rule with x_i(k); "printed": eq. 5.19 as printed.
+    rule: Literal["hebbian", "printed"] = "hebbian"
+    normalize: bool = True
+    #: Controller sample period, s (a whole number of simulation steps).
+    sample_time: float = Field(0.1, gt=0)
+    #: "equilibrium": add the input that holds the plant's operating point.
+    feedforward: Literal["none", "equilibrium"] = "none"
+
+
+#: cp layout: output index, reference index, input index, K, eta_p, eta_i, eta_d,
+#: normalize, printed second difference, printed rule, sample time (rounded to whole steps), bias.
+#: cs layout: step counter, e(k-1), e(k-2), u(k-1), w1, w2, w3, started.
+
+
+@njit(CONTROLLER_SIG, cache=True)
+def neuron_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+    """Eqs. 5.15-5.19 at every ``hold``-th simulation step; the input is held in between."""
+    yi, ri, ui = int(cp[0]), int(cp[1]), int(cp[2])
+    hold = max(1, round(cp[10] / dt))
+    if int(cs[0]) % hold == 0:
+        e = r[ri] - y[yi]
+        if cs[7] == 0.0:
+            cs[1] = e
+            cs[2] = e
+            cs[7] = 1.0
+        e1, e2, u1 = cs[1], cs[2], cs[3]
+        x1 = e - e1
+        x2 = e
+        x3 = e - 2.0 * e1 - e2 if cp[8] != 0.0 else e - 2.0 * e1 + e2
+        if cp[9] != 0.0:  # eq. 5.19 as printed
+            cs[4] += cp[4] * e1 * u1
+            cs[5] += cp[5] * e1 * u1
+            cs[6] += cp[6] * e1 * u1
+        else:  # supervised Hebbian learning (Liu, 2008)
+            cs[4] += cp[4] * e * u1 * x1
+            cs[5] += cp[5] * e * u1 * x2
+            cs[6] += cp[6] * e * u1 * x3
+        w1, w2, w3 = cs[4], cs[5], cs[6]
+        if cp[7] != 0.0:
+            total = abs(w1) + abs(w2) + abs(w3)
+            if total > 0.0:
+                w1, w2, w3 = w1 / total, w2 / total, w3 / total
+        cs[3] = u1 + cp[3] * (w1 * x1 + w2 * x2 + w3 * x3)
+        cs[2] = e1
+        cs[1] = e
+        log[0] = w1
+        log[1] = w2
+        log[2] = w3
+    else:
+        log[0] = cs[4]
+        log[1] = cs[5]
+        log[2] = cs[6]
+    cs[0] += 1.0
+    u[ui] = cp[11] + cs[3]
+    log[3] = cs[3]
+
+
+class SingleNeuron(ControllerModel):
+    """Single-neuron adaptive PID (eqs. 5.15-5.19) for a SISO loop."""
+
+    Config = NeuronConfig
+    step = staticmethod(neuron_step)
+
+    def build(self, label: str, cfg: NeuronConfig, plant: Plant, path: str) -> ControllerInstance:
+        outputs, inputs = plant.output_names, plant.input_names
+        signal = cfg.signal or (outputs[0] if len(outputs) == 1 else None)
+        if signal not in outputs:
+            raise ConfigError(
+                join(path, "signal"), cfg.signal, f"name one output of {plant.name}: {', '.join(outputs)}"
+            )
+        if len(inputs) != 1:
+            raise ConfigError(path, cfg.kind, f"the single neuron drives one input; {plant.name} has {len(inputs)}")
+        bias = float(equilibrium_input(plant)[0]) if cfg.feedforward == "equilibrium" else 0.0
+        cp = np.array(
+            [
+                outputs.index(signal), outputs.index(signal), 0, cfg.gain,
+                cfg.learning.p, cfg.learning.i, cfg.learning.d, float(cfg.normalize),
+                float(cfg.second_difference == "printed"), float(cfg.rule == "printed"), cfg.sample_time, bias,
+            ]
+        )  # fmt: skip
+        cs0 = np.array([0.0, 0.0, 0.0, 0.0, *cfg.weights, 0.0])
+        return ControllerInstance(
+            label=label,
+            kind="single_neuron",
+            step=self.step,
+            cp=cp,
+            cs0=cs0,
+            reference_signals=tuple(outputs),
+            log_names=("neuron.w1", "neuron.w2", "neuron.w3", "neuron.u"),
+            log_units=("", "", "", plant.unit_of(inputs[0])),
+            config=cfg.model_dump(),
+        )
