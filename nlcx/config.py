@@ -85,6 +85,8 @@ class OutputsSection(Section):
     timeseries: bool = True
     #: Write the thesis-style figure (figure.png) and the gains/inputs figure (gains.png).
     figure: bool = True
+    #: Add an axes per plant input to figure.png (below the outputs).
+    figure_inputs: bool = False
 
 
 class ExperimentSection(Section):
@@ -314,7 +316,10 @@ def controller_section(label: str, data: Any, path: str) -> PluginSection:
     else:
         tuners = ()
     c = _plugin(registry.controllers, label, data, path)
-    return PluginSection(c.label, c.kind, c.model, c.model.normalize(c.config, path), tuners)
+    # a tuned controller's nested sections (e.g. its schedule) are completed by its tuners and
+    # validated after them (engine.prepare)
+    config = c.config if tuners else c.model.normalize(c.config, path)
+    return PluginSection(c.label, c.kind, c.model, config, tuners)
 
 
 def build(raw: dict[str, Any]) -> Experiment:

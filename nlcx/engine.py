@@ -144,7 +144,7 @@ def prepare(exp: Experiment) -> Prepared:
                 data = tuner.model.tune(data, tuner.config, ctx)
             section = controller_section(c.label, data, path)
             tuning += ctx.rows
-        controllers.append(section.model.build(c.label, section.config, plant, path))
+        controllers.append(section.model.build(c.label, section.config, plant, path, dt=sim.dt))
     grid = time_grid(sim.t_end, sim.dt, sim.integrator)
     seed_sequence = np.random.SeedSequence(sec.seed)
     children = seed_sequence.spawn(max(1, len(exp.uncertainties)))
@@ -321,7 +321,7 @@ def measure(prepared: Prepared, runs: list[Run]) -> pd.DataFrame:
     cfg = prepared.experiment.section.metrics
     rows: list[list[Any]] = []
     for run in runs:
-        signals = [s for s in run.controller.reference_signals if s in plant.output_names]
+        signals = [s for s in dict.fromkeys(run.controller.reference_signals) if s in plant.output_names]
         label = run.label
         if run.status != "ok":
             rows.append([label, "all", "t_fail", run.t_fail, "s", run.status, run.reason])

@@ -134,9 +134,12 @@ def register_builtins() -> None:
     controllers.register("pid", "nlcx.controllers.pid:MultiLoopPID")
     controllers.register("open_loop", "nlcx.controllers.open_loop:OpenLoop")
     controllers.register("single_neuron", "nlcx.controllers.neuron:SingleNeuron")
+    controllers.register("preview", "nlcx.controllers.preview:Preview")
     schedules.register("constant", "nlcx.controllers.schedules:Constant")
     schedules.register("time_ags", "nlcx.controllers.schedules:TimeAGS")
     schedules.register("error_ags", "nlcx.controllers.schedules:ErrorAGS")
+    schedules.register("fuzzy", "nlcx.controllers.fuzzy:Fuzzy")
+    schedules.register("anfis", "nlcx.controllers.anfis:ANFIS")
     uncertainties.register("disturbance", "nlcx.uncertainty.disturbance:Disturbance")
     uncertainties.register("noise", "nlcx.uncertainty.noise:Noise")
     uncertainties.register("friction", "nlcx.uncertainty.friction:Friction")
@@ -145,6 +148,7 @@ def register_builtins() -> None:
     references.register("sine", "nlcx.references.basic:Sine")
     tuners.register("ziegler_nichols", "nlcx.tuning.ziegler_nichols:ZieglerNichols")
     tuners.register("ga", "nlcx.tuning.ga:GATuner")
+    tuners.register("anfis", "nlcx.tuning.anfis_tuner:AnfisTuner")
 
 
 register_builtins()

@@ -85,6 +85,11 @@ def timeseries_frame(result: Result) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
+def _finite(values: np.ndarray, limit: float = 1e9) -> np.ndarray:
+    """Values beyond ``limit`` (a diverging run) as NaN, so an axis can still be drawn."""
+    return np.where(np.abs(values) < limit, values, np.nan)
+
+
 def _style(i: int) -> tuple[str, str]:
     return LINE_STYLES[i % len(LINE_STYLES)]
 
@@ -97,12 +102,23 @@ def output_figure(result: Result, title: str | None = None) -> plt.Figure:
     """One axes per regulated output, every controller overlaid, reference dotted (thesis layout)."""
     plant = result.prepared.plant
     outputs = plant.outputs
-    fig, axes = plt.subplots(len(outputs), 1, figsize=(7.5, 2.9 * len(outputs)), squeeze=False)
-    for k, (ax, sig) in enumerate(zip(axes[:, 0], outputs, strict=True)):
+    inputs = plant.inputs if result.prepared.experiment.section.outputs.figure_inputs else ()
+    n_axes = len(outputs) + len(inputs)
+    fig, axes = plt.subplots(n_axes, 1, figsize=(7.5, 2.9 * n_axes), squeeze=False)
+    for j, (ax, sig) in enumerate(zip(axes[len(outputs) :, 0], inputs, strict=True)):
+        for i, run in enumerate(result.runs):
+            color, ls = _style(i)
+            ax.plot(run.t, _finite(run.u[:, j]), color=color, ls=ls, lw=1.3, label=_run_label(run))
+        ax.set_title(f"({chr(ord('a') + len(outputs) + j)}) {sig.label or sig.name} vs time")
+        ax.set_xlabel("Time (s)")
+        ax.set_ylabel(sig.axis_label)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+    for k, (ax, sig) in enumerate(zip(axes[: len(outputs), 0], outputs, strict=True)):
         j = plant.output_names.index(sig.name)
         for i, run in enumerate(result.runs):
             color, ls = _style(i)
-            ax.plot(run.t, run.x @ plant.C[j], color=color, ls=ls, lw=1.3, label=_run_label(run))
+            ax.plot(run.t, _finite(run.x @ plant.C[j]), color=color, ls=ls, lw=1.3, label=_run_label(run))
         first = result.runs[0]
         if sig.name in first.controller.reference_signals:
             col = first.controller.reference_signals.index(sig.name)
@@ -138,7 +154,7 @@ def gains_figure(result: Result) -> plt.Figure:
                 values, unit = run.log[:, k], run.controller.log_units[k]
             else:
                 continue
-            ax.plot(run.t, values, color=color, ls=ls, lw=1.0, label=run.label)
+            ax.plot(run.t, _finite(values), color=color, ls=ls, lw=1.0, label=run.label)
         ax.set_title(f"{name} ({unit})" if unit else name, fontsize=9)
         ax.tick_params(labelsize=7)
         ax.grid(True, alpha=0.3)

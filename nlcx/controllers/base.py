@@ -8,7 +8,9 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
+from nlcx.errors import ConfigError
 from nlcx.plants.base import Plant
+from nlcx.validation import join
 
 
 class ControllerConfig(BaseModel):
@@ -48,5 +50,19 @@ class ControllerModel:
         """Validate nested plugin sections (e.g. gain schedules) and fill their defaults."""
         return cfg
 
-    def build(self, label: str, cfg: Any, plant: Plant, path: str) -> ControllerInstance:
+    def build(self, label: str, cfg: Any, plant: Plant, path: str, dt: float | None = None) -> ControllerInstance:
+        """The controller for ``plant``; ``dt`` is the simulation step (controller sampling)."""
         raise NotImplementedError
+
+
+def check_sample_time(Ts: float, dt: float, path: str = "controller") -> int:
+    """Number of simulation steps per controller sample; ConfigError unless Ts is a multiple of dt."""
+    ratio = Ts / dt
+    n_sub = round(ratio)
+    if n_sub < 1 or abs(ratio - n_sub) > 1e-6 * ratio:
+        raise ConfigError(
+            join(path, "sample_time"),
+            Ts,
+            f"must be a whole multiple (>= 1) of the simulation step dt = {dt} (sample_time/dt = {ratio:.6g})",
+        )
+    return int(n_sub)

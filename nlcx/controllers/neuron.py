@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
-from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
+from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.errors import ConfigError
 from nlcx.kernel import CONTROLLER_SIG
 from nlcx.plants.base import Plant, equilibrium_input
@@ -108,7 +108,11 @@ class SingleNeuron(ControllerModel):
     Config = NeuronConfig
     step = staticmethod(neuron_step)
 
-    def build(self, label: str, cfg: NeuronConfig, plant: Plant, path: str) -> ControllerInstance:
+    def build(
+        self, label: str, cfg: NeuronConfig, plant: Plant, path: str, dt: float | None = None
+    ) -> ControllerInstance:
+        if dt is not None:
+            check_sample_time(cfg.sample_time, dt, path)
         outputs, inputs = plant.output_names, plant.input_names
         signal = cfg.signal or (outputs[0] if len(outputs) == 1 else None)
         if signal not in outputs:

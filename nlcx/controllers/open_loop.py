@@ -29,7 +29,9 @@ class OpenLoop(ControllerModel):
     Config = OpenLoopConfig
     step = staticmethod(open_loop_step)
 
-    def build(self, label: str, cfg: OpenLoopConfig, plant: Plant, path: str) -> ControllerInstance:
+    def build(
+        self, label: str, cfg: OpenLoopConfig, plant: Plant, path: str, dt: float | None = None
+    ) -> ControllerInstance:
         return ControllerInstance(
             label=label,
             kind="open_loop",

@@ -145,7 +145,7 @@ class MultiLoopPID(ControllerModel):
             loops[key] = loop.model_copy(update={"schedule": sched.model_dump()})
         return cfg.model_copy(update={"loops": loops})
 
-    def build(self, label: str, cfg: PIDConfig, plant: Plant, path: str) -> ControllerInstance:
+    def build(self, label: str, cfg: PIDConfig, plant: Plant, path: str, dt: float | None = None) -> ControllerInstance:
         outputs = plant.output_names
         inputs = plant.input_names
         loops = self._resolve_loops(cfg, plant, path)

@@ -20,6 +20,39 @@ import pandas as pd
 DATA = files("nlcx.thesis") / "data"
 #: Plant of each chapter-2-4 pendulum as the extracts name it -> nlcx plant.
 PLANTS = {"x": "x_pendulum", "xy": "xy_pendulum", "xz": "xz_pendulum", "xyz": "xyz_pendulum"}
+#: Chapter-5 figures: figure -> (kind, config file, membership variable).
+CSTR_FIGURES = {
+    "5.2": ("response", "fig_5_02.yaml", ""),
+    "5.4": ("membership", "fig_5_10.yaml", "e"),
+    "5.5": ("membership", "fig_5_10.yaml", "de_dt"),
+    "5.6": ("membership", "fig_5_10.yaml", "kp1"),
+    "5.7": ("membership", "fig_5_10.yaml", "ki1"),
+    "5.8": ("membership", "fig_5_10.yaml", "kd1"),
+    "5.10": ("response", "fig_5_10.yaml", ""),
+    "5.12": ("response", "fig_5_12.yaml", ""),
+    "5.15": ("response", "fig_5_15.yaml", ""),
+    "5.17": ("response", "fig_5_17.yaml", ""),
+    "5.19": ("response", "fig_5_19.yaml", ""),
+}
+#: Table 5.8's methods -> (config file, controller label).
+CSTR_METHODS = {
+    "ZN": ("fig_5_02.yaml", "zn"),
+    "Fuzzy": ("fig_5_10.yaml", "fuzzy"),
+    "ANN": ("fig_5_12.yaml", "ann"),
+    "ANFIS": ("fig_5_15.yaml", "anfis"),
+    "GA": ("fig_5_17.yaml", "ga"),
+}
+#: Chapter-5 parameter tables: table -> (kind, config file, fuzzy variable).
+CSTR_TABLES = {
+    "5.1": ("zn_rules", "fig_5_02.yaml", ""),
+    "5.2": ("fuzzy_universes", "fig_5_10.yaml", ""),
+    "5.3": ("fuzzy_sets", "fig_5_10.yaml", "e"),
+    "5.4": ("fuzzy_sets", "fig_5_10.yaml", "de_dt"),
+    "5.5": ("fuzzy_sets", "fig_5_10.yaml", "kp1"),
+    "5.6": ("fuzzy_sets", "fig_5_10.yaml", "ki1"),
+    "5.7": ("fuzzy_sets", "fig_5_10.yaml", "kd1"),
+    "5.8": ("cstr_metrics", "", ""),
+}
 #: Parameter tables: table -> (kind, plant).
 PARAMETER_TABLES = {
     "2.1": ("plant", "x"),
@@ -33,13 +66,14 @@ PARAMETER_TABLES = {
 @dataclass(frozen=True)
 class FigureSpec:
     figure: str
-    kind: str  # "response" | "lyapunov"
+    kind: str  # "response" | "lyapunov" | "membership"
     plant: str
     ags: str
     mode: str
     uncertainty: str
     title: str
     configs: tuple[Path, ...]
+    variable: str = ""
 
     @property
     def chapter(self) -> int:
@@ -58,9 +92,10 @@ class FigureSpec:
 @dataclass(frozen=True)
 class TableSpec:
     table: str
-    kind: str  # "metrics" | "plant" | "ags"
+    kind: str  # "metrics" | "plant" | "ags" | "cstr_metrics" | "zn_rules" | "fuzzy_universes" | "fuzzy_sets"
     plant: str
     configs: tuple[Path, ...]
+    variable: str = ""
 
     @property
     def chapter(self) -> int:
@@ -89,6 +124,27 @@ def thesis_metrics() -> pd.DataFrame:
 
 
 @cache
+def cstr_table() -> pd.DataFrame:
+    """Table 5.8 and the inverse-response magnitudes of sections 5.3-5.4."""
+    with (DATA / "cstr_table_5_8.csv").open(newline="", encoding="utf-8") as fh:
+        return pd.read_csv(fh)
+
+
+@cache
+def fuzzy_sets() -> pd.DataFrame:
+    """Tables 5.3-5.7."""
+    with (DATA / "cstr_fuzzy_sets.csv").open(newline="", encoding="utf-8") as fh:
+        return pd.read_csv(fh)
+
+
+@cache
+def fuzzy_universes() -> pd.DataFrame:
+    """Table 5.2."""
+    with (DATA / "cstr_fuzzy_universes.csv").open(newline="", encoding="utf-8") as fh:
+        return pd.read_csv(fh)
+
+
+@cache
 def gain_ranges() -> pd.DataFrame:
     """Tables 2.2, 3.1, 3.6, 4.1."""
     with (DATA / "ags_gain_ranges.csv").open(newline="", encoding="utf-8") as fh:
@@ -111,6 +167,22 @@ def figures(root: Path) -> list[FigureSpec]:
     """Every result figure of chapters 2-4."""
     specs = []
     for row in _read("figures.csv"):
+        if row["kind"] == "result" and row["figure"] in CSTR_FIGURES:
+            kind, file, variable = CSTR_FIGURES[row["figure"]]
+            specs.append(
+                FigureSpec(
+                    figure=row["figure"],
+                    kind=kind,
+                    plant="cstr",
+                    ags="",
+                    mode="",
+                    uncertainty="",
+                    title=f"Figure {row['figure']} {row['title']}",
+                    configs=(root / "ch5" / file,),
+                    variable=variable,
+                )
+            )
+            continue
         if row["kind"] != "result" or row["figure"].split(".")[0] not in ("2", "3", "4"):
             continue
         plant = row["plant"]
@@ -145,6 +217,13 @@ def tables(root: Path) -> list[TableSpec]:
         uncertainty = "none" if row.scenario == "nominal" else row.scenario
         figure = _figure_number(row.plant, row.ags, "stabilization", uncertainty)
         specs.append(TableSpec(str(row.table), "metrics", row.plant, (figure_config(root, figure),)))
+    for table, (kind, file, variable) in CSTR_TABLES.items():
+        configs = (
+            tuple(root / "ch5" / f for f, _ in CSTR_METHODS.values())
+            if kind == "cstr_metrics"
+            else (root / "ch5" / file,)
+        )
+        specs.append(TableSpec(table, kind, "cstr", configs, variable))
     for table, (kind, plant) in PARAMETER_TABLES.items():
         configs = tuple(
             figure_config(root, _figure_number(plant, ags, "stabilization", "none")) for ags in ("time", "error")

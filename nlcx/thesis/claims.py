@@ -491,13 +491,19 @@ def claims_for(plant: str) -> list[Claim]:
 def configs_for(root: Path, chapters: set[int]) -> list[Path]:
     """Every experiment the claims of these chapters look at."""
     plants = {p for c in chapters for p in CHAPTER_PLANTS.get(c, ())}
+    if 5 in chapters:
+        plants.add("cstr")
     return [f.configs[0] for f in catalog.figures(root) if f.kind == "response" and f.plant in plants]
 
 
 def evaluate(root: Path, records: dict[Path, Any], chapters: set[int]) -> pd.DataFrame:
     """claims.csv: chapter, pendulum, id, source, claim, reproduced, evidence."""
+    from nlcx.thesis import cstr
+
     rows = []
     for chapter in sorted(chapters):
+        if chapter == 5:
+            rows += cstr.claims(records, root)
         for plant in CHAPTER_PLANTS.get(chapter, ()):
             ctx = Context(records=records, root=root, plant=plant)
             for claim in claims_for(plant):

@@ -25,7 +25,7 @@ import pandas as pd
 
 from nlcx.config import load as load_config
 from nlcx.errors import ConfigError, NlcxError
-from nlcx.thesis import catalog
+from nlcx.thesis import catalog, cstr
 from nlcx.thesis.catalog import FigureSpec, TableSpec
 
 ANGLES = ("theta", "phi")
@@ -52,6 +52,9 @@ class Record:
     status: dict[str, str]
     extras: pd.DataFrame
     lyapunov: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
+    tuning: list[dict[str, Any]] = field(default_factory=list)
+    #: Each controller's configuration as built (after its tuners).
+    built: dict[str, dict[str, Any]] = field(default_factory=dict)
     wall: float = 0.0
 
 
@@ -124,6 +127,8 @@ def run_config(config: Path, out_dir: Path, figure: tuple[str, str] | None, over
         status={run.label: run.status for run in result.runs},
         extras=_extras(result),
         lyapunov=lyap,
+        tuning=result.prepared.tuning,
+        built={c.label: c.config for c in result.prepared.controllers},
         wall=time.perf_counter() - start,
     )
 
@@ -255,6 +260,13 @@ def reproduce(
                 out_dir / "figures" / spec.filename,
                 claims.lyapunov_figure(spec, [records[c] for c in spec.configs]),
             )
+        elif spec.kind == "membership":
+            from nlcx.controllers.fuzzy import membership_figure
+
+            schedule = cstr._fuzzy_schedule(records[spec.configs[0]])
+            fig = membership_figure(schedule, spec.variable)
+            fig.suptitle(spec.title, fontsize=9)
+            report.write_figure(out_dir / "figures" / spec.filename, fig)
     written_tables = {}
     for spec in tabs:
         recs = [records[c] for c in spec.configs]
@@ -262,11 +274,21 @@ def reproduce(
             table = _metrics_table(spec, recs[0])
         elif spec.kind == "plant":
             table = _plant_table(recs)
-        else:
+        elif spec.kind == "ags":
             table = _ags_table(spec, recs)
+        elif spec.kind == "cstr_metrics":
+            table = cstr.table_5_8(records, root)
+        elif spec.kind == "zn_rules":
+            table = cstr.table_5_1(recs[0])
+        elif spec.kind == "fuzzy_universes":
+            table = cstr.table_5_2(recs[0])
+        else:
+            table = cstr.table_sets(recs[0], spec.variable)
         report.write_csv(out_dir / "tables" / spec.filename, table)
         written_tables[spec.table] = table
     summary: dict[str, Any] = {"figures": [f.figure for f in figs], "tables": sorted(written_tables)}
+    if not only and 5 in {f.chapter for f in figs}:
+        summary["zn_variants"] = cstr.zn_variants(root, out_dir)
     if claims_needed:
         claim_table = claims.evaluate(root, records, {f.chapter for f in figs} | {t.chapter for t in tabs})
         report.write_csv(out_dir / "claims.csv", claim_table)

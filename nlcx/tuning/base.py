@@ -62,3 +62,20 @@ def single_loop(controller: dict[str, Any], ctx: TuneContext, tuner: str) -> tup
         raise ConfigError(f"{ctx.path}.loops", list(loops), f"the {tuner} tuner needs exactly one loop (a SISO PID)")
     key = next(iter(loops))
     return key, loops[key]
+
+
+def simulate_alone(experiment: Any, label: str, controller: dict[str, Any], **simulation: Any) -> tuple[Any, Any]:
+    """(run, plant): the experiment with only ``controller`` (no tuners), e.g. the ZN loop.
+
+    ``simulation`` overrides keys of the simulation section (t_end, ...).
+    """
+    import copy
+
+    from nlcx import config as cfg
+    from nlcx import engine
+
+    raw = copy.deepcopy(experiment.raw)
+    raw["controllers"] = {label: {k: v for k, v in controller.items() if k != "tune"}}
+    raw.setdefault("simulation", {}).update(simulation)
+    result = engine.run_experiment(cfg.build(raw))
+    return result.runs[0], result.prepared.plant

@@ -18,16 +18,20 @@ from nlcx.validation import join
 
 class DisturbanceConfig(UncertaintyConfig):
     kind: Literal["disturbance"] = "disturbance"
+    #: "sine": amplitude sin(2 pi frequency t + phase) (eq. 2.16); "step": amplitude from t >= start.
+    waveform: Literal["sine", "step"] = "sine"
     amplitude: float = 20.0
     #: Hz; 20 pi t in eq. 2.16 is 10 Hz.
     frequency: float = Field(10.0, ge=0)
     phase: float = 0.0
+    #: Time the step starts, s (waveform: step).
+    start: float = Field(0.0, ge=0)
     #: States whose derivative receives d; default: every velocity state (the accelerations).
     states: list[str] | None = None
 
 
 class Disturbance(UncertaintyModel):
-    """d(t) = amplitude sin(2 pi frequency t + phase) added to chosen state derivatives."""
+    """d(t) = amplitude sin(2 pi frequency t + phase), or a step, added to chosen state derivatives."""
 
     Config = DisturbanceConfig
 
@@ -41,5 +45,8 @@ class Disturbance(UncertaintyModel):
                 raise ConfigError(join(path, "states", i), name, f"unknown state; allowed: {', '.join(names)}")
             column[names.index(name)] = 1.0
         ts = perturbations.stage_times
-        values = cfg.amplitude * np.sin(2 * np.pi * cfg.frequency * ts + cfg.phase)
+        if cfg.waveform == "step":
+            values = np.where(ts >= cfg.start, cfg.amplitude, 0.0)
+        else:
+            values = cfg.amplitude * np.sin(2 * np.pi * cfg.frequency * ts + cfg.phase)
         perturbations.add_disturbance(column, values)

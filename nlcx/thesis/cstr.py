@@ -1,0 +1,297 @@
+"""Chapter 5 (the CSTR): Table 5.8, the parameter tables 5.1-5.7, the ZN variants and claims.
+
+Table 5.8 compares five PID tunings on the transfer function 5.10: t_r, t_s (2 % band),
+M_p (%), e_ss and the inverse-response magnitude (our undershoot, %) of sections 5.3-5.4.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import yaml
+
+from nlcx.thesis import catalog
+
+#: Table 5.8 column -> (nlcx metric, unit).
+CSTR_METRICS = {
+    "tr_s": ("rise_time", "s"),
+    "ts_s": ("settling_time", "s"),
+    "Mp_percent": ("overshoot", "%"),
+    "ess": ("steady_state_error", ""),
+    "inverse_response_percent": ("undershoot", "%"),
+}
+
+
+def _value(record: Any, controller: str, metric: str) -> float:
+    rows = record.metrics[(record.metrics.controller == controller) & (record.metrics.metric == metric)]
+    rows = rows[rows.signal == "C_B"]
+    return float(rows.value.iloc[0]) if not rows.empty else math.nan
+
+
+def method_values(records: dict[Path, Any], root: Path) -> dict[str, dict[str, float]]:
+    """Our Table 5.8 numbers: method -> thesis column -> value."""
+    out = {}
+    for method, (file, label) in catalog.CSTR_METHODS.items():
+        record = records[root / "ch5" / file]
+        out[method] = {col: _value(record, label, metric) for col, (metric, _) in CSTR_METRICS.items()}
+    return out
+
+
+def table_5_8(records: dict[Path, Any], root: Path) -> pd.DataFrame:
+    """method, metric, thesis, nlcx, delta, unit."""
+    printed = catalog.cstr_table().set_index("method")
+    ours = method_values(records, root)
+    rows = []
+    for method in catalog.CSTR_METHODS:
+        for col, (_, unit) in CSTR_METRICS.items():
+            thesis = float(printed.loc[method, col])
+            value = ours[method][col]
+            rows.append(
+                {
+                    "method": method,
+                    "metric": col,
+                    "thesis": thesis,
+                    "nlcx": value,
+                    "delta": value - thesis,
+                    "unit": unit,
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def _tuning(record: Any, tuner: str) -> dict[str, float]:
+    return {r["parameter"]: r["value"] for r in record.tuning if r["tuner"] == tuner}
+
+
+def table_5_1(record: Any) -> pd.DataFrame:
+    """The Ziegler-Nichols rules of Table 5.1 applied to the K_u, T_u found in the run."""
+    from nlcx.tuning.ziegler_nichols import RULES, zn_gains
+
+    zn = _tuning(record, "ziegler_nichols")
+    ku, tu = float(zn["Ku"]), float(zn["Tu"])
+    rows = []
+    for rule, (a, ti, td) in RULES.items():
+        kp, ki, kd = zn_gains(ku, tu, rule)
+        rows.append({
+            "controller": rule.upper(), "kp_rule": f"{a:g} Ku", "Ti_rule": f"Tu/{1 / ti:g}" if ti else "",
+            "Td_rule": f"Tu/{1 / td:g}" if td else "", "Ku": ku, "Tu": tu, "kp": kp,
+            "Ti": ti * tu if ti else math.nan, "Td": td * tu if td else math.nan, "ki": ki, "kd": kd,
+        })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def _fuzzy_schedule(record: Any) -> dict[str, Any]:
+    """The fuzzy schedule as run (after the ZN tuner filled in its gain ranges)."""
+    loops = record.built["fuzzy"]["loops"]
+    return next(iter(loops.values()))["schedule"]
+
+
+def table_5_2(record: Any) -> pd.DataFrame:
+    """Universes of discourse actually used, beside Table 5.2."""
+    sched = _fuzzy_schedule(record)
+    printed = catalog.fuzzy_universes().set_index("name")
+    rows = []
+    for name in ("e", "de_dt"):
+        lo, hi = sched["universes"][name]
+        rows.append(
+            {
+                "variable": name,
+                "role": "input",
+                "nlcx_min": lo,
+                "nlcx_max": hi,
+                "thesis_min": float(printed.loc[name, "min"]),
+                "thesis_max": float(printed.loc[name, "max"]),
+            }
+        )
+    rows.append(
+        {
+            "variable": "kp1, ki1, kd1",
+            "role": "output",
+            "nlcx_min": 0.0,
+            "nlcx_max": 1.0,
+            "thesis_min": 0.0,
+            "thesis_max": 1.0,
+        }
+    )
+    return pd.DataFrame(rows)
+
+
+def table_sets(record: Any, variable: str) -> pd.DataFrame:
+    """The fuzzy sets of one variable actually used, beside Tables 5.3-5.7."""
+    sched = _fuzzy_schedule(record)
+    printed = catalog.fuzzy_sets()
+    printed = printed[printed.variable == variable].set_index("set")
+    rows = []
+    for name, (lo, hi) in sched["sets"][variable].items():
+        rows.append(
+            {
+                "set": name,
+                "shape": printed.loc[name, "shape"],
+                "nlcx_lower": lo,
+                "nlcx_upper": hi,
+                "thesis_lower": float(printed.loc[name, "lower"]),
+                "thesis_upper": float(printed.loc[name, "upper"]),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def zn_variants(root: Path, out_dir: Path) -> pd.DataFrame:
+    """Run the ZN loop variants of ``configs/thesis/ch5/zn_variants.yaml`` against Table 5.8's ZN row."""
+    from nlcx import config as cfg
+    from nlcx import engine, report
+
+    spec = yaml.safe_load((root / "ch5" / "zn_variants.yaml").read_text(encoding="utf-8"))
+    printed = catalog.cstr_table().set_index("method").loc["ZN"]
+    rows = []
+    for name, variant in spec["variants"].items():
+        exp = cfg.load(
+            root / "ch5" / spec["base"],
+            [f"{k}={v!r}" if isinstance(v, str) else f"{k}={v}" for k, v in (variant.get("set") or {}).items()],
+        )
+        result = engine.run_experiment(exp)
+        label = exp.controllers[0].label
+        values = {col: _value_of(result.metrics, label, metric) for col, (metric, _) in CSTR_METRICS.items()}
+        distance = math.sqrt(sum(
+            ((values[c] - float(printed[c])) / max(abs(float(printed[c])), 1.0)) ** 2
+            for c in ("tr_s", "ts_s", "Mp_percent", "inverse_response_percent")
+        ))  # fmt: skip
+        rows.append({"variant": name, "description": variant.get("description", ""), **values, "distance": distance})
+    table = pd.DataFrame(rows).sort_values("distance", kind="stable")
+    thesis_row = {
+        "variant": "thesis (Table 5.8)",
+        "description": "",
+        **{c: float(printed[c]) for c in CSTR_METRICS},
+        "distance": 0.0,
+    }
+    table = pd.concat([pd.DataFrame([thesis_row]), table], ignore_index=True)
+    report.write_csv(out_dir / "tables" / "zn_variants.csv", table)
+    return table
+
+
+def _value_of(metrics: pd.DataFrame, controller: str, metric: str) -> float:
+    rows = metrics[(metrics.controller == controller) & (metrics.metric == metric) & (metrics.signal == "C_B")]
+    return float(rows.value.iloc[0]) if not rows.empty else math.nan
+
+
+def claims(records: dict[Path, Any], root: Path) -> list[dict[str, Any]]:
+    """The claims of chapter 5 (section 5.4 and the conclusion 5.6), checked on our runs."""
+    v = method_values(records, root)
+    methods = list(v)
+    hybrids = [m for m in methods if m != "ZN"]
+
+    def best(col: str) -> str:
+        return min(methods, key=lambda m: v[m][col] if not math.isnan(v[m][col]) else math.inf)
+
+    def fmt(col: str) -> str:
+        return "; ".join(f"{m} {v[m][col]:.3g}" for m in methods)
+
+    rows: list[tuple[str, str, str, bool | None, str]] = [
+        (
+            "zn-fastest-rise",
+            "Table 5.8, 5.6",
+            "ZN gives the shortest rise time",
+            best("tr_s") == "ZN",
+            "t_r: " + fmt("tr_s"),
+        ),
+        (
+            "anfis-best-ts",
+            "Table 5.8, 5.6",
+            "ANFIS gives the best settling time",
+            best("ts_s") == "ANFIS",
+            "t_s: " + fmt("ts_s"),
+        ),
+        (
+            "anfis-best-mp",
+            "Table 5.8, 5.6",
+            "ANFIS gives the smallest overshoot of the methods with overshoot (GA has none)",
+            min([m for m in methods if m != "GA"], key=lambda m: v[m]["Mp_percent"]) == "ANFIS",
+            "M_p %: " + fmt("Mp_percent"),
+        ),
+        (
+            "hybrids-lower-mp",
+            "Table 5.8",
+            "Every hybrid method lowers M_p below ZN's",
+            all(v[m]["Mp_percent"] < v["ZN"]["Mp_percent"] for m in hybrids),
+            "M_p %: " + fmt("Mp_percent"),
+        ),
+        (
+            "anfis-less-inverse",
+            "5.4.3, 5.6",
+            "ANFIS's inverse response is smaller than ZN's and fuzzy's",
+            v["ANFIS"]["inverse_response_percent"]
+            < min(v["ZN"]["inverse_response_percent"], v["Fuzzy"]["inverse_response_percent"]),
+            "inverse response %: " + fmt("inverse_response_percent"),
+        ),
+        (
+            "ann-smallest-inverse",
+            "5.4.2, 5.6",
+            "The ANN PID reduces the inverse response the most and lowers M_p",
+            best("inverse_response_percent") == "ANN" and v["ANN"]["Mp_percent"] < v["ZN"]["Mp_percent"],
+            "inverse response %: " + fmt("inverse_response_percent"),
+        ),
+        (
+            "ga-sluggish-no-overshoot",
+            "5.4.4",
+            "GA tuning is sluggish (longest t_r) with zero overshoot",
+            max(methods, key=lambda m: v[m]["tr_s"]) == "GA" and v["GA"]["Mp_percent"] <= 0.5,
+            f"t_r: {fmt('tr_s')} | M_p GA {v['GA']['Mp_percent']:.3g} %",
+        ),
+        (
+            "zero-ess",
+            "Table 5.8",
+            "Every method reaches zero steady-state error",
+            all(abs(v[m]["ess"]) <= 0.01 for m in methods),
+            "e_ss: " + fmt("ess"),
+        ),
+        (
+            "rhp-zero-inverse",
+            "5.2, 5.3.1",
+            "The RHP zero gives the ZN loop an inverse response (44.46 %)",
+            v["ZN"]["inverse_response_percent"] > 10,
+            f"ZN inverse response {v['ZN']['inverse_response_percent']:.3g} %",
+        ),
+    ]
+    preview = records.get(root / "ch5" / "fig_5_19.yaml")
+    if preview is not None:
+
+        def pv(label: str, signal: str, metric: str) -> float:
+            m = preview.metrics
+            r = m[(m.controller == label) & (m.signal == signal) & (m.metric == metric)]
+            return float(r.value.iloc[0]) if not r.empty else math.nan
+
+        ise_h2, ise_inf = pv("h2", "C_B", "ise"), pv("hinf", "C_B", "ise")
+        eff_h2, eff_inf = pv("h2", "u", "control_effort"), pv("hinf", "u", "control_effort")
+        rows.append(
+            (
+                "hinf-better-tracking",
+                "5.5, 5.6",
+                "H∞ preview control tracks better (lower ISE) than H2",
+                ise_inf < ise_h2,
+                f"ISE: H2 {ise_h2:.4g}, H∞ {ise_inf:.4g}",
+            )
+        )
+        rows.append(
+            (
+                "hinf-less-effort",
+                "5.5, 5.6",
+                "H∞ preview control needs less control effort than H2",
+                eff_inf < eff_h2,
+                f"∫u² dt: H2 {eff_h2:.4g}, H∞ {eff_inf:.4g}",
+            )
+        )
+    return [
+        {
+            "chapter": 5,
+            "pendulum": "cstr",
+            "id": f"cstr-{key}",
+            "source": source,
+            "claim": text,
+            "reproduced": "yes" if ok else "no",
+            "evidence": evidence,
+        }
+        for key, source, text, ok, evidence in rows
+    ]
