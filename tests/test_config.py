@@ -48,7 +48,7 @@ CASES = [
         ["controllers.proposed.loops.x.schedule.kind=time_agss"],
         "controllers.proposed.loops.x.schedule.kind",
         "'time_agss'",
-        "unknown gain schedule; allowed: constant, error_ags, time_ags (did you mean 'time_ags'?)",
+        "unknown gain schedule; allowed: anfis, constant, error_ags, fuzzy, time_ags (did you mean 'time_ags'?)",
     ),
     (
         ["controllers.proposed.loops.x.schedule.rate.kp=-1"],

@@ -158,7 +158,12 @@ class AnfisModel:
 
     def copy(self) -> AnfisModel:
         return AnfisModel(
-            self.mf, self.centres.copy(), self.widths.copy(), self.slopes.copy(), self.consequents.copy(), self.ranges
+            self.mf,
+            self.centres.copy(),
+            self.widths.copy(),
+            self.slopes.copy(),
+            self.consequents.copy(),
+            self.ranges.copy(),
         )
 
 
