@@ -87,6 +87,8 @@ class OutputsSection(Section):
     figure: bool = True
     #: Add an axes per plant input to figure.png (below the outputs).
     figure_inputs: bool = False
+    #: Metrics quoted in figure.png's legend, e.g. [ise, control_effort].
+    figure_metrics: list[str] = Field(default_factory=list)
 
 
 class ExperimentSection(Section):

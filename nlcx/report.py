@@ -94,8 +94,19 @@ def _style(i: int) -> tuple[str, str]:
     return LINE_STYLES[i % len(LINE_STYLES)]
 
 
-def _run_label(run: Run) -> str:
-    return run.label if run.status == "ok" else f"{run.label} ({run.status})"
+def _run_label(run: Run, result: Result | None = None) -> str:
+    """The legend entry: the controller, its status if not ok, and the requested metrics."""
+    if run.status != "ok":
+        return f"{run.label} ({run.status})"
+    names = result.prepared.experiment.section.outputs.figure_metrics if result is not None else []
+    if not names:
+        return run.label
+    table = result.metrics[result.metrics.controller == run.label]
+    parts = []
+    for name in names:
+        rows = table[table.metric == name]
+        parts += [f"{name} {v:.4g}" for v in rows.value]
+    return f"{run.label} ({', '.join(parts)})" if parts else run.label
 
 
 def output_figure(result: Result, title: str | None = None) -> plt.Figure:
@@ -118,7 +129,7 @@ def output_figure(result: Result, title: str | None = None) -> plt.Figure:
         j = plant.output_names.index(sig.name)
         for i, run in enumerate(result.runs):
             color, ls = _style(i)
-            ax.plot(run.t, _finite(run.x @ plant.C[j]), color=color, ls=ls, lw=1.3, label=_run_label(run))
+            ax.plot(run.t, _finite(run.x @ plant.C[j]), color=color, ls=ls, lw=1.3, label=_run_label(run, result))
         first = result.runs[0]
         if sig.name in first.controller.reference_signals:
             col = first.controller.reference_signals.index(sig.name)

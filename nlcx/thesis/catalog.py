@@ -10,6 +10,7 @@ nominal or disturbed stabilisation figure it quantifies.
 from __future__ import annotations
 
 import csv
+import re
 from dataclasses import dataclass
 from functools import cache
 from importlib.resources import files
@@ -111,6 +112,12 @@ class TableSpec:
         return f"table_{chapter}_{number}.csv"
 
 
+def clean_title(title: str) -> str:
+    """The figure list's caption with its TeX remnants made readable (H_{∞} -> H∞, dot{V} -> V̇)."""
+    title = title.replace("dot{V}", "V̇").replace("H_2", "H2")
+    return re.sub(r"_\{([^}]*)\}", r"\1", title)
+
+
 def _read(name: str) -> list[dict[str, str]]:
     with (DATA / name).open(newline="", encoding="utf-8") as fh:
         return list(csv.DictReader(fh))
@@ -177,7 +184,7 @@ def figures(root: Path) -> list[FigureSpec]:
                     ags="",
                     mode="",
                     uncertainty="",
-                    title=f"Figure {row['figure']} {row['title']}",
+                    title=clean_title(f"Figure {row['figure']} {row['title']}"),
                     configs=(root / "ch5" / file,),
                     variable=variable,
                 )
@@ -202,7 +209,7 @@ def figures(root: Path) -> list[FigureSpec]:
                 ags=row["ags"],
                 mode=row["mode"],
                 uncertainty=row["uncertainty"],
-                title=f"Figure {row['figure']} {row['title']}".replace("dot{V}", "V̇"),
+                title=clean_title(f"Figure {row['figure']} {row['title']}"),
                 configs=configs,
             )
         )

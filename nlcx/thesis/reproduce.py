@@ -265,7 +265,7 @@ def reproduce(
 
             schedule = cstr._fuzzy_schedule(records[spec.configs[0]])
             fig = membership_figure(schedule, spec.variable)
-            fig.suptitle(spec.title, fontsize=9)
+            fig.axes[0].set_title(spec.title, fontsize=10)
             report.write_figure(out_dir / "figures" / spec.filename, fig)
     written_tables = {}
     for spec in tabs:
