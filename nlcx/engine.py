@@ -356,6 +356,16 @@ def run_experiment(exp: Experiment) -> Result:
     start = time.perf_counter()
     runs = simulate_runs(prepared)
     timings["simulate"] = time.perf_counter() - start
+    for run in runs:
+        c = run.controller
+        prepared.tuning += [
+            {"controller": c.label, "tuner": "controller", "parameter": k, "value": v} for k, v in c.records.items()
+        ]
+        prepared.tuning += [
+            {"controller": c.label, "tuner": "controller", "parameter": f"{name}.final",
+             "value": float(run.log[-1, c.log_names.index(name)])}
+            for name in c.final_logs
+        ]  # fmt: skip
     start = time.perf_counter()
     table = measure(prepared, runs)
     timings["metrics"] = time.perf_counter() - start

@@ -197,8 +197,9 @@ def test_preview_tracks_step_and_moves_before_it() -> None:
     k = np.searchsorted(h2.t, STEP_TIME - H * TS)
     log = dict(zip(h2.controller.log_names, h2.log.T, strict=True))
     assert log["preview"][k] != 0.0 and log["feedback"][k] == 0.0  # moved by the preview term alone
-    designed = next(r for r in res.runs if r.label == "hinf").controller.config["designed"]
+    designed = next(r for r in res.runs if r.label == "hinf").controller.records
     assert designed["gamma"] == pytest.approx(1.05 * designed["gamma_min"])
+    assert any(row["parameter"] == "gamma" for row in res.prepared.tuning)  # recorded in tuning.csv
 
 
 def test_constant_input_disturbance_is_rejected() -> None:

@@ -38,6 +38,11 @@ class ControllerInstance:
     log_names: tuple[str, ...] = ()
     log_units: tuple[str, ...] = ()
     config: dict[str, Any] = field(default_factory=dict)
+    #: Values the controller's own design produced or uses (e.g. H-infinity gamma and gains,
+    #: learning settings), recorded in tuning.csv.
+    records: dict[str, Any] = field(default_factory=dict)
+    #: Logged values whose final value is a result (e.g. learned weights), recorded in tuning.csv.
+    final_logs: tuple[str, ...] = ()
 
 
 class ControllerModel:

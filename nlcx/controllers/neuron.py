@@ -140,4 +140,18 @@ class SingleNeuron(ControllerModel):
             log_names=("neuron.w1", "neuron.w2", "neuron.w3", "neuron.u"),
             log_units=("", "", "", plant.unit_of(inputs[0])),
             config=cfg.model_dump(),
+            records={
+                "gain_K": cfg.gain,
+                "eta_p": cfg.learning.p,
+                "eta_i": cfg.learning.i,
+                "eta_d": cfg.learning.d,
+                "w1_initial": cfg.weights[0],
+                "w2_initial": cfg.weights[1],
+                "w3_initial": cfg.weights[2],
+                "sample_time": cfg.sample_time,
+                "rule": cfg.rule,
+                "second_difference": cfg.second_difference,
+                "normalize": cfg.normalize,
+            },
+            final_logs=("neuron.w1", "neuron.w2", "neuron.w3"),
         )

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import scipy.linalg
@@ -537,12 +537,11 @@ class Preview(ControllerModel):
         log_names.append("integral")
         log_units.append(f"{unit_y}*s" if unit_y else "s")
         config = cfg.model_dump()
-        config["designed"] = {
-            "gamma": d.gamma,
-            "gamma_min": d.gamma_min,
-            "Kx": d.Kx.tolist(),
-            "Kd": d.Kd.tolist(),
-        }
+        records: dict[str, Any] = {"design": cfg.design, "preview": h, "sample_time": cfg.sample_time}
+        if cfg.design == "hinf":
+            records.update(gamma=d.gamma, gamma_min=d.gamma_min)
+        records.update({f"Kx[{i}]": float(v) for i, v in enumerate(np.ravel(d.Kx))})
+        records.update({f"Kd[{i}]": float(v) for i, v in enumerate(np.ravel(d.Kd))})
         return ControllerInstance(
             label=label,
             kind="preview",
@@ -554,4 +553,5 @@ class Preview(ControllerModel):
             log_names=tuple(log_names),
             log_units=tuple(log_units),
             config=config,
+            records=records,
         )
