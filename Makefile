@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.nlcx-installed
 JOBS ?= 2
 
-.PHONY: install run test lint reproduce reproduce-pendulums calibrate configs errata clean
+.PHONY: install run test lint reproduce reproduce-pendulums reproduce-cstr calibrate configs errata clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -33,7 +33,13 @@ lint: install
 reproduce-pendulums: install
 	$(BIN)/nlcx reproduce --chapter 2 --chapter 3 --chapter 4 --jobs $(JOBS)
 
-reproduce: reproduce-pendulums
+## reproduce-cstr: chapter 5 (the CSTR): figures, Table 5.8, tables 5.1-5.7, ZN variants, claims
+reproduce-cstr: install
+	$(BIN)/nlcx reproduce --chapter 5 --jobs $(JOBS) --out results/thesis
+
+## reproduce: every figure and table of chapters 2-5 and all claims
+reproduce: install
+	$(BIN)/nlcx reproduce --jobs $(JOBS)
 
 ## calibrate: refit the unprinted conventional gains (writes configs/thesis/gains/conventional.yaml)
 calibrate: install
