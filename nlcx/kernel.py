@@ -95,13 +95,13 @@ SIMULATE_SIG = types.void(
 )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _row(arr_len: int, b: int) -> int:
     """Index into an axis that is either per-variant (length B) or broadcast (length 1)."""
     return b if arr_len > 1 else 0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _derivative(rhs, t, x, u, p, dist_row, dist_map, dx):  # pragma: no cover - compiled
     """dx = f(t, x, u; p) + dist_map @ d (eqs. 2.13/2.15: d enters the state derivatives)."""
     rhs(t, x, u, p, dx)
@@ -242,7 +242,7 @@ def _disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
         out[j] = (1.0 - w) * drow[lo, j] + w * drow[hi, j]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rk_step(
     rhs,
     t,
