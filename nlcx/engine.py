@@ -197,53 +197,91 @@ def _failure_reason(plant: Plant, status: int, index: int, t_fail: float) -> str
     return ""
 
 
-def simulate_runs(prepared: Prepared) -> list[Run]:
-    """Integrate every controller of the experiment; one kernel call per step function."""
-    plant = prepared.plant
-    grid = prepared.grid
-    a, b = TABLEAUS[prepared.experiment.section.simulation.integrator]
-    dist, dist_map = prepared.perturbations.dist_arrays()
-    n, n_u, n_y = len(plant.states), len(plant.inputs), len(plant.outputs)
-    noise_y = prepared.perturbations.noise_y
-    noise_u = prepared.perturbations.noise_u
-    noise_y = np.zeros((1, 1, n_y)) if noise_y is None else np.ascontiguousarray(noise_y[None])
-    noise_u = np.zeros((1, 1, n_u)) if noise_u is None else np.ascontiguousarray(noise_u[None])
-    friction = prepared.perturbations.friction
-    fric = np.zeros((1, n_u, FRICTION_FIELDS)) if friction is None else np.ascontiguousarray(friction[None])
+@dataclass
+class Item:
+    """One closed loop to simulate: a plant instance, a controller and what perturbs it."""
+
+    plant: Plant
+    controller: ControllerInstance
+    ref: np.ndarray  # (K+1, n_r)
+    dist: np.ndarray  # (K|1, s, n_d)
+    dist_map: np.ndarray  # (n, n_d)
+    noise_y: np.ndarray | None = None  # (K+1, n_y)
+    noise_u: np.ndarray | None = None  # (K+1, n_u)
+    friction: np.ndarray | None = None  # (n_u, FRICTION_FIELDS)
+
+
+def items_of(prepared: Prepared) -> list[Item]:
+    """The closed loops of one experiment: its plant under each of its controllers."""
+    pert = prepared.perturbations
+    dist, dist_map = pert.dist_arrays()
+    refs: dict[tuple[Any, ...], np.ndarray] = {}
+    out = []
+    for c in prepared.controllers:
+        key = (c.reference_signals, c.reference_offsets)
+        if key not in refs:
+            refs[key] = reference_array(prepared, c.reference_signals, c.reference_offsets)
+        out.append(Item(prepared.plant, c, refs[key], dist[0], dist_map, pert.noise_y, pert.noise_u, pert.friction))
+    return out
+
+
+def _stack(arrays: list[np.ndarray | None], empty_shape: tuple[int, ...]) -> np.ndarray:
+    """Stack per-item arrays on a leading batch axis; one shared (or absent) array is broadcast."""
+    first = arrays[0]
+    if all(a is first for a in arrays):
+        base = np.zeros(empty_shape) if first is None else first
+        return np.ascontiguousarray(base[None])
+    return np.ascontiguousarray(np.stack([np.zeros(empty_shape) if a is None else a for a in arrays]))
+
+
+def _group_key(item: Item) -> tuple[Any, ...]:
+    c, plant = item.controller, item.plant
+    return (
+        id(plant.rhs), id(c.step), len(plant.states), len(plant.inputs), plant.C.tobytes(), len(c.log_names),
+        item.ref.shape, item.dist.shape, item.dist_map.tobytes(),
+    )  # fmt: skip
+
+
+def simulate_items(items: list[Item], grid: TimeGrid, integrator: str) -> list[Run]:
+    """Integrate every item; items sharing plant equations and controller kind go through one
+    batched kernel call (per-item parameters, states, references and perturbations)."""
+    a, b = TABLEAUS[integrator]
     groups: dict[tuple[Any, ...], list[int]] = {}
-    for i, c in enumerate(prepared.controllers):
-        groups.setdefault((id(c.step), c.reference_signals, c.reference_offsets, len(c.log_names)), []).append(i)
-    runs: list[Run | None] = [None] * len(prepared.controllers)
+    for i, item in enumerate(items):
+        groups.setdefault(_group_key(item), []).append(i)
+    runs: list[Run | None] = [None] * len(items)
+    n_k = grid.t.size
     for indices in groups.values():
-        ctrls = [prepared.controllers[i] for i in indices]
-        n_b = len(ctrls)
-        ref = reference_array(prepared, ctrls[0].reference_signals, ctrls[0].reference_offsets)[None]
-        n_k = grid.t.size
+        group = [items[i] for i in indices]
+        plant = group[0].plant
+        n, n_u, n_y = len(plant.states), len(plant.inputs), len(plant.outputs)
+        n_b = len(group)
+        plants = [g.plant for g in group]
         X = np.full((n_b, n_k, n), np.nan)
         U = np.full((n_b, n_k, n_u), np.nan)
-        LOG = np.full((n_b, n_k, len(ctrls[0].log_names)), np.nan)
+        LOG = np.full((n_b, n_k, len(group[0].controller.log_names)), np.nan)
         FRIC = np.full((n_b, n_k, n_u), np.nan)
         status = np.zeros(n_b, dtype=np.int64)
         n_valid = np.zeros(n_b, dtype=np.int64)
         fail_index = np.zeros(n_b, dtype=np.int64)
         simulate(
             plant.rhs,
-            ctrls[0].step,
+            group[0].controller.step,
             schedule_slots(),
             a,
             b,
-            np.ascontiguousarray(np.tile(plant.x0, (n_b, 1))),
-            np.ascontiguousarray(plant.p[None]),
+            np.ascontiguousarray(np.stack([q.x0 for q in plants])),
+            _stack([q.p for q in plants], plant.p.shape),
             np.ascontiguousarray(plant.C),
-            _pad_rows([c.cp for c in ctrls]),
-            _pad_rows([c.cs0 for c in ctrls]),
-            ref,
-            dist,
-            dist_map,
-            noise_y,
-            noise_u,
-            fric,
-            np.ascontiguousarray(plant.bounds),
+            _pad_rows([g.controller.cp for g in group]),
+            _pad_rows([g.controller.cs0 for g in group]),
+            _stack([g.ref for g in group], group[0].ref.shape),
+            _stack([g.dist for g in group], group[0].dist.shape),
+            np.ascontiguousarray(group[0].dist_map),
+            _stack([g.noise_y for g in group], (1, n_y)),
+            _stack([g.noise_u for g in group], (1, n_u)),
+            _stack([g.friction for g in group], (n_u, FRICTION_FIELDS)),
+            _stack([q.bounds for q in plants], plant.bounds.shape),
             grid.dt,
             X,
             U,
@@ -257,18 +295,23 @@ def simulate_runs(prepared: Prepared) -> list[Run]:
             k = int(n_valid[j])
             t_fail = float(grid.t[k - 1] + grid.dt) if status[j] else math.nan
             runs[i] = Run(
-                controller=ctrls[j],
+                controller=group[j].controller,
                 status="unstable" if status[j] else "ok",
-                reason=_failure_reason(plant, int(status[j]), int(fail_index[j]), t_fail),
+                reason=_failure_reason(group[j].plant, int(status[j]), int(fail_index[j]), t_fail),
                 t=grid.t[:k],
                 x=X[j, :k],
                 u=U[j, :k],
-                r=ref[0, :k],
+                r=group[j].ref[:k],
                 log=LOG[j, :k],
                 friction=FRIC[j, :k],
                 t_fail=t_fail,
             )
     return [r for r in runs if r is not None]
+
+
+def simulate_runs(prepared: Prepared) -> list[Run]:
+    """Integrate every controller of the experiment (one kernel call per controller kind)."""
+    return simulate_items(items_of(prepared), prepared.grid, prepared.experiment.section.simulation.integrator)
 
 
 METRIC_COLUMNS = ["controller", "signal", "metric", "value", "unit", "status", "note"]

@@ -83,7 +83,7 @@ SIMULATE_SIG = types.void(
     ARR3,  # noise_y (B|1, K+1|1, n_y) added to the measured outputs
     ARR3,  # noise_u (B|1, K+1|1, n_u) added to the controller output
     ARR3,  # fric (B|1, n_u, FRICTION_FIELDS) friction of each input's axis (model 0: none)
-    VEC,  # bounds (n,) |x_i| above bounds[i] stops the run
+    MAT,  # bounds (B|1, n) |x_i| above bounds[i] stops the run
     F64,  # dt
     ARR3,  # X out (B, K+1, n)
     ARR3,  # U out (B, K+1, n_u)
@@ -380,6 +380,7 @@ def simulate(
         nyb = noise_y[_row(noise_y.shape[0], b)]
         nub = noise_u[_row(noise_u.shape[0], b)]
         fb = fric[_row(fric.shape[0], b)]
+        bb = bounds[_row(bounds.shape[0], b)]
         x[:] = x0[b]
         has_friction = False
         for j in range(n_u):
@@ -547,7 +548,7 @@ def simulate(
                     bad = i
                     code = STATUS_NONFINITE
                     break
-                if abs(x[i]) > bounds[i]:
+                if abs(x[i]) > bb[i]:
                     bad = i
                     code = STATUS_BOUND
                     break
