@@ -359,34 +359,56 @@ _NAN_NOTES = {
 
 
 def measure(prepared: Prepared, runs: list[Run]) -> pd.DataFrame:
-    """Long-form metrics of every run (columns METRIC_COLUMNS)."""
-    plant = prepared.plant
-    cfg = prepared.experiment.section.metrics
+    """Long-form metrics of every run of one experiment (columns METRIC_COLUMNS)."""
+    plans = {s: model.metric_plan(cfg) for s, (model, cfg) in prepared.references.items()}
+    return measure_runs(prepared.plant, runs, [plans] * len(runs), prepared.experiment.section.metrics)
+
+
+def measure_runs(
+    plant: Plant, runs: list[Run], plans: list[dict[str, MetricPlan]], cfg: MetricsSection
+) -> pd.DataFrame:
+    """Long-form metrics of runs on plants with ``plant``'s outputs and inputs.
+
+    The metrics of runs that completed are computed together, vectorised over the runs
+    that share a reference plan (a sweep measures thousands of runs in a few calls).
+    """
+    ok = [i for i, r in enumerate(runs) if r.status == "ok"]
+    values: dict[tuple[int, str], dict[str, Any]] = {}
+    groups: dict[tuple[str, MetricPlan, int], list[int]] = {}
+    for i in ok:
+        for s in dict.fromkeys(runs[i].controller.reference_signals):
+            if s in plant.output_names:
+                groups.setdefault((s, plans[i][s], runs[i].t.size), []).append(i)
+    for (s, plan, _), members in groups.items():
+        j = plant.output_names.index(s)
+        t = runs[members[0]].t
+        y = np.stack([runs[i].x @ plant.C[j] for i in members])
+        r = np.stack([runs[i].r[:, runs[i].controller.reference_signals.index(s)] for i in members])
+        batch = _signal_metrics(t, y, r, plan, cfg)
+        for k, i in enumerate(members):
+            values[(i, s)] = {name: float(v[k]) for name, v in batch.items()}
+    by_length: dict[int, list[int]] = {}
+    for i in ok:
+        by_length.setdefault(runs[i].t.size, []).append(i)
+    for members in by_length.values():
+        t = runs[members[0]].t
+        for j, name in enumerate(plant.input_names):
+            batch = m.input_metrics(t, np.stack([runs[i].u[:, j] for i in members]))
+            for k, i in enumerate(members):
+                values[(i, name)] = {metric: float(v[k]) for metric, v in batch.items()}
     rows: list[list[Any]] = []
-    for run in runs:
+    for i, run in enumerate(runs):
         signals = [s for s in dict.fromkeys(run.controller.reference_signals) if s in plant.output_names]
         label = run.label
         if run.status != "ok":
             rows.append([label, "all", "t_fail", run.t_fail, "s", run.status, run.reason])
-            for s in signals:
-                rows.append([label, s, "settling_time", math.nan, "s", run.status, run.reason])
+            rows += [[label, s, "settling_time", math.nan, "s", run.status, run.reason] for s in signals]
             continue
-        y_all = run.x @ plant.C.T
-        for s in signals:
-            model, ref_cfg = prepared.references[s]
-            plan = model.metric_plan(ref_cfg)
-            j = plant.output_names.index(s)
-            col = run.controller.reference_signals.index(s)
-            values = _signal_metrics(run.t, y_all[:, j], run.r[:, col], plan, cfg)
+        for s in [*signals, *plant.input_names]:
             unit = plant.unit_of(s)
-            for name, value in values.items():
-                v = float(value)
+            for name, v in values[(i, s)].items():
                 note = _NAN_NOTES.get(name, "undefined") if math.isnan(v) else ""
                 rows.append([label, s, name, v, _unit(m.METRIC_UNITS.get(name, ""), unit), "ok", note])
-        for j, name in enumerate(plant.input_names):
-            unit = plant.unit_of(name)
-            for metric, value in m.input_metrics(run.t, run.u[:, j]).items():
-                rows.append([label, name, metric, float(value), _unit(m.METRIC_UNITS.get(metric, ""), unit), "ok", ""])
     return pd.DataFrame(rows, columns=METRIC_COLUMNS)
 
 
