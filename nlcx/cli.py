@@ -93,6 +93,9 @@ def run(
     from nlcx import config as cfg
     from nlcx import engine, report
 
+    if "sweep" in cfg.apply_overrides(cfg.read_config(config), overrides or []):
+        _sweep(config, overrides or [], out, "process", 2, None, False, False)
+        return
     start = time.perf_counter()
     exp = cfg.load(config, overrides or [])
     loaded = time.perf_counter()
@@ -110,6 +113,79 @@ def run(
     )
     typer.echo(_summary(result))
     typer.echo(f"wrote {out_dir}/ in {elapsed:.2f} s")
+
+
+def _sweep(
+    config: Path,
+    overrides: list[str],
+    out: Path | None,
+    executor: str,
+    jobs: int,
+    scheduler: str | None,
+    force: bool,
+    dry_run: bool,
+) -> None:
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from nlcx import sweep
+
+    if dry_run:
+        base_raw, spec, base = sweep.load(config, overrides)
+        variants, hashes = sweep.plan(base_raw, spec)
+        typer.echo(f"{base.name}: {len(variants)} variant(s) x {len(base.controllers)} controller(s)")
+        for v, h in list(zip(variants, hashes, strict=True))[:20]:
+            values = ", ".join(f"{k}={val!r}" for k, val in v.values.items())
+            typer.echo(f"  {v.index:>6}  seed {v.seed:>10}  {h}  {values}")
+        if len(variants) > 20:
+            typer.echo(f"  ... {len(variants) - 20} more")
+        return
+    columns = (
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+        TextColumn("failed {task.fields[failed]}"), TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
+    )  # fmt: skip
+    with Progress(*columns, transient=False) as bar:
+        task = bar.add_task("variants", total=None, failed=0)
+
+        def progress(done: int, total: int, failed: int) -> None:
+            bar.update(task, completed=done, total=total, failed=failed)
+
+        outcome = sweep.run(config, overrides, out, executor, jobs, scheduler, force, progress)
+    counts = outcome.index.status.value_counts().to_dict() if not outcome.index.empty else {}
+    summary = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+    typer.echo(
+        f"{len(outcome.index)} variants ({outcome.computed} computed, {outcome.skipped} already done): {summary}; "
+        f"{outcome.wall:.1f} s -> {outcome.out_dir}/"
+    )
+    if counts.get("failed"):
+        failed = outcome.index[outcome.index.status == "failed"].head(3)
+        for row in failed.itertuples():
+            typer.echo(f"  variant {row.variant} failed: {row.message}", err=True)
+        raise typer.Exit(1)
+
+
+@app.command("sweep")
+@one_line_errors
+def sweep_command(
+    config: ConfigArg,
+    overrides: OverridesArg = None,
+    out: Annotated[Path | None, typer.Option("--out", help="Run directory (default results/<name>).")] = None,
+    executor: Annotated[str, typer.Option("--executor", help="process, serial or dask.")] = "process",
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Worker processes.")] = 2,
+    scheduler: Annotated[str | None, typer.Option("--scheduler", help="Dask scheduler address.")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Recompute variants that already have results.")] = False,
+    dry_run: Annotated[bool, typer.Option("--dry-run", help="Print the expansion and stop.")] = False,
+) -> None:
+    """Run the sweep of CONFIG (its sweep: section); a rerun resumes where it stopped."""
+    if executor not in ("process", "serial", "dask"):
+        raise NlcxError(f"--executor = {executor!r}: allowed values: process, serial, dask")
+    _sweep(config, overrides or [], out, executor, jobs, scheduler, force, dry_run)
 
 
 @app.command()

@@ -361,7 +361,8 @@ _NAN_NOTES = {
 def measure(prepared: Prepared, runs: list[Run]) -> pd.DataFrame:
     """Long-form metrics of every run of one experiment (columns METRIC_COLUMNS)."""
     plans = {s: model.metric_plan(cfg) for s, (model, cfg) in prepared.references.items()}
-    return measure_runs(prepared.plant, runs, [plans] * len(runs), prepared.experiment.section.metrics)
+    table = measure_runs(prepared.plant, runs, [plans] * len(runs), prepared.experiment.section.metrics)
+    return table.drop(columns="run")
 
 
 def measure_runs(
@@ -370,7 +371,8 @@ def measure_runs(
     """Long-form metrics of runs on plants with ``plant``'s outputs and inputs.
 
     The metrics of runs that completed are computed together, vectorised over the runs
-    that share a reference plan (a sweep measures thousands of runs in a few calls).
+    that share a reference plan (a sweep measures thousands of runs in a few calls). The
+    first column, ``run``, is the position of the row's run in ``runs``.
     """
     ok = [i for i, r in enumerate(runs) if r.status == "ok"]
     values: dict[tuple[int, str], dict[str, Any]] = {}
@@ -401,15 +403,15 @@ def measure_runs(
         signals = [s for s in dict.fromkeys(run.controller.reference_signals) if s in plant.output_names]
         label = run.label
         if run.status != "ok":
-            rows.append([label, "all", "t_fail", run.t_fail, "s", run.status, run.reason])
-            rows += [[label, s, "settling_time", math.nan, "s", run.status, run.reason] for s in signals]
+            rows.append([i, label, "all", "t_fail", run.t_fail, "s", run.status, run.reason])
+            rows += [[i, label, s, "settling_time", math.nan, "s", run.status, run.reason] for s in signals]
             continue
         for s in [*signals, *plant.input_names]:
             unit = plant.unit_of(s)
             for name, v in values[(i, s)].items():
                 note = _NAN_NOTES.get(name, "undefined") if math.isnan(v) else ""
-                rows.append([label, s, name, v, _unit(m.METRIC_UNITS.get(name, ""), unit), "ok", note])
-    return pd.DataFrame(rows, columns=METRIC_COLUMNS)
+                rows.append([i, label, s, name, v, _unit(m.METRIC_UNITS.get(name, ""), unit), "ok", note])
+    return pd.DataFrame(rows, columns=["run", *METRIC_COLUMNS])
 
 
 def run_experiment(exp: Experiment) -> Result:

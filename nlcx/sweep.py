@@ -1,0 +1,429 @@
+"""Sweeps: many variants of one experiment, batched through the kernel, resumable.
+
+A ``sweep:`` section varies any dotted config key::
+
+    sweep:
+      seed: 0
+      grid: {uncertainty.friction.model: [simple, exponential]}        # cartesian product
+      zip: {plant.params.M: [0.8, 1.2], plant.params.m: [0.08, 0.12]}  # paired lists
+      random:                                                          # n seeded samples
+        n: 1000
+        params:
+          plant.params.l: {dist: uniform, relative: 0.2}               # +-20 % of the base value
+          plant.params.g: {dist: normal, mean: 9.8, std: 0.01}
+      batch_size: 64          # variants per kernel call (and per result file)
+      timeseries: false       # per-variant timeseries.csv only on request
+
+The variants are the product grid x zip x random. Each variant's ``seed`` is spawned with
+``numpy.random.SeedSequence`` from the sweep seed. Results are written per batch into
+``parts/`` as they complete; a rerun skips every variant whose config hash already has a
+complete result (``--force`` recomputes), so an interrupted sweep loses nothing finished.
+The run directory gets ``sweep.csv`` (variant, varied values, seed, config hash, status,
+wall time) and one long ``metrics.csv`` for all variants.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+import os
+import time
+from collections.abc import Callable, Iterable
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from nlcx import config as cfg
+from nlcx.errors import ConfigError, NlcxError
+from nlcx.validation import validate_model
+
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+class Distribution(BaseModel):
+    """A random parameter: uniform [low, high] or +-relative x base, normal, log-uniform, choice."""
+
+    model_config = ConfigDict(extra="forbid")
+    dist: Literal["uniform", "normal", "loguniform", "choice"]
+    low: float | None = None
+    high: float | None = None
+    #: For uniform: draw from [base (1 - relative), base (1 + relative)] around the config's value.
+    relative: float | None = Field(None, gt=0)
+    mean: float | None = None
+    std: float | None = Field(None, gt=0)
+    values: list[Any] | None = None
+
+    @model_validator(mode="after")
+    def _complete(self) -> Distribution:
+        need = {
+            "uniform": self.relative is not None or (self.low is not None and self.high is not None),
+            "loguniform": self.low is not None and self.high is not None and 0 < self.low < self.high,
+            "normal": self.mean is not None and self.std is not None,
+            "choice": bool(self.values),
+        }
+        if not need[self.dist]:
+            hints = {
+                "uniform": "low and high, or relative",
+                "loguniform": "0 < low < high",
+                "normal": "mean and std",
+                "choice": "a non-empty list of values",
+            }
+            raise ValueError(f"a {self.dist} distribution needs {hints[self.dist]}")
+        return self
+
+
+class RandomSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    n: int = Field(ge=1)
+    params: dict[str, Distribution] = Field(min_length=1)
+
+
+class SweepSection(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    seed: int = Field(0, ge=0)
+    grid: dict[str, list[Any]] = Field(default_factory=dict)
+    zip: dict[str, list[Any]] = Field(default_factory=dict)
+    random: RandomSpec | None = None
+    batch_size: int = Field(64, ge=1)
+    timeseries: bool = False
+
+    @model_validator(mode="after")
+    def _zip_lengths(self) -> SweepSection:
+        lengths = {len(v) for v in self.zip.values()}
+        if len(lengths) > 1:
+            raise ValueError(f"zip lists must have the same length, got {sorted(lengths)}")
+        for key, values in self.grid.items():
+            if not values:
+                raise ValueError(f"grid list of {key} is empty")
+        return self
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One point of a sweep: its index, the values it sets and its spawned seed."""
+
+    index: int
+    values: dict[str, Any]
+    seed: int
+
+    def overrides(self) -> list[str]:
+        return [f"{key}={json.dumps(value)}" for key, value in self.values.items()] + [f"seed={self.seed}"]
+
+
+def _lookup(raw: dict[str, Any], key: str) -> Any:
+    node: Any = raw
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise ConfigError(
+                f"sweep.random.params.{key}", None, "relative needs the key to have a value in the config"
+            )
+        node = node[part]
+    return node
+
+
+def _draw(dist: Distribution, base: Any, n: int, rng: np.random.Generator) -> list[Any]:
+    if dist.dist == "uniform":
+        if dist.relative is not None:
+            lo, hi = float(base) * (1 - dist.relative), float(base) * (1 + dist.relative)
+        else:
+            lo, hi = float(dist.low), float(dist.high)  # type: ignore[arg-type]
+        return [float(v) for v in rng.uniform(min(lo, hi), max(lo, hi), n)]
+    if dist.dist == "loguniform":
+        return [float(v) for v in np.exp(rng.uniform(math.log(dist.low), math.log(dist.high), n))]  # type: ignore[arg-type]
+    if dist.dist == "normal":
+        return [float(v) for v in rng.normal(dist.mean, dist.std, n)]
+    values = dist.values or []
+    return [values[i] for i in rng.integers(0, len(values), n)]
+
+
+def expand(spec: SweepSection, base_raw: dict[str, Any]) -> list[Variant]:
+    """The variants of ``spec``: grid x zip x random, each with a spawned seed."""
+    grid_keys = list(spec.grid)
+    grid_points = [dict(zip(grid_keys, combo, strict=True)) for combo in itertools.product(*spec.grid.values())]
+    zip_keys = list(spec.zip)
+    n_zip = len(next(iter(spec.zip.values()))) if spec.zip else 1
+    zip_points = [{k: spec.zip[k][i] for k in zip_keys} for i in range(n_zip)]
+    if spec.random is not None:
+        root = np.random.SeedSequence(spec.seed)
+        rng = np.random.default_rng(root.spawn(1)[0])
+        draws = {}
+        for key, dist in spec.random.params.items():
+            base = _lookup(base_raw, key) if dist.relative is not None else None
+            draws[key] = _draw(dist, base, spec.random.n, rng)
+        random_points = [{k: draws[k][i] for k in draws} for i in range(spec.random.n)]
+    else:
+        random_points = [{}]
+    combos = [{**g, **z, **r} for g in grid_points for z in zip_points for r in random_points]
+    children = np.random.SeedSequence(spec.seed).spawn(len(combos) + 1)[1:]
+    return [
+        Variant(index=i, values=values, seed=int(child.generate_state(1)[0]))
+        for i, (values, child) in enumerate(zip(combos, children, strict=True))
+    ]
+
+
+def config_hash(raw: dict[str, Any]) -> str:
+    """A stable hash of a resolved config (what identifies a result for resuming)."""
+    text = json.dumps(raw, sort_keys=True, default=str, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@dataclass
+class Batch:
+    """Variants simulated together in one task."""
+
+    base_raw: dict[str, Any]
+    variants: list[Variant]
+    hashes: list[str]
+    out_dir: Path
+    timeseries: bool
+
+
+@dataclass
+class BatchResult:
+    index: list[dict[str, Any]] = field(default_factory=list)
+    metrics: pd.DataFrame | None = None
+    part: str = ""
+
+
+def _set_threads() -> None:
+    for name in THREAD_VARIABLES:
+        os.environ[name] = "1"
+
+
+def run_batch(batch: Batch) -> BatchResult:
+    """Simulate a batch of variants and write its part files (the metrics, then the index)."""
+    from nlcx import engine, report
+
+    _set_threads()
+    rows: list[dict[str, Any]] = []
+    prepared_of: dict[int, Any] = {}
+    for pos, (variant, digest) in enumerate(zip(batch.variants, batch.hashes, strict=True)):
+        start = time.perf_counter()
+        row: dict[str, Any] = {"variant": variant.index, "seed": variant.seed, "config_hash": digest}
+        row.update({f"value:{k}": v for k, v in variant.values.items()})
+        try:
+            exp = cfg.build(cfg.interpolate(cfg.apply_overrides(batch.base_raw, variant.overrides())))
+            prepared_of[pos] = engine.prepare(exp)
+            row.update(status="ok", message="")
+        except Exception as exc:  # a bad variant is recorded; the others go on
+            row.update(status="failed", message=str(exc).splitlines()[0])
+        row["wall_s"] = time.perf_counter() - start
+        rows.append(row)
+    # variants on the same time grid go through the kernel together
+    grids: dict[tuple[Any, ...], list[int]] = {}
+    for pos, prepared in prepared_of.items():
+        sim = prepared.experiment.section.simulation
+        grids.setdefault((sim.dt, prepared.grid.n_steps, sim.integrator), []).append(pos)
+    frames = []
+    for (_, _, integrator), members in grids.items():
+        start = time.perf_counter()
+        items, owner = [], []
+        for pos in members:
+            new = engine.items_of(prepared_of[pos])
+            items += new
+            owner += [pos] * len(new)
+        runs = engine.simulate_items(items, prepared_of[members[0]].grid, integrator)
+        plants: dict[tuple[Any, ...], list[int]] = {}
+        for k, pos in enumerate(owner):
+            plant = prepared_of[pos].plant
+            plants.setdefault((plant.name, tuple(plant.output_names), tuple(plant.input_names)), []).append(k)
+        for ks in plants.values():
+            first = prepared_of[owner[ks[0]]]
+            plans = [
+                {s: model.metric_plan(c) for s, (model, c) in prepared_of[owner[k]].references.items()} for k in ks
+            ]
+            table = engine.measure_runs(first.plant, [runs[k] for k in ks], plans, first.experiment.section.metrics)
+            table.insert(0, "variant", [batch.variants[owner[ks[r]]].index for r in table["run"]])
+            frames.append(table.drop(columns="run"))
+        share = (time.perf_counter() - start) / len(members)
+        for k, pos in enumerate(owner):
+            row = rows[pos]
+            if runs[k].status != "ok" and row["status"] == "ok":
+                row.update(status="unstable", message=f"{runs[k].label}: {runs[k].reason}")
+        for pos in members:
+            rows[pos]["wall_s"] += share
+            if batch.timeseries:
+                mine = [runs[k] for k, o in enumerate(owner) if o == pos]
+                result = engine.Result(prepared_of[pos], mine, pd.DataFrame())
+                name = f"variant_{batch.variants[pos].index:06d}.csv"
+                report.write_csv(batch.out_dir / "timeseries" / name, report.timeseries_frame(result))
+    columns = ["variant", *engine.METRIC_COLUMNS]
+    metrics = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=columns)
+    digest = hashlib.sha256("".join(batch.hashes).encode()).hexdigest()[:10]
+    part = f"{batch.variants[0].index:06d}-{digest}"
+    report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", metrics)
+    report.write_csv(batch.out_dir / "parts" / f"{part}.index.csv", pd.DataFrame(rows))  # last: marks it complete
+    return BatchResult(index=rows, metrics=metrics, part=part)
+
+
+def load(path: str | Path, overrides: list[str] | None = None) -> tuple[dict[str, Any], SweepSection, Any]:
+    """(base raw config without ``sweep``, the sweep spec, the validated base experiment)."""
+    raw = cfg.apply_overrides(cfg.read_config(path), overrides or [])
+    sweep_raw = raw.pop("sweep", None)
+    if sweep_raw is None:
+        raise ConfigError("sweep", None, "this config has no sweep section (use `nlcx run` for a single experiment)")
+    spec = validate_model(SweepSection, sweep_raw, "sweep")
+    base = cfg.build(cfg.interpolate(raw))
+    return raw, spec, base
+
+
+def plan(base_raw: dict[str, Any], spec: SweepSection) -> tuple[list[Variant], list[str]]:
+    """The variants and the hash of each one's resolved config."""
+    variants = expand(spec, cfg.interpolate(base_raw))
+    hashes = [config_hash(cfg.interpolate(cfg.apply_overrides(base_raw, v.overrides()))) for v in variants]
+    return variants, hashes
+
+
+def completed(out_dir: Path) -> dict[str, tuple[str, pd.DataFrame]]:
+    """config hash -> (part name, index row) of every variant with a complete result."""
+    done: dict[str, tuple[str, pd.DataFrame]] = {}
+    for path in sorted((out_dir / "parts").glob("*.index.csv")):
+        part = path.name.removesuffix(".index.csv")
+        index = pd.read_csv(path)
+        for _, row in index.iterrows():
+            if row["status"] in ("ok", "unstable"):
+                done[str(row["config_hash"])] = (part, row)
+    return done
+
+
+def make_executor(kind: str, jobs: int, scheduler: str | None) -> tuple[Executor | None, Callable[[], None]]:
+    """(executor, close) for "serial", "process" or "dask"."""
+    for name in THREAD_VARIABLES:  # one BLAS/OpenMP thread per worker
+        os.environ.setdefault(name, "1")
+    if kind == "serial":
+        return None, lambda: None
+    if kind == "process":
+        pool = ProcessPoolExecutor(max_workers=jobs, initializer=_set_threads)
+        return pool, lambda: pool.shutdown(wait=True, cancel_futures=True)
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise NlcxError("--executor dask needs the optional extra: pip install 'nlcx[dask]'") from None
+    if scheduler:
+        client = Client(scheduler)
+        return client.get_executor(), client.close
+    cluster = LocalCluster(
+        n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+    )
+    client = Client(cluster)
+
+    def close() -> None:
+        client.close()
+        cluster.close()
+
+    return client.get_executor(), close
+
+
+@dataclass
+class SweepOutcome:
+    out_dir: Path
+    index: pd.DataFrame
+    computed: int
+    skipped: int
+    wall: float
+
+
+def run(
+    path: str | Path,
+    overrides: list[str] | None = None,
+    out_dir: Path | None = None,
+    executor: str = "process",
+    jobs: int = 2,
+    scheduler: str | None = None,
+    force: bool = False,
+    progress: Callable[[int, int, int], None] | None = None,
+) -> SweepOutcome:
+    """Run (or resume) a sweep; write sweep.csv, metrics.csv, config.yaml and manifest.json."""
+    from nlcx import report
+
+    start = time.perf_counter()
+    base_raw, spec, base = load(path, overrides)
+    out_dir = Path(out_dir or base.section.outputs.dir or Path("results") / base.name)
+    variants, hashes = plan(base_raw, spec)
+    if force and (out_dir / "parts").exists():
+        for part in (out_dir / "parts").iterdir():
+            part.unlink()
+    done = completed(out_dir)
+    todo = [i for i, h in enumerate(hashes) if h not in done]
+    batches = [
+        Batch(base_raw, [variants[i] for i in todo[k : k + spec.batch_size]],
+              [hashes[i] for i in todo[k : k + spec.batch_size]], out_dir, spec.timeseries)
+        for k in range(0, len(todo), spec.batch_size)
+    ]  # fmt: skip
+    finished, failures = len(variants) - len(todo), 0
+    if progress is not None:
+        progress(finished, len(variants), failures)
+    pool, close = make_executor(executor, jobs, scheduler) if batches else (None, lambda: None)
+    try:
+        results: Iterable[BatchResult]
+        if pool is None:
+            results = (run_batch(b) for b in batches)
+        else:
+            futures: list[Future[BatchResult]] = [pool.submit(run_batch, b) for b in batches]
+            results = (f.result() for f in as_completed(futures))
+        for result in results:
+            finished += len(result.index)
+            failures += sum(r["status"] == "failed" for r in result.index)
+            if progress is not None:
+                progress(finished, len(variants), failures)
+    finally:
+        close()
+    index = assemble(out_dir, variants, hashes, base_raw, spec)
+    wall = time.perf_counter() - start
+    info = {
+        "name": base.name,
+        "variants": len(variants),
+        "computed": len(todo),
+        "skipped": len(variants) - len(todo),
+        "status": index.status.value_counts().to_dict(),
+        "seed": spec.seed,
+        "executor": executor,
+        "jobs": jobs,
+        "wall_s": round(wall, 3),
+        "versions": report.package_versions(),
+        "git": report.git_state(),
+    }
+    report.write_text(out_dir / "manifest.json", json.dumps(info, indent=2, default=str) + "\n")
+    return SweepOutcome(out_dir, index, len(todo), len(variants) - len(todo), wall)
+
+
+def assemble(
+    out_dir: Path, variants: list[Variant], hashes: list[str], base_raw: dict[str, Any], spec: SweepSection
+) -> pd.DataFrame:
+    """sweep.csv and metrics.csv from the part files, in variant order (deterministic)."""
+    import yaml
+
+    from nlcx import report
+
+    want = {h: v.index for v, h in zip(variants, hashes, strict=True)}
+    index_rows, metric_frames = {}, []
+    for path in sorted((out_dir / "parts").glob("*.index.csv")):
+        part = path.name.removesuffix(".index.csv")
+        index = pd.read_csv(path, dtype={"config_hash": str})
+        metrics = pd.read_csv(out_dir / "parts" / f"{part}.metrics.csv", keep_default_na=False, na_values=[""])
+        for _, row in index.iterrows():
+            h = str(row["config_hash"])
+            if h in want and (h not in index_rows or index_rows[h]["status"] == "failed"):
+                index_rows[h] = row.to_dict() | {"variant": want[h]}
+                rows = metrics[metrics.variant == row["variant"]].copy()
+                rows["variant"] = want[h]
+                metric_frames.append(rows)
+    index = pd.DataFrame(sorted(index_rows.values(), key=lambda r: r["variant"]))
+    keep = set(index.variant)
+    metrics = pd.concat(metric_frames, ignore_index=True) if metric_frames else pd.DataFrame()
+    if not metrics.empty:
+        metrics = metrics[metrics.variant.isin(keep)]
+        metrics = metrics.drop_duplicates(subset=["variant", "controller", "signal", "metric"], keep="last")
+        metrics = metrics.sort_values("variant", kind="stable").reset_index(drop=True)
+    report.write_csv(out_dir / "sweep.csv", index)
+    report.write_csv(out_dir / "metrics.csv", metrics)
+    resolved = {**cfg.interpolate(base_raw), "sweep": spec.model_dump()}
+    report.write_text(out_dir / "config.yaml", yaml.safe_dump(resolved, sort_keys=False, allow_unicode=True))
+    return index
