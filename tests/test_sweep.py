@@ -1,0 +1,159 @@
+"""Sweeps: expansion, seeds, executors, batch = single, resume, failures."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from nlcx import config, engine, sweep
+from nlcx.cli import app
+
+ROOT = Path(__file__).resolve().parent.parent
+runner = CliRunner()
+
+
+def write_sweep(tmp_path: Path, sweep_section: dict, t_end: float = 3.0, name: str = "sw") -> Path:
+    raw = yaml.safe_load((ROOT / "configs" / "x_error_ags.yaml").read_text())
+    raw.update(name=name, outputs={"figure": False, "timeseries": False}, sweep=sweep_section)
+    raw["simulation"]["t_end"] = t_end
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+SPEC = {
+    "seed": 7,
+    "grid": {"controllers.proposed.loops.theta.schedule.error": ["abs", "signed"]},
+    "zip": {"plant.params.m": [0.09, 0.11], "plant.params.g": [9.79, 9.81]},
+    "random": {
+        "n": 3,
+        "params": {
+            "plant.params.M": {"dist": "uniform", "relative": 0.2},
+            "plant.params.l": {"dist": "normal", "mean": 0.3, "std": 0.01},
+        },
+    },
+    "batch_size": 5,
+}
+
+
+def test_expansion_grid_zip_random_and_seeds(tmp_path: Path) -> None:
+    base_raw, spec, _ = sweep.load(write_sweep(tmp_path, SPEC))
+    variants, hashes = sweep.plan(base_raw, spec)
+    assert len(variants) == 2 * 2 * 3
+    assert len(set(hashes)) == len(variants) and len({v.seed for v in variants}) == len(variants)
+    m_values = [v.values["plant.params.M"] for v in variants]
+    assert all(0.8 <= value <= 1.2 for value in m_values)
+    assert [v.values["plant.params.m"] for v in variants[:6]] == [0.09] * 3 + [0.11] * 3
+    again, _ = sweep.plan(base_raw, spec)
+    assert [v.values for v in again] == [v.values for v in variants] and [v.seed for v in again] == [
+        v.seed for v in variants
+    ]
+    seeds = np.random.SeedSequence(7).spawn(len(variants) + 1)[1:]
+    assert [v.seed for v in variants] == [int(s.generate_state(1)[0]) for s in seeds]
+
+
+def test_serial_pool_and_dask_give_identical_metrics(tmp_path: Path) -> None:
+    path = write_sweep(tmp_path, SPEC)
+    outputs = []
+    for executor in ("serial", "process", "dask"):
+        out = tmp_path / executor
+        result = runner.invoke(app, ["sweep", str(path), "--executor", executor, "--jobs", "2", "--out", str(out)])
+        assert result.exit_code == 0, result.output
+        outputs.append(((out / "metrics.csv").read_bytes(), (out / "sweep.csv").read_text()))
+    assert outputs[0][0] == outputs[1][0] == outputs[2][0]
+    index = pd.read_csv(tmp_path / "serial" / "sweep.csv")
+    assert list(index.variant) == list(range(12)) and set(index.status) <= {"ok", "unstable"}
+    assert {"value:plant.params.M", "seed", "config_hash", "wall_s"} <= set(index.columns)
+
+
+def test_batch_equals_single_runs_bit_for_bit(tmp_path: Path) -> None:
+    """Trajectories of variants simulated in one kernel call equal each variant run alone."""
+    path = write_sweep(tmp_path, SPEC)
+    base_raw, spec, _ = sweep.load(path)
+    variants, hashes = sweep.plan(base_raw, spec)
+    prepared = [
+        engine.prepare(config.build(config.interpolate(config.apply_overrides(base_raw, v.overrides()))))
+        for v in variants
+    ]
+    items = [item for p in prepared for item in engine.items_of(p)]
+    batched = engine.simulate_items(items, prepared[0].grid, "rk4")
+    assert len(batched) == 2 * len(variants)
+    for k, p in enumerate(prepared):
+        alone = engine.simulate_runs(p)
+        for j, run in enumerate(alone):
+            other = batched[2 * k + j]
+            assert np.array_equal(run.x, other.x) and np.array_equal(run.u, other.u) and run.status == other.status
+    # and the metrics a sweep batch computes (vectorised over variants) equal single runs'
+    result = sweep.run_batch(sweep.Batch(base_raw, variants, hashes, tmp_path / "b", False))
+    for k in (0, 7, 11):
+        single = engine.measure(prepared[k], engine.simulate_runs(prepared[k]))
+        mine = result.metrics[result.metrics.variant == k].drop(columns="variant").reset_index(drop=True)
+        assert list(mine.metric) == list(single.metric)
+        assert np.array_equal(mine.value.to_numpy(), single.value.to_numpy(), equal_nan=True)
+
+
+def test_failed_variant_is_recorded_the_rest_go_on(tmp_path: Path) -> None:
+    path = write_sweep(tmp_path, {"grid": {"plant.params.M": [1.0, -1.0, 1.1]}})
+    out = tmp_path / "fail"
+    result = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)])
+    assert result.exit_code == 1
+    index = pd.read_csv(out / "sweep.csv")
+    assert list(index.status) == ["ok", "failed", "ok"]
+    assert "plant.params.M" in index.message[1] and "greater than 0" in index.message[1]
+    assert "variant 1 failed" in result.output
+
+
+def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) -> None:
+    spec = {"random": {"n": 24, "params": {"plant.params.M": {"dist": "uniform", "relative": 0.2}}}, "batch_size": 2}
+    path = write_sweep(tmp_path, spec, t_end=8.0)
+    out = tmp_path / "resumed"
+    cmd = [sys.executable, "-m", "nlcx.cli", "sweep", str(path), "--executor", "serial", "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.time() + 60
+    while time.time() < deadline and len(list((out / "parts").glob("*.index.csv"))) < 2:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    parts = len(list((out / "parts").glob("*.index.csv")))
+    assert 2 <= parts < 12, "the sweep must have been killed mid-way"
+    result = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert f"({24 - 2 * parts} computed, {2 * parts} already done)" in result.output
+    again = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)])
+    assert "(0 computed, 24 already done)" in again.output
+    clean = tmp_path / "clean"
+    assert runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(clean)]).exit_code == 0
+    assert (clean / "metrics.csv").read_bytes() == (out / "metrics.csv").read_bytes()
+    forced = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out), "--force"])
+    assert "(24 computed, 0 already done)" in forced.output
+
+
+def test_dry_run_and_bad_sweep_specs(tmp_path: Path) -> None:
+    path = write_sweep(tmp_path, SPEC)
+    result = runner.invoke(app, ["sweep", str(path), "--dry-run"])
+    assert result.exit_code == 0 and "12 variant(s) x 2 controller(s)" in result.output
+    bad = write_sweep(tmp_path, {"zip": {"plant.params.M": [1, 2], "plant.params.m": [0.1]}}, name="bad")
+    result = runner.invoke(app, ["sweep", str(bad), "--dry-run"])
+    assert result.exit_code == 2 and "zip lists must have the same length" in result.stderr
+    bad = write_sweep(tmp_path, {"random": {"n": 2, "params": {"plant.params.M": {"dist": "normal"}}}}, name="bad2")
+    result = runner.invoke(app, ["sweep", str(bad), "--dry-run"])
+    assert result.exit_code == 2 and "sweep.random.params.plant.params.M" in result.stderr
+
+
+@pytest.mark.parametrize("timeseries", [False, True])
+def test_timeseries_only_on_request(tmp_path: Path, timeseries: bool) -> None:
+    path = write_sweep(tmp_path, {"grid": {"plant.params.M": [1.0, 1.1]}, "timeseries": timeseries})
+    out = tmp_path / "ts"
+    assert runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)]).exit_code == 0
+    files = sorted(p.name for p in (out / "timeseries").glob("*.csv")) if (out / "timeseries").exists() else []
+    assert files == (["variant_000000.csv", "variant_000001.csv"] if timeseries else [])
