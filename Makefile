@@ -6,7 +6,10 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.nlcx-installed
 JOBS ?= 2
 
-.PHONY: install run test lint reproduce reproduce-pendulums reproduce-cstr calibrate configs errata clean
+BASELINE_TABLES := table-2.3,table-2.5,table-3.2,table-3.7,table-4.2,table-4.4,table-5.1,table-5.8
+
+.PHONY: install run test lint reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata \
+	baseline baseline-diff sweep-demo bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -40,6 +43,28 @@ reproduce-cstr: install
 ## reproduce: every figure and table of chapters 2-5 and all claims
 reproduce: install
 	$(BIN)/nlcx reproduce --jobs $(JOBS)
+
+## tables / figures: every thesis table / figure (both come from one reproduce run)
+tables figures: reproduce
+
+## baseline: deliberately refresh the committed baseline tables (results/baseline/) after a reviewed change
+baseline: install
+	$(BIN)/nlcx reproduce --only $(BASELINE_TABLES) --jobs $(JOBS) --out results/ci
+	rm -rf results/baseline/tables && mkdir -p results/baseline && cp -r results/ci/tables results/baseline/
+
+## baseline-diff: regenerate the baseline subset and diff it against results/baseline/ (also a test)
+baseline-diff: install
+	$(BIN)/nlcx reproduce --only $(BASELINE_TABLES) --jobs $(JOBS) --out results/ci
+	$(BIN)/nlcx diff results/baseline/tables results/ci/tables
+
+## sweep-demo: the robustness sweep of configs/sweeps/ and its plot
+sweep-demo: install
+	$(BIN)/nlcx sweep configs/sweeps/robustness.yaml --jobs $(JOBS)
+	$(BIN)/python scripts/plot_sweep.py results/robustness
+
+## bench: the speed benchmarks (writes benchmarks/latest.txt)
+bench: install
+	$(BIN)/python benchmarks/run.py | tee benchmarks/latest.txt
 
 ## calibrate: refit the unprinted conventional gains (writes configs/thesis/gains/conventional.yaml)
 calibrate: install

@@ -39,6 +39,8 @@ def one_line_errors(func: F) -> F:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return func(*args, **kwargs)
+        except (typer.Exit, typer.Abort):
+            raise
         except NlcxError as exc:
             typer.echo(str(exc), err=True)
             raise typer.Exit(2) from None
@@ -266,6 +268,30 @@ def calibrate(
     if write:
         typer.echo(f"wrote {write_back(spec, outcome)}")
     typer.echo(f"loss {outcome['result'].f:.5g}; results in {out_dir}/")
+
+
+@app.command()
+@one_line_errors
+def diff(
+    base: Annotated[Path, typer.Argument(help="Baseline directory (or CSV file).", show_default=False)],
+    new: Annotated[Path, typer.Argument(help="Directory (or CSV file) to check.", show_default=False)],
+    rtol: Annotated[
+        list[str] | None, typer.Option("--rtol", help="Relative tolerance: VALUE (default) or METRIC=VALUE.")
+    ] = None,
+    atol: Annotated[
+        list[str] | None, typer.Option("--atol", help="Absolute tolerance: VALUE (default) or METRIC=VALUE.")
+    ] = None,
+) -> None:
+    """Compare metric CSVs of NEW against BASE; exit 1 and list the drift if any cell moved."""
+    from nlcx.diff import diff_dirs, parse_tolerances, render
+
+    tol = parse_tolerances(rtol or [], atol or [])
+    drifts, n_files = diff_dirs(base, new, tol)
+    if drifts:
+        typer.echo(render(drifts))
+        typer.echo(f"drift: {len(drifts)} cell(s) in {len({d.file for d in drifts})} of {n_files} file(s)")
+        raise typer.Exit(1)
+    typer.echo(f"no drift: {n_files} file(s) within rtol {tol.rtol} atol {tol.atol}")
 
 
 @app.command("list")
