@@ -83,8 +83,11 @@ class OutputsSection(Section):
     dir: str | None = None
     #: Write timeseries.csv (every sample of every controller).
     timeseries: bool = True
-    #: Write the thesis-style figure (figure.png) and the gains/inputs figure (gains.png).
+    #: Write the thesis-style figure (figure.png).
     figure: bool = True
+    #: Also write gains.png: every input and every logged gain against time (one panel each;
+    #: off by default because it costs about a second per twenty panels).
+    gains_figure: bool = False
     #: Add an axes per plant input to figure.png (below the outputs).
     figure_inputs: bool = False
     #: Metrics quoted in figure.png's legend, e.g. [ise, control_effort].

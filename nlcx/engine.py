@@ -7,6 +7,8 @@ through one batched call) and measures the results (:mod:`nlcx.metrics`).
 
 from __future__ import annotations
 
+import functools
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -51,8 +53,9 @@ class TimeGrid:
         return self.t.size - 1
 
 
+@functools.lru_cache(maxsize=32)
 def time_grid(t_end: float, dt: float, integrator: str) -> TimeGrid:
-    """The grid of ``t_end / dt`` steps; t_end must be a whole number of steps."""
+    """The grid of ``t_end / dt`` steps; t_end must be a whole number of steps (cached: read-only)."""
     n_steps = round(t_end / dt)
     if n_steps < 1 or abs(n_steps * dt - t_end) > 1e-9 * max(1.0, t_end):
         raise ConfigError(
@@ -167,14 +170,33 @@ def prepare(exp: Experiment) -> Prepared:
 def reference_array(
     prepared: Prepared, signals: tuple[str, ...], offsets: tuple[float, ...] | None = None
 ) -> np.ndarray:
-    """r_k for the given channels, shape (K+1, n_r); channel i is read at t + offsets[i]."""
-    t = prepared.grid.t
+    """r_k for the given channels, shape (K+1, n_r); channel i is read at t + offsets[i].
+
+    Cached on the reference configuration and the grid, so the variants of a sweep that share
+    their references share one (read-only) array, which the kernel then broadcasts.
+    """
     offsets = offsets or (0.0,) * len(signals)
-    cols = [
-        prepared.references[s][0].values(prepared.references[s][1], t + off)
+    grid = prepared.grid
+    specs = tuple(
+        (s, off, json.dumps(prepared.references[s][1].model_dump(), sort_keys=True))
         for s, off in zip(signals, offsets, strict=True)
-    ]
-    return np.ascontiguousarray(np.stack(cols, axis=-1) if cols else np.zeros((t.size, 0)))
+    )
+    key = (specs, grid.dt, grid.n_steps)
+    cached = _REFERENCE_CACHE.get(key)
+    if cached is None:
+        t = grid.t
+        cols = [
+            prepared.references[s][0].values(prepared.references[s][1], t + off)
+            for s, off in zip(signals, offsets, strict=True)
+        ]
+        cached = np.ascontiguousarray(np.stack(cols, axis=-1) if cols else np.zeros((t.size, 0)))
+        if len(_REFERENCE_CACHE) > 64:
+            _REFERENCE_CACHE.clear()
+        _REFERENCE_CACHE[key] = cached
+    return cached
+
+
+_REFERENCE_CACHE: dict[tuple[Any, ...], np.ndarray] = {}
 
 
 def _pad_rows(rows: list[np.ndarray]) -> np.ndarray:
@@ -257,10 +279,11 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str) -> list[R
         n, n_u, n_y = len(plant.states), len(plant.inputs), len(plant.outputs)
         n_b = len(group)
         plants = [g.plant for g in group]
-        X = np.full((n_b, n_k, n), np.nan)
-        U = np.full((n_b, n_k, n_u), np.nan)
-        LOG = np.full((n_b, n_k, len(group[0].controller.log_names)), np.nan)
-        FRIC = np.full((n_b, n_k, n_u), np.nan)
+        # the kernel writes every sample up to where a run stops; the rest is never read
+        X = np.empty((n_b, n_k, n))
+        U = np.empty((n_b, n_k, n_u))
+        LOG = np.empty((n_b, n_k, len(group[0].controller.log_names)))
+        FRIC = np.empty((n_b, n_k, n_u))
         status = np.zeros(n_b, dtype=np.int64)
         n_valid = np.zeros(n_b, dtype=np.int64)
         fail_index = np.zeros(n_b, dtype=np.int64)

@@ -25,7 +25,9 @@ PENDULUM_COLUMNS = ["t", "controller", "x", "x_dot", "theta", "theta_dot", "F_x"
 @pytest.mark.parametrize("name", ["x_time_ags", "x_error_ags"])
 def test_run_writes_the_run_directory(name: str, tmp_path: Path) -> None:
     out = tmp_path / name
-    result = runner.invoke(app, ["run", str(ROOT / "configs" / f"{name}.yaml"), "--out", str(out)])
+    result = runner.invoke(
+        app, ["run", str(ROOT / "configs" / f"{name}.yaml"), "outputs.gains_figure=true", "--out", str(out)]
+    )
     assert result.exit_code == 0, result.output
     assert {p.name for p in out.iterdir()} == {
         "config.yaml",

@@ -24,10 +24,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from matplotlib.figure import Figure
 
+from nlcx.report import new_figure
 from nlcx.thesis import catalog
 from nlcx.thesis.catalog import FigureSpec
 
@@ -524,9 +525,9 @@ def evaluate(root: Path, records: dict[Path, Any], chapters: set[int]) -> pd.Dat
     return pd.DataFrame(rows)
 
 
-def lyapunov_figure(spec: FigureSpec, records: list[Any]) -> plt.Figure:
+def lyapunov_figure(spec: FigureSpec, records: list[Any]) -> Figure:
     """V̇ from the stored trajectory beside sum F v, for time-AGS (a) and error-AGS (b)."""
-    fig, axes = plt.subplots(len(records), 1, figsize=(7.5, 2.9 * len(records)), squeeze=False)
+    fig, axes = new_figure(len(records), 1, (7.5, 2.9 * len(records)))
     for k, (ax, rec, name) in enumerate(zip(axes[:, 0], records, ("Time", "Error"), strict=False)):
         for label, color in (("proposed", "C3"), ("conventional", "C0")):
             if label not in rec.lyapunov:

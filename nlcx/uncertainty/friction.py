@@ -30,7 +30,8 @@ VERTICAL_INPUT = "F_z"
 
 class FrictionConfig(UncertaintyConfig):
     kind: Literal["friction"] = "friction"
-    model: Literal["simple", "exponential"] = "simple"
+    #: "none" switches friction off (handy as a sweep value).
+    model: Literal["none", "simple", "exponential"] = "simple"
     #: Static (breakaway) friction coefficient.
     mu_s: float = Field(0.2, ge=0)
     #: Coulomb (sliding) friction coefficient.
@@ -77,6 +78,8 @@ class Friction(UncertaintyModel):
             f_n = plant.weight
         else:
             f_n = float(cfg.normal_force)
+        if cfg.model == "none":
+            return
         table = np.zeros((len(plant.inputs), FRICTION_FIELDS))
         model = FRICTION_SIMPLE if cfg.model == "simple" else FRICTION_EXPONENTIAL
         for i, name in enumerate(axes):
