@@ -61,6 +61,10 @@ def write_csv(path: Path, frame: pd.DataFrame) -> None:
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
+    frame = frame.copy()
+    for col in frame.columns:  # a column of mixed values (e.g. tuning.csv's) is written as text
+        if frame[col].dtype == object and len({type(v) for v in frame[col] if v is not None}) > 1:
+            frame[col] = [v if isinstance(v, str) else repr(v) for v in frame[col]]
     table = pa.Table.from_pandas(frame, preserve_index=False)
     options = pacsv.WriteOptions(quoting_style="needed")
     atomic_write(path, lambda tmp: pacsv.write_csv(table, str(tmp), options))

@@ -1,0 +1,258 @@
+"""nlcx speed benchmarks (issue targets a-d). Run from the repository root:
+
+    python benchmarks/run.py | tee benchmarks/latest.txt      (or: make bench)
+
+(a) configs/xyz_error_ags.yaml: simulation of both controllers after warm-up (target <= 0.2 s)
+    and `nlcx run` end to end with a warm numba cache (target <= 3 s); cold compile reported
+    separately (an empty NUMBA_CACHE_DIR).
+(b) a 10 000-variant x-pendulum sweep (error-AGS PID, M, m, l within +-20 %, 20 s at 1 ms) with
+    --jobs 2 (target <= 30 s wall, <= 2 GB peak memory of the whole process tree).
+(c) `nlcx reproduce` of every thesis figure and table, calibration excluded (target <= 120 s).
+(d) the experiment of (a), proposed controller, through python-control's input_output_response
+    and scipy's solve_ivp (RK45, the PID integrators in the ODE), with the speed ratios and the
+    agreement of the trajectories.
+Machines are noisy: each timing is the best of a few repeats, and ratios come from one run.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+NLCX = [sys.executable, "-m", "nlcx.cli"]
+
+
+def best(fn, repeats: int = 3) -> float:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def tree_rss_kb(pid: int) -> int:
+    """Resident memory of a process and all its descendants (Linux /proc)."""
+    total, stack = 0, [pid]
+    while stack:
+        p = stack.pop()
+        try:
+            with open(f"/proc/{p}/status") as fh:
+                total += next((int(line.split()[1]) for line in fh if line.startswith("VmRSS:")), 0)
+            for task in os.listdir(f"/proc/{p}/task"):
+                with open(f"/proc/{p}/task/{task}/children") as fh:
+                    stack += [int(c) for c in fh.read().split()]
+        except (FileNotFoundError, ProcessLookupError, StopIteration):
+            continue
+    return total
+
+
+def run_measured(cmd: list[str], cwd: Path, env: dict[str, str] | None = None) -> tuple[float, int, str]:
+    """(wall s, peak tree RSS kB, stdout) of a command, sampling memory every 50 ms."""
+    start = time.perf_counter()
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    peak = [0]
+
+    def sample() -> None:
+        while proc.poll() is None:
+            peak[0] = max(peak[0], tree_rss_kb(proc.pid))
+            time.sleep(0.05)
+
+    watcher = threading.Thread(target=sample, daemon=True)
+    watcher.start()
+    out, _ = proc.communicate()
+    watcher.join()
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{out}")
+    return time.perf_counter() - start, peak[0], out
+
+
+def bench_a() -> dict[str, float]:
+    from nlcx import config, engine
+
+    start = time.perf_counter()
+    exp = config.load(ROOT / "configs" / "xyz_error_ags.yaml")
+    prepared = engine.prepare(exp)
+    engine.simulate_runs(prepared)
+    warmup = time.perf_counter() - start
+    sim = best(lambda: engine.simulate_runs(prepared), 5)
+    out = Path(tempfile.mkdtemp())
+    cmd = [*NLCX, "run", "configs/xyz_error_ags.yaml", "--out", str(out / "a"), "-q"]
+    subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True)
+    end_to_end = best(lambda: subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True), 3)
+    cold_env = {**os.environ, "NUMBA_CACHE_DIR": tempfile.mkdtemp()}
+    cold = run_measured(cmd, ROOT, cold_env)[0]
+    return {"simulate_s": sim, "warmup_in_process_s": warmup, "end_to_end_s": end_to_end, "cold_compile_run_s": cold}
+
+
+def bench_b(n: int = 10_000) -> dict[str, float]:
+    raw = yaml.safe_load((ROOT / "configs" / "x_error_ags.yaml").read_text())
+    del raw["controllers"]["conventional"]
+    raw.update(name="bench_sweep", outputs={"figure": False, "timeseries": False, "gains_figure": False})
+    raw["sweep"] = {
+        "seed": 1,
+        "random": {
+            "n": n,
+            "params": {
+                k: {"dist": "uniform", "relative": 0.2} for k in ("plant.params.M", "plant.params.m", "plant.params.l")
+            },
+        },
+        "batch_size": 100,
+    }
+    work = Path(tempfile.mkdtemp())
+    path = work / "sweep.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    cmd = [*NLCX, "sweep", str(path), "--jobs", "2", "--out", str(work / "out")]
+    wall, peak_kb, out = run_measured(cmd, ROOT)
+    summary = out.strip().splitlines()[-1]
+    return {"variants": n, "wall_s": wall, "peak_memory_mb": peak_kb / 1024, "summary": summary}
+
+
+def bench_c() -> dict[str, float]:
+    out = Path(tempfile.mkdtemp()) / "thesis"
+    wall, peak_kb, text = run_measured([*NLCX, "reproduce", "--jobs", "2", "--out", str(out)], ROOT)
+    return {"wall_s": wall, "peak_memory_mb": peak_kb / 1024, "summary": " | ".join(text.strip().splitlines()[-3:])}
+
+
+def bench_d() -> dict[str, float]:
+    """The proposed (error-AGS) controller of configs/xyz_error_ags.yaml three ways."""
+    import control as ct
+    from scipy.integrate import solve_ivp
+
+    from nlcx import config, engine
+    from nlcx.controllers.schedules import error_ags_gains
+
+    exp = config.load(ROOT / "configs" / "xyz_error_ags.yaml")
+    prepared = engine.prepare(exp)
+    plant = prepared.plant
+    proposed = next(c for c in prepared.controllers if c.label == "proposed")
+    prepared.controllers = [proposed]
+    engine.simulate_runs(prepared)
+    ours_s = best(lambda: engine.simulate_runs(prepared), 5)
+    (ours,) = engine.simulate_runs(prepared)
+
+    # the same closed loop as a continuous ODE: plant states + one integrator per loop
+    loops = exp.controllers[1].config.loops
+    names = plant.state_names
+    order = list(loops)
+    info = []
+    for key in order:
+        loop = loops[key]
+        signal = loop.signal or key
+        sched = loop.schedule
+        sp = np.array([
+            sched["kp"]["min"], sched["kp"]["max"], sched["ki"]["min"], sched["ki"]["max"],
+            sched["kd"]["min"], sched["kd"]["max"], sched["rate"]["kp"], sched["rate"]["ki"], sched["rate"]["kd"],
+            1.0 if sched["error"] == "abs" else 0.0,
+        ])  # fmt: skip
+        info.append(
+            (
+                names.index(signal),
+                names.index(f"{signal}_dot"),
+                plant.input_names.index(plant.loop_inputs[signal]),
+                loop.sign,
+                sp,
+                prepared.references[signal][1],
+            )
+        )
+    bias = proposed.cp[2 : 2 + len(plant.inputs)]
+    n = len(names)
+    g = np.zeros(3)
+
+    def field(t: float, z: np.ndarray) -> np.ndarray:
+        x = np.ascontiguousarray(z[:n])
+        u = bias.copy()
+        dz = np.zeros_like(z)
+        for k, (pi, vi, ui, sign, sp, ref) in enumerate(info):
+            if ref.kind == "step":
+                r = ref.final if t >= ref.time else ref.initial
+            else:
+                r = ref.value
+            e = r - x[pi]
+            edot = -x[vi]
+            error_ags_gains(t, e, edot, sp, g)
+            u[ui] += sign * (g[0] * e + g[1] * z[n + k] + g[2] * edot)
+            dz[n + k] = e
+        dx = np.zeros(n)
+        plant.rhs(t, x, u, plant.p, dx)
+        dz[:n] = dx
+        return dz
+
+    z0 = np.concatenate([plant.x0, np.zeros(len(info))])
+    t_eval = ours.t
+    sol_box: list = []
+    scipy_s = best(
+        lambda: sol_box.append(solve_ivp(field, (0, t_eval[-1]), z0, t_eval=t_eval, rtol=1e-6, atol=1e-9)), 1
+    )
+    sol = sol_box[-1]
+    sys_ct = ct.nlsys(lambda t, z, u, params: field(t, z), None, states=len(z0), inputs=0, outputs=len(z0))
+    ct_box: list = []
+    control_s = best(
+        lambda: ct_box.append(
+            ct.input_output_response(sys_ct, t_eval, 0, z0, solve_ivp_kwargs={"rtol": 1e-6, "atol": 1e-9})
+        ),
+        1,
+    )
+    resp = ct_box[-1]
+    x_idx = [names.index(s) for s in ("x", "y", "z", "theta", "phi")]
+    dev_scipy = float(np.max(np.abs(sol.y[x_idx].T - ours.x[:, x_idx])))
+    dev_ct = float(np.max(np.abs(np.asarray(resp.states)[x_idx].T - ours.x[:, x_idx])))
+    return {
+        "nlcx_s": ours_s, "scipy_solve_ivp_s": scipy_s, "python_control_s": control_s,
+        "ratio_scipy": scipy_s / ours_s, "ratio_python_control": control_s / ours_s,
+        "max_dev_vs_scipy": dev_scipy, "max_dev_vs_python_control": dev_ct, "rhs_evals_scipy": sol.nfev,
+    }  # fmt: skip
+
+
+def main() -> None:
+    sys.path.insert(0, str(ROOT))
+    os.chdir(ROOT)
+    print(
+        f"nlcx benchmarks, {time.strftime('%Y-%m-%d')}, {platform.processor() or platform.machine()}, "
+        f"{os.cpu_count()} cores, Python {platform.python_version()}"
+    )
+    a = bench_a()
+    print(
+        "(a) xyz_error_ags: simulate (2 controllers, 20 s, dt 1 ms) "
+        f"{a['simulate_s']:.3f} s [target <= 0.2]; `nlcx run` end to end {a['end_to_end_s']:.2f} s [target <= 3]"
+    )
+    print(
+        f"    warm-up in process (imports, cache load, first call) {a['warmup_in_process_s']:.2f} s; "
+        f"cold compile (empty numba cache) whole run {a['cold_compile_run_s']:.1f} s"
+    )
+    d = bench_d()
+    print(
+        f"(d) proposed controller of (a): nlcx {d['nlcx_s'] * 1e3:.1f} ms; "
+        f"scipy solve_ivp RK45 {d['scipy_solve_ivp_s']:.2f} s "
+        f"(x{d['ratio_scipy']:.0f}, {d['rhs_evals_scipy']} RHS evaluations); python-control input_output_response "
+        f"{d['python_control_s']:.2f} s (x{d['ratio_python_control']:.0f}) [goal >= 100x python-control]"
+    )
+    print(
+        f"    max |position/angle| difference vs scipy {d['max_dev_vs_scipy']:.2e}, vs python-control "
+        f"{d['max_dev_vs_python_control']:.2e} (ZOH-sampled vs continuous PID)"
+    )
+    c = bench_c()
+    print(
+        f"(c) nlcx reproduce (chapters 2-5, calibration excluded): {c['wall_s']:.1f} s [target <= 120], "
+        f"peak {c['peak_memory_mb']:.0f} MB; {c['summary']}"
+    )
+    b = bench_b()
+    print(
+        f"(b) {b['variants']} x-pendulum variants (error-AGS, M, m, l +-20 %, 20 s, dt 1 ms), --jobs 2: "
+        f"{b['wall_s']:.1f} s wall [target <= 30], peak {b['peak_memory_mb']:.0f} MB [target <= 2048]"
+    )
+    print(f"    {b['summary']}")
+
+
+if __name__ == "__main__":
+    main()
