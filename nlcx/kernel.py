@@ -95,13 +95,25 @@ SIMULATE_SIG = types.void(
 )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _row(arr_len: int, b: int) -> int:
     """Index into an axis that is either per-variant (length B) or broadcast (length 1)."""
     return b if arr_len > 1 else 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
+def _add_disturbance(dist_row, dist_map, dx):  # pragma: no cover - compiled
+    """dx += dist_map @ d."""
+    n_d = dist_row.shape[0]
+    if n_d > 0:
+        for i in range(dx.shape[0]):
+            acc = 0.0
+            for j in range(n_d):
+                acc += dist_map[i, j] * dist_row[j]
+            dx[i] += acc
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _derivative(rhs, t, x, u, p, dist_row, dist_map, dx):  # pragma: no cover - compiled
     """dx = f(t, x, u; p) + dist_map @ d (eqs. 2.13/2.15: d enters the state derivatives)."""
     rhs(t, x, u, p, dx)
@@ -114,7 +126,7 @@ def _derivative(rhs, t, x, u, p, dist_row, dist_map, dx):  # pragma: no cover - 
             dx[i] += acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def slip_friction(fric_row, v, direction):  # pragma: no cover - compiled
     """Friction while sliding in ``direction`` at velocity v (Appendix A).
 
@@ -132,7 +144,7 @@ def slip_friction(fric_row, v, direction):  # pragma: no cover - compiled
     return -mu * f_n * direction - eps * v
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _solve_small(A, b, n):  # pragma: no cover - compiled
     """Solve A[:n, :n] z = b[:n] in place (Gaussian elimination, partial pivoting)."""
     for col in range(n):
@@ -156,7 +168,7 @@ def _solve_small(A, b, n):  # pragma: no cover - compiled
         b[col] = acc / A[col, col]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _friction_forces(
     rhs, t, x, u, p, dist_row, dist_map, fric_b, mode, direction, f_out, work, A, rhs_s, dx
 ):  # pragma: no cover - compiled
@@ -207,7 +219,7 @@ def _friction_forces(
             k += 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _update_friction_modes(
     rhs, t, x, u, p, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx
 ):  # pragma: no cover - compiled
@@ -225,7 +237,7 @@ def _update_friction_modes(
             return
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
     """d at fraction ``position`` of the step, interpolated linearly between the stage nodes c."""
     n_stage = c.shape[0]
@@ -242,7 +254,7 @@ def _disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
         out[j] = (1.0 - w) * drow[lo, j] + w * drow[hi, j]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _rk_step(
     rhs,
     t,
@@ -271,6 +283,7 @@ def _rk_step(
     rhs_s,
     dx,
     d_tmp,
+    classic,
 ):  # pragma: no cover - compiled
     """One explicit Runge-Kutta step of size h from x_in at t (u held) into x_out.
 
@@ -281,6 +294,25 @@ def _rk_step(
     n = x_in.shape[0]
     n_stage = rk_b.shape[0]
     partial = frac0 != 0.0 or h_frac != 1.0
+    if classic and not partial and not has_friction:
+        # the classic RK4 unrolled (the common case: no partial step, no friction)
+        rhs(t, x_in, u, pb, k_stage[0])
+        _add_disturbance(drow[0], dist_map, k_stage[0])
+        for i in range(n):
+            xs[i] = x_in[i] + 0.5 * h * k_stage[0, i]
+        rhs(t + 0.5 * h, xs, u, pb, k_stage[1])
+        _add_disturbance(drow[1], dist_map, k_stage[1])
+        for i in range(n):
+            xs[i] = x_in[i] + 0.5 * h * k_stage[1, i]
+        rhs(t + 0.5 * h, xs, u, pb, k_stage[2])
+        _add_disturbance(drow[2], dist_map, k_stage[2])
+        for i in range(n):
+            xs[i] = x_in[i] + h * k_stage[2, i]
+        rhs(t + h, xs, u, pb, k_stage[3])
+        _add_disturbance(drow[3], dist_map, k_stage[3])
+        for i in range(n):
+            x_out[i] = x_in[i] + h / 6.0 * (k_stage[0, i] + 2.0 * (k_stage[1, i] + k_stage[2, i]) + k_stage[3, i])
+        return
     for s in range(n_stage):
         xs[:] = x_in
         for j in range(s):
@@ -306,7 +338,7 @@ def _rk_step(
             x_out[i] += h * rk_b[s] * k_stage[s, i]
 
 
-@njit(SIMULATE_SIG, cache=True)
+@njit(SIMULATE_SIG, cache=True, error_model="numpy")
 def simulate(
     rhs,
     controller,
@@ -354,6 +386,12 @@ def simulate(
     for i in range(n_stage):
         for j in range(n_stage):
             c[i] += rk_a[i, j]
+    classic = (
+        n_stage == 4
+        and rk_a[1, 0] == 0.5 and rk_a[2, 1] == 0.5 and rk_a[3, 2] == 1.0
+        and rk_a[2, 0] == 0.0 and rk_a[3, 0] == 0.0 and rk_a[3, 1] == 0.0
+        and rk_b[0] == 1.0 / 6.0 and rk_b[1] == 2.0 / 6.0 and rk_b[2] == 2.0 / 6.0 and rk_b[3] == 1.0 / 6.0
+    )  # fmt: skip
     k_stage = np.empty((n_stage, n))
     x = np.empty(n)
     xs = np.empty(n)
@@ -454,6 +492,7 @@ def simulate(
                 rhs_s,
                 dx,
                 d_tmp,
+                classic,
             )
             if has_friction:
                 # event: a sliding axis whose velocity reaches zero inside the step stops there
@@ -492,6 +531,7 @@ def simulate(
                         rhs_s,
                         dx,
                         d_tmp,
+                        classic,
                     )
                     for j in range(n_u):
                         vi = int(fb[j, 7])
@@ -531,6 +571,7 @@ def simulate(
                         rhs_s,
                         dx,
                         d_tmp,
+                        classic,
                     )
                 for j in range(n_u):
                     vi = int(fb[j, 7])

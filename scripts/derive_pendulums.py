@@ -311,7 +311,7 @@ def emit_rhs(d: Derivation) -> str:
         f'{ind}"""'
     )
     lines = [
-        "@njit(RHS_SIG, cache=True)",
+        '@njit(RHS_SIG, cache=True, error_model="numpy")',
         f"def {key}_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled",
         doc,
     ]

@@ -13,5 +13,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_ruff_clean() -> None:
     ruff = shutil.which("ruff", path=str(Path(sys.executable).parent)) or shutil.which("ruff")
     assert ruff, "ruff is a test dependency (pip install -e '.[test]')"
-    proc = subprocess.run([ruff, "check", "nlcx", "tests", "scripts", "benchmarks"], cwd=ROOT, capture_output=True, text=True)
+    proc = subprocess.run(
+        [ruff, "check", "nlcx", "tests", "scripts", "benchmarks"], cwd=ROOT, capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -93,7 +93,7 @@ class ANFISConfig(ScheduleConfig):
         return value
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _mf(kind, x, c, a, b):  # pragma: no cover - compiled
     z = (x - c) / a
     if kind == 0.0:
@@ -101,7 +101,7 @@ def _mf(kind, x, c, a, b):  # pragma: no cover - compiled
     return math.exp(-0.5 * z * z)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def anfis_eval(sp, off, x1, x2, clip):  # pragma: no cover - compiled
     """The TS model packed at sp[off:] (:meth:`AnfisModel.to_vector` layout) at (x1, x2)."""
     kind = sp[off]
@@ -131,7 +131,7 @@ def anfis_eval(sp, off, x1, x2, clip):  # pragma: no cover - compiled
     return fsum / (n * n)  # no rule fires: the mean rule output, as AnfisModel.predict
 
 
-@njit(SCHEDULE_SIG, cache=True)
+@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
 def anfis_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
     """sp = (clip inputs, 3 x (clip?, min, max), 3 model offsets, 3 packed models)."""
     clip = sp[0] != 0.0

@@ -266,7 +266,7 @@ def as_config(cfg: FuzzyConfig | dict[str, Any]) -> FuzzyConfig:
 _LEFT, _RIGHT = 0, len(SET_NAMES) - 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _mf(x, lower, upper, position, umin, umax):  # pragma: no cover - compiled
     """Membership of x in the set at ``position`` (0 NB shoulder, 4 PB shoulder, else triangle)."""
     if position == 0:
@@ -358,7 +358,7 @@ _RULES = _GAINS + 6  # 3 outputs x 25 rules (e row-major): output set index
 _GRID = _RULES + 75  # z_0..z_{n-1}, then 3 x 5 x n output memberships
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _aggregate(sp, base, n, k, w0, w1, w2, w3, w4):  # pragma: no cover - compiled
     """max_s min(W_s, mu_s(z_k)) of one output (base: its membership table)."""
     a = min(w0, sp[base + k])
@@ -368,7 +368,7 @@ def _aggregate(sp, base, n, k, w0, w1, w2, w3, w4):  # pragma: no cover - compil
     return max(a, min(w4, sp[base + 4 * n + k]))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _centroid(sp, base, n, piecewise, w0, w1, w2, w3, w4):  # pragma: no cover - compiled
     z0 = _GRID
     num = 0.0
@@ -394,7 +394,7 @@ def _centroid(sp, base, n, piecewise, w0, w1, w2, w3, w4):  # pragma: no cover -
     return 0.5 * (sp[z0] + sp[z0 + n - 1])
 
 
-@njit(SCHEDULE_SIG, cache=True)
+@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
 def fuzzy_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
     """Mamdani self-tuning PID, section 5.4.1: (e, de/dt) -> (k_p1, k_i1, k_d1) -> eqs. 5.12-5.14."""
     n = int(sp[_N])

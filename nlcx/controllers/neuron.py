@@ -59,7 +59,7 @@ class NeuronConfig(ControllerConfig):
 #: cs layout: step counter, e(k-1), e(k-2), u(k-1), w1, w2, w3, started.
 
 
-@njit(CONTROLLER_SIG, cache=True)
+@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
 def neuron_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
     """Eqs. 5.15-5.19 at every ``hold``-th simulation step; the input is held in between."""
     yi, ri, ui = int(cp[0]), int(cp[1]), int(cp[2])

@@ -16,7 +16,7 @@ class OpenLoopConfig(ControllerConfig):
     kind: Literal["open_loop"] = "open_loop"
 
 
-@njit(CONTROLLER_SIG, cache=True)
+@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
 def open_loop_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
     """u_j(t) = r_j(t): the reference channels are the plant inputs."""
     for j in range(u.shape[0]):

@@ -80,7 +80,7 @@ class PIDConfig(ControllerConfig):
     setpoint_weight: float = 1.0
 
 
-@njit(CONTROLLER_SIG, cache=True)
+@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
 def pid_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
     """Multi-loop PID with pluggable gain schedules (one sample, zero-order hold)."""
     n_loops = int(cp[0])

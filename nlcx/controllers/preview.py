@@ -387,7 +387,7 @@ def design_preview(
 # --------------------------------------------------------------------------- run time
 
 
-@njit(CONTROLLER_SIG, cache=True)
+@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
 def preview_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
     """Preview servo (eq. 5.21), sampled every Ts = N dt and held in between.
 

@@ -72,7 +72,7 @@ class ErrorAGSConfig(AGSConfig):
     error: Literal["abs", "signed"] = "abs"
 
 
-@njit(SCHEDULE_SIG, cache=True)
+@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
 def constant_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
     """Conventional PID: fixed gains, sp = (k_p, k_i, k_d)."""
     gains[0] = sp[0]
@@ -80,7 +80,7 @@ def constant_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
     gains[2] = sp[2]
 
 
-@njit(SCHEDULE_SIG, cache=True)
+@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
 def time_ags_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
     """Eqs. 2.17-2.19, sp = (kp_min, kp_max, ki_min, ki_max, kd_min, kd_max, k_p, k_i, k_d).
 
@@ -93,7 +93,7 @@ def time_ags_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
     gains[2] = sp[4] + (sp[5] - sp[4]) * math.exp(-sp[8] * t)
 
 
-@njit(SCHEDULE_SIG, cache=True)
+@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
 def error_ags_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
     """Eqs. 2.20-2.22 on s = |e| (sp[9] = 1) or s = e (sp[9] = 0), sp as for time-AGS.
 

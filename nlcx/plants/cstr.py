@@ -31,7 +31,7 @@ class CSTRParams(PlantParams):
     u_s: float = Field(4 / 7, gt=0, description="operating dilution rate F_s/V", json_schema_extra={"unit": "1/min"})
 
 
-@njit(RHS_SIG, cache=True)
+@njit(RHS_SIG, cache=True, error_model="numpy")
 def cstr_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 5.1-5.2 with p = (k1, k2, k3, C_Af) and u = (F/V,)."""
     k1, k2, k3, caf = p[0], p[1], p[2], p[3]

@@ -47,7 +47,7 @@ class TransferFunctionParams(PlantParams):
         return self
 
 
-@njit(RHS_SIG, cache=True)
+@njit(RHS_SIG, cache=True, error_model="numpy")
 def companion_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """Controllable canonical form: x_i' = x_{i+1}, x_n' = -sum_j a_j x_{j+1} + u, p = a_0..a_{n-1}."""
     n = x.shape[0]

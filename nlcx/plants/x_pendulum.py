@@ -32,7 +32,7 @@ class XPendulumParams(PendulumParams):
     """Table 2.1 parameters."""
 
 
-@njit(RHS_SIG, cache=True)
+@njit(RHS_SIG, cache=True, error_model="numpy")
 def x_pendulum_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 2.8-2.11 as printed, with p = (M, m, l, g) and u = (F_x,)."""
     M, m, l, g = p[0], p[1], p[2], p[3]

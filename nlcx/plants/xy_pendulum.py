@@ -22,7 +22,7 @@ from nlcx.plants.generated.pendulums import xy_derived_rhs, xy_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
 
 
-@njit(RHS_SIG, cache=True)
+@njit(RHS_SIG, cache=True, error_model="numpy")
 def xy_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 3.11-3.18 transcribed literally (typos included), p = (M, m, l, g), u = (F_x, F_y)."""
     M, m, l, g = p[0], p[1], p[2], p[3]

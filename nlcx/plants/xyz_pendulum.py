@@ -23,7 +23,7 @@ from nlcx.plants.generated.pendulums import xyz_derived_rhs, xyz_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
 
 
-@njit(RHS_SIG, cache=True)
+@njit(RHS_SIG, cache=True, error_model="numpy")
 def xyz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 4.18-4.27 transcribed literally (typos included), p = (M, m, l, g), u = (F_x, F_y, F_z).
 

@@ -19,7 +19,7 @@ from numba import njit
 from nlcx.kernel import RHS_SIG
 
 
-@njit(RHS_SIG, cache=True)
+@njit(RHS_SIG, cache=True, error_model="numpy")
 def x_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x inverted pendulum derived from eqs. 2.1, 2.4-2.6 (Lagrange eqs. 2.2, 2.7).
 
@@ -59,7 +59,7 @@ def x_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     dx[3] = a1
 
 
-@njit(RHS_SIG, cache=True)
+@njit(RHS_SIG, cache=True, error_model="numpy")
 def xy_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x-y inverted pendulum derived from eqs. 3.1, 3.4-3.6 (Lagrange eqs. 3.2, 3.7-3.10).
 
@@ -134,7 +134,7 @@ def xy_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     dx[7] = a3
 
 
-@njit(RHS_SIG, cache=True)
+@njit(RHS_SIG, cache=True, error_model="numpy")
 def xz_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x-z inverted pendulum derived from eqs. 3.36-3.38 (Lagrange eqs. 3.34, 3.39-3.41).
 
@@ -190,7 +190,7 @@ def xz_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     dx[5] = a2
 
 
-@njit(RHS_SIG, cache=True)
+@njit(RHS_SIG, cache=True, error_model="numpy")
 def xyz_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x-y-z inverted pendulum derived from eqs. 4.1, 4.4-4.5 (Lagrange eqs. 4.2, 4.8-4.12).
 
