@@ -167,7 +167,6 @@ def bench_d() -> dict[str, float]:
         )
     bias = proposed.cp[2 : 2 + len(plant.inputs)]
     n = len(names)
-    g = np.zeros(3)
 
     def field(t: float, z: np.ndarray) -> np.ndarray:
         x = np.ascontiguousarray(z[:n])
@@ -180,12 +179,10 @@ def bench_d() -> dict[str, float]:
                 r = ref.value
             e = r - x[pi]
             edot = -x[vi]
-            error_ags_gains(t, e, edot, sp, g)
-            u[ui] += sign * (g[0] * e + g[1] * z[n + k] + g[2] * edot)
+            kp, ki, kd = error_ags_gains(t, e, edot, sp[None], 0, 0)
+            u[ui] += sign * (kp * e + ki * z[n + k] + kd * edot)
             dz[n + k] = e
-        dx = np.zeros(n)
-        plant.rhs(t, x, u, plant.p, dx)
-        dz[:n] = dx
+        dz[:n] = plant.f(x, u, t)
         return dz
 
     z0 = np.concatenate([plant.x0, np.zeros(len(info))])

@@ -180,19 +180,25 @@ def parse_override(text: str) -> tuple[list[str], Any]:
 
 
 def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
-    """A copy of ``raw`` with each ``dotted.key=value`` override set (Hydra style)."""
-    data = copy.deepcopy(raw)
-    for text in overrides:
-        parts, value = parse_override(text)
+    """A deep copy of ``raw`` with each ``dotted.key=value`` override set (Hydra style)."""
+    return set_values(copy.deepcopy(raw), [parse_override(text) for text in overrides])
+
+
+def set_values(raw: dict[str, Any], values: list[tuple[list[str], Any]]) -> dict[str, Any]:
+    """A copy of ``raw`` with each (key path, value) set; only the mappings on the paths are
+    copied, the rest is shared with ``raw`` (treat both as read-only afterwards)."""
+    data = dict(raw)
+    for parts, value in values:
         node = data
         for i, part in enumerate(parts[:-1]):
             child = node.get(part)
             if child is None:
-                child = node[part] = {}
+                child = {}
             if not isinstance(child, dict):
                 raise ConfigError(".".join(parts[: i + 1]), child, "is not a mapping, so it has no sub-keys")
+            child = node[part] = dict(child)
             node = child
-        node[parts[-1]] = value
+        node[parts[-1]] = copy.deepcopy(value)
     return data
 
 

@@ -24,7 +24,7 @@ from nlcx.controllers.base import ControllerInstance
 from nlcx.controllers.schedules import schedule_slots
 from nlcx.errors import ConfigError
 from nlcx.kernel import FRICTION_FIELDS, STATUS_BOUND, STATUS_NONFINITE, simulate
-from nlcx.plants.base import Plant
+from nlcx.plants.base import Plant, check_rows
 from nlcx.references.base import MetricPlan
 from nlcx.tuning.base import TuneContext
 from nlcx.uncertainty.base import Perturbations
@@ -80,8 +80,9 @@ class Run:
     x: np.ndarray
     u: np.ndarray
     r: np.ndarray
-    log: np.ndarray
-    friction: np.ndarray
+    #: Controller logs and friction forces (None when the simulation did not record them).
+    log: np.ndarray | None
+    friction: np.ndarray | None
     t_fail: float = math.nan
 
     @property
@@ -253,7 +254,10 @@ def _stack(arrays: list[np.ndarray | None], empty_shape: tuple[int, ...]) -> np.
     if all(a is first for a in arrays):
         base = np.zeros(empty_shape) if first is None else first
         return np.ascontiguousarray(base[None])
-    return np.ascontiguousarray(np.stack([np.zeros(empty_shape) if a is None else a for a in arrays]))
+    filled = [np.zeros(empty_shape) if a is None else a for a in arrays]
+    # an axis of length 1 (e.g. no noise: one zero row for every sample) meets the others' length
+    shape = tuple(max(sizes) for sizes in zip(*(a.shape for a in filled), strict=True))
+    return np.ascontiguousarray(np.stack([np.broadcast_to(a, shape) for a in filled]))
 
 
 def _group_key(item: Item) -> tuple[Any, ...]:
@@ -264,9 +268,12 @@ def _group_key(item: Item) -> tuple[Any, ...]:
     )  # fmt: skip
 
 
-def simulate_items(items: list[Item], grid: TimeGrid, integrator: str) -> list[Run]:
+def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_logs: bool = True) -> list[Run]:
     """Integrate every item; items sharing plant equations and controller kind go through one
-    batched kernel call (per-item parameters, states, references and perturbations)."""
+    batched kernel call (per-item parameters, states, references and perturbations).
+
+    ``record_logs=False`` skips the controller logs and friction forces (``Run.log`` and
+    ``Run.friction`` are None): a sweep that keeps only metrics does not need them."""
     a, b = TABLEAUS[integrator]
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i, item in enumerate(items):
@@ -276,14 +283,16 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str) -> list[R
     for indices in groups.values():
         group = [items[i] for i in indices]
         plant = group[0].plant
+        check_rows(plant)
         n, n_u, n_y = len(plant.states), len(plant.inputs), len(plant.outputs)
         n_b = len(group)
         plants = [g.plant for g in group]
         # the kernel writes every sample up to where a run stops; the rest is never read
+        n_rec = n_k if record_logs else 1
         X = np.empty((n_b, n_k, n))
         U = np.empty((n_b, n_k, n_u))
-        LOG = np.empty((n_b, n_k, len(group[0].controller.log_names)))
-        FRIC = np.empty((n_b, n_k, n_u))
+        LOG = np.empty((n_b, n_rec, len(group[0].controller.log_names)))
+        FRIC = np.empty((n_b, n_rec, n_u))
         status = np.zeros(n_b, dtype=np.int64)
         n_valid = np.zeros(n_b, dtype=np.int64)
         fail_index = np.zeros(n_b, dtype=np.int64)
@@ -325,8 +334,8 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str) -> list[R
                 x=X[j, :k],
                 u=U[j, :k],
                 r=group[j].ref[:k],
-                log=LOG[j, :k],
-                friction=FRIC[j, :k],
+                log=LOG[j, :k] if record_logs else None,
+                friction=FRIC[j, :k] if record_logs else None,
                 t_fail=t_fail,
             )
     return [r for r in runs if r is not None]
@@ -381,6 +390,15 @@ _NAN_NOTES = {
 }
 
 
+def _outputs(xs: list[np.ndarray], c_row: np.ndarray) -> np.ndarray:
+    """y = x c for each state trajectory x, stacked (B, T); a row of C that selects one state
+    (the usual case) is a gather, not a product."""
+    (nonzero,) = np.nonzero(c_row)
+    if nonzero.size == 1 and c_row[nonzero[0]] == 1.0:
+        return np.stack([x[:, nonzero[0]] for x in xs])
+    return np.stack([x @ c_row for x in xs])
+
+
 def measure(prepared: Prepared, runs: list[Run]) -> pd.DataFrame:
     """Long-form metrics of every run of one experiment (columns METRIC_COLUMNS)."""
     plans = {s: model.metric_plan(cfg) for s, (model, cfg) in prepared.references.items()}
@@ -407,7 +425,7 @@ def measure_runs(
     for (s, plan, _), members in groups.items():
         j = plant.output_names.index(s)
         t = runs[members[0]].t
-        y = np.stack([runs[i].x @ plant.C[j] for i in members])
+        y = _outputs([runs[i].x for i in members], plant.C[j])
         r = np.stack([runs[i].r[:, runs[i].controller.reference_signals.index(s)] for i in members])
         batch = _signal_metrics(t, y, r, plan, cfg)
         for k, i in enumerate(members):

@@ -3,21 +3,32 @@
 Plants, controllers and gain schedules are numba-compiled functions with the fixed
 signatures below. They are passed to :func:`simulate` as first-class function values, so a
 single compiled (and disk-cached) kernel serves every plant and controller, including those
-registered by third-party packages. Every per-variant quantity carries a leading batch axis
-``b``; an array whose batch (or time) axis has length 1 is broadcast over that axis.
+registered by third-party packages.
 
-Signatures (all arrays are contiguous float64 vectors):
+The kernel runs a batch of closed loops in lock step: every sampling instant, one call of
+the controller and one call of the right-hand side per Runge-Kutta stage serve every
+variant of the batch. Plant and controller functions therefore take 2-D arrays whose rows
+are the variants. A single trajectory is a chain of dependent operations (each stage needs
+the one before); stepping many variants together lets the processor overlap independent
+chains, and the cost of a call is shared by the whole batch.
+
+Signatures (arrays are contiguous float64; row ``b`` of every 2-D array is variant ``b``):
 
 ``rhs(t, x, u, p, dx)``
-    Plant right-hand side: writes dx/dt = f(t, x, u; p) into ``dx``.
-``schedule(t, e, edot, sp, gains)``
-    Gain schedule: writes (k_p, k_i, k_d) into ``gains`` from time, error, error rate and
-    the loop's schedule parameters ``sp``.
+    Plant right-hand side: ``dx[b] = f(t, x[b], u[b]; p[b])`` for every row ``b`` of ``x``.
+``schedule(t, e, edot, p, row, offset) -> (k_p, k_i, k_d)``
+    Gain schedule: the gains at time t for error e and error rate edot, from the schedule
+    parameters stored in ``p[row]`` from column ``offset`` on.
 ``controller(t, dt, x, y, r, cp, cs, u, log, schedules)``
-    Controller sampled at t: reads measured outputs ``y`` (and, if it is a full-information
-    controller, the plant state ``x``) and references ``r``, updates its
+    Controller sampled at t, for every row: reads measured outputs ``y`` (and, if it is a
+    full-information controller, the plant state ``x``) and references ``r``, updates its
     state ``cs`` in place, writes the plant input ``u`` (held constant over the step: zero-
     order hold) and the values it wants recorded into ``log``.
+
+Hot-loop rules (they decide the speed, see benchmarks/): no array view is made per step and
+per variant (a view handed to a compiled-function value costs a reference-count round
+trip), and a function that calls a compiled-function value does so inside its loop over
+the rows, so its own reference counting is paid once per call, not once per variant.
 """
 
 from __future__ import annotations
@@ -37,16 +48,19 @@ MAT = types.float64[:, ::1]
 ARR3 = types.float64[:, :, ::1]
 ARR4 = types.float64[:, :, :, ::1]
 IVEC = types.int64[::1]
+I64 = types.int64
 
-#: Plant right-hand side ``rhs(t, x, u, p, dx)``.
-RHS_SIG = types.void(F64, VEC, VEC, VEC, VEC)
-#: Gain schedule ``schedule(t, e, edot, sp, gains)``.
-SCHEDULE_SIG = types.void(F64, F64, F64, VEC, VEC)
+#: Plant right-hand side ``rhs(t, x, u, p, dx)`` over the rows of x.
+RHS_SIG = types.void(F64, MAT, MAT, MAT, MAT)
+#: Gain schedule ``schedule(t, e, edot, p, row, offset) -> (k_p, k_i, k_d)``.
+SCHEDULE_SIG = types.UniTuple(F64, 3)(F64, F64, F64, MAT, I64, I64)
+#: Most stages of a Runge-Kutta tableau the kernel integrates with.
+MAX_STAGES = 4
 #: Number of gain-schedule slots handed to every controller (registered schedules + padding).
 SCHEDULE_SLOTS = 16
 ScheduleTuple = types.UniTuple(types.FunctionType(SCHEDULE_SIG), SCHEDULE_SLOTS)
-#: Controller step ``controller(t, dt, x, y, r, cp, cs, u, log, schedules)``.
-CONTROLLER_SIG = types.void(F64, F64, VEC, VEC, VEC, VEC, VEC, VEC, VEC, ScheduleTuple)
+#: Controller step ``controller(t, dt, x, y, r, cp, cs, u, log, schedules)`` over the rows.
+CONTROLLER_SIG = types.void(F64, F64, MAT, MAT, MAT, MAT, MAT, MAT, MAT, ScheduleTuple)
 
 RhsFn = types.FunctionType(RHS_SIG)
 ControllerFn = types.FunctionType(CONTROLLER_SIG)
@@ -87,8 +101,8 @@ SIMULATE_SIG = types.void(
     F64,  # dt
     ARR3,  # X out (B, K+1, n)
     ARR3,  # U out (B, K+1, n_u)
-    ARR3,  # LOG out (B, K+1, n_log)
-    ARR3,  # FRICTION out (B, K+1, n_u) friction force on each input's axis at t_k
+    ARR3,  # LOG out (B, K+1|1, n_log); time length 1: logs not recorded
+    ARR3,  # FRICTION out (B, K+1|1, n_u) friction force on each input's axis at t_k (1: not recorded)
     IVEC,  # status out (B,)
     IVEC,  # n_valid out (B,)
     IVEC,  # fail_index out (B,) i < n: state i failed; n + j: input j non-finite; -1: none
@@ -101,25 +115,23 @@ def _row(arr_len: int, b: int) -> int:
     return b if arr_len > 1 else 0
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _add_disturbance(dist_row, dist_map, dx):  # pragma: no cover - compiled
-    """dx += dist_map @ d."""
-    n_d = dist_row.shape[0]
-    if n_d > 0:
-        for i in range(dx.shape[0]):
-            acc = 0.0
-            for j in range(n_d):
-                acc += dist_map[i, j] * dist_row[j]
-            dx[i] += acc
+# --------------------------------------------------------------- one variant (friction path)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _derivative(rhs, t, x, u, p, dist_row, dist_map, dx):  # pragma: no cover - compiled
-    """dx = f(t, x, u; p) + dist_map @ d (eqs. 2.13/2.15: d enters the state derivatives)."""
-    rhs(t, x, u, p, dx)
+@njit(cache=True, error_model="numpy")
+def _derivative(rhs, t, x, u, dist_row, dist_map, dx, one):  # pragma: no cover - compiled
+    """dx = f(t, x, u; p) + dist_map @ d for one variant (eqs. 2.13/2.15: d enters the
+    state derivatives). ``one`` = (x, u, p, dx) scratch rows of shape (1, .); p is set."""
+    x1, u1, p1, dx1 = one
+    for i in range(x.shape[0]):
+        x1[0, i] = x[i]
+    for j in range(u.shape[0]):
+        u1[0, j] = u[j]
+    rhs(t, x1, u1, p1, dx1)
     n_d = dist_row.shape[0]
-    if n_d > 0:
-        for i in range(dx.shape[0]):
+    for i in range(dx.shape[0]):
+        dx[i] = dx1[0, i]
+        if n_d > 0:
             acc = 0.0
             for j in range(n_d):
                 acc += dist_map[i, j] * dist_row[j]
@@ -170,7 +182,7 @@ def _solve_small(A, b, n):  # pragma: no cover - compiled
 
 @njit(cache=True, error_model="numpy")
 def _friction_forces(
-    rhs, t, x, u, p, dist_row, dist_map, fric_b, mode, direction, f_out, work, A, rhs_s, dx
+    rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, f_out, work, A, rhs_s, dx, one
 ):  # pragma: no cover - compiled
     """Friction force on every input's axis at state x (written to f_out).
 
@@ -192,7 +204,7 @@ def _friction_forces(
         return
     for j in range(n_u):
         work[j] = u[j] + f_out[j]
-    _derivative(rhs, t, x, work, p, dist_row, dist_map, dx)
+    _derivative(rhs, t, x, work, dist_row, dist_map, dx, one)
     k = 0
     for j in range(n_u):
         if mode[j] == _STUCK:
@@ -203,7 +215,7 @@ def _friction_forces(
         if mode[jc] != _STUCK:
             continue
         work[jc] += 1.0
-        _derivative(rhs, t, x, work, p, dist_row, dist_map, dx)
+        _derivative(rhs, t, x, work, dist_row, dist_map, dx, one)
         work[jc] -= 1.0
         row = 0
         for jr in range(n_u):
@@ -221,12 +233,12 @@ def _friction_forces(
 
 @njit(cache=True, error_model="numpy")
 def _update_friction_modes(
-    rhs, t, x, u, p, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx
+    rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx, one
 ):  # pragma: no cover - compiled
     """Breakaway at the start of a step: a stuck axis whose holding force would exceed
     mu_s F_N starts to slide in the direction of the net force (Appendix A's static case)."""
     for _ in range(u.shape[0]):
-        _friction_forces(rhs, t, x, u, p, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx)
+        _friction_forces(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx, one)
         released = False
         for j in range(u.shape[0]):
             if mode[j] == _STUCK and abs(f_tmp[j]) > fric_b[j, 1] * fric_b[j, 4]:
@@ -254,8 +266,8 @@ def _disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
         out[j] = (1.0 - w) * drow[lo, j] + w * drow[hi, j]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _rk_step(
+@njit(cache=True, error_model="numpy")
+def _rk_step_one(
     rhs,
     t,
     h,
@@ -264,14 +276,12 @@ def _rk_step(
     x_in,
     x_out,
     u,
-    pb,
     drow,
     c,
     dist_map,
     fb,
     mode,
     direction,
-    has_friction,
     rk_a,
     rk_b,
     k_stage,
@@ -283,9 +293,10 @@ def _rk_step(
     rhs_s,
     dx,
     d_tmp,
-    classic,
+    one,
 ):  # pragma: no cover - compiled
-    """One explicit Runge-Kutta step of size h from x_in at t (u held) into x_out.
+    """One explicit Runge-Kutta step of one variant with friction, size h from x_in at t
+    (u held) into x_out.
 
     The step covers the fraction [frac0, frac0 + h_frac] of the sampling step; the
     disturbance is exact at the stage nodes of a full step and interpolated between them
@@ -294,25 +305,6 @@ def _rk_step(
     n = x_in.shape[0]
     n_stage = rk_b.shape[0]
     partial = frac0 != 0.0 or h_frac != 1.0
-    if classic and not partial and not has_friction:
-        # the classic RK4 unrolled (the common case: no partial step, no friction)
-        rhs(t, x_in, u, pb, k_stage[0])
-        _add_disturbance(drow[0], dist_map, k_stage[0])
-        for i in range(n):
-            xs[i] = x_in[i] + 0.5 * h * k_stage[0, i]
-        rhs(t + 0.5 * h, xs, u, pb, k_stage[1])
-        _add_disturbance(drow[1], dist_map, k_stage[1])
-        for i in range(n):
-            xs[i] = x_in[i] + 0.5 * h * k_stage[1, i]
-        rhs(t + 0.5 * h, xs, u, pb, k_stage[2])
-        _add_disturbance(drow[2], dist_map, k_stage[2])
-        for i in range(n):
-            xs[i] = x_in[i] + h * k_stage[2, i]
-        rhs(t + h, xs, u, pb, k_stage[3])
-        _add_disturbance(drow[3], dist_map, k_stage[3])
-        for i in range(n):
-            x_out[i] = x_in[i] + h / 6.0 * (k_stage[0, i] + 2.0 * (k_stage[1, i] + k_stage[2, i]) + k_stage[3, i])
-        return
     for s in range(n_stage):
         xs[:] = x_in
         for j in range(s):
@@ -325,17 +317,214 @@ def _rk_step(
             d_s = d_tmp
         else:
             d_s = drow[s]
-        if has_friction:
-            _friction_forces(rhs, ts, xs, u, pb, d_s, dist_map, fb, mode, direction, f, work, A, rhs_s, dx)
-            for j in range(u.shape[0]):
-                u_total[j] = u[j] + f[j]
-            _derivative(rhs, ts, xs, u_total, pb, d_s, dist_map, k_stage[s])
-        else:
-            _derivative(rhs, ts, xs, u, pb, d_s, dist_map, k_stage[s])
+        _friction_forces(rhs, ts, xs, u, d_s, dist_map, fb, mode, direction, f, work, A, rhs_s, dx, one)
+        for j in range(u.shape[0]):
+            u_total[j] = u[j] + f[j]
+        _derivative(rhs, ts, xs, u_total, d_s, dist_map, k_stage[s], one)
     x_out[:] = x_in
     for s in range(n_stage):
         for i in range(n):
             x_out[i] += h * rk_b[s] * k_stage[s, i]
+
+
+@njit(cache=True, error_model="numpy")
+def _step_with_friction(
+    rhs,
+    t,
+    dt,
+    x,
+    x_new,
+    x_mid,
+    u,
+    drow,
+    c,
+    dist_map,
+    fb,
+    mode,
+    direction,
+    hold,
+    rk_a,
+    rk_b,
+    k_stage,
+    xs,
+    f,
+    u_total,
+    work,
+    A,
+    rhs_s,
+    dx,
+    d_tmp,
+    one,
+):  # pragma: no cover - compiled
+    """One sampling step of one variant with friction (Appendix A): a sliding axis whose
+    velocity reaches zero inside the step is stopped there (the step is split at that
+    instant); a stuck axis is held at its position until it breaks away."""
+    n_u = u.shape[0]
+    _rk_step_one(
+        rhs,
+        t,
+        dt,
+        0.0,
+        1.0,
+        x,
+        x_new,
+        u,
+        drow,
+        c,
+        dist_map,
+        fb,
+        mode,
+        direction,
+        rk_a,
+        rk_b,
+        k_stage,
+        xs,
+        f,
+        u_total,
+        work,
+        A,
+        rhs_s,
+        dx,
+        d_tmp,
+        one,
+    )
+    frac = 1.0
+    for j in range(n_u):
+        vi = int(fb[j, 7])
+        if mode[j] == _SLIP and x_new[vi] * direction[j] <= 0.0 and x[vi] != x_new[vi]:
+            frac = min(frac, x[vi] / (x[vi] - x_new[vi]))
+    if frac < 1.0:
+        h1 = frac * dt
+        _rk_step_one(
+            rhs,
+            t,
+            h1,
+            0.0,
+            frac,
+            x,
+            x_mid,
+            u,
+            drow,
+            c,
+            dist_map,
+            fb,
+            mode,
+            direction,
+            rk_a,
+            rk_b,
+            k_stage,
+            xs,
+            f,
+            u_total,
+            work,
+            A,
+            rhs_s,
+            dx,
+            d_tmp,
+            one,
+        )
+        for j in range(n_u):
+            vi = int(fb[j, 7])
+            if mode[j] == _SLIP and x_new[vi] * direction[j] <= 0.0:
+                x_mid[vi] = 0.0
+                mode[j] = _STUCK
+                hold[j] = x_mid[int(fb[j, 8])]
+        _disturbance_at(drow, c, frac, d_tmp)
+        _update_friction_modes(rhs, t + h1, x_mid, u, d_tmp, dist_map, fb, mode, direction, f, work, A, rhs_s, dx, one)
+        _rk_step_one(
+            rhs,
+            t + h1,
+            dt - h1,
+            frac,
+            1.0 - frac,
+            x_mid,
+            x_new,
+            u,
+            drow,
+            c,
+            dist_map,
+            fb,
+            mode,
+            direction,
+            rk_a,
+            rk_b,
+            k_stage,
+            xs,
+            f,
+            u_total,
+            work,
+            A,
+            rhs_s,
+            dx,
+            d_tmp,
+            one,
+        )
+    for j in range(n_u):
+        vi = int(fb[j, 7])
+        if mode[j] == _SLIP and x_new[vi] * direction[j] <= 0.0:  # a second stop: rare
+            mode[j] = _STUCK
+            hold[j] = x_new[int(fb[j, 8])]
+        if mode[j] == _STUCK:
+            x_new[vi] = 0.0
+            x_new[int(fb[j, 8])] = hold[j]
+
+
+# ------------------------------------------------------------------------ the whole batch
+
+
+@njit(cache=True, error_model="numpy")
+def _add_disturbances(dx, dist, vid, kd, stage, dist_map):  # pragma: no cover - compiled
+    """dx[b] += dist_map @ dist[variant of b, kd, stage] for every active row."""
+    n_d = dist.shape[3]
+    if n_d == 0:
+        return
+    n = dx.shape[1]
+    for b in range(dx.shape[0]):
+        bd = _row(dist.shape[0], vid[b])
+        for i in range(n):
+            acc = 0.0
+            for j in range(n_d):
+                acc += dist_map[i, j] * dist[bd, kd, stage, j]
+            dx[b, i] += acc
+
+
+@njit(cache=True, error_model="numpy")
+def _rk_step_batch(rhs, t, h, x, x_out, u, p, dist, vid, kd, dist_map, rk_a, rk_b, c, stages, xs):  # pragma: no cover
+    """One explicit Runge-Kutta step of size h for every row, any tableau of at most
+    :data:`MAX_STAGES` stages (u held, no friction). ``stages`` holds one (B, n) array per stage."""
+    nb, n = x.shape
+    n_stage = rk_b.shape[0]
+    for s in range(n_stage):
+        for b in range(nb):
+            for i in range(n):
+                acc = x[b, i]
+                for j in range(s):
+                    if rk_a[s, j] != 0.0:
+                        acc += h * rk_a[s, j] * stages[j][b, i]
+                xs[b, i] = acc
+        rhs(t + c[s] * h, xs, u, p, stages[s])
+        _add_disturbances(stages[s], dist, vid, kd, s, dist_map)
+    for b in range(nb):
+        for i in range(n):
+            acc = x[b, i]
+            for s in range(n_stage):
+                acc += h * rk_b[s] * stages[s][b, i]
+            x_out[b, i] = acc
+
+
+@njit(cache=True, error_model="numpy")
+def _swap_rows(a, i, j):  # pragma: no cover - compiled
+    """Exchange rows i and j of a 2-D array."""
+    for c in range(a.shape[1]):
+        a[i, c], a[j, c] = a[j, c], a[i, c]
+
+
+@njit(cache=True, error_model="numpy")
+def _swap_rows3(a, i, j):  # pragma: no cover - compiled
+    """Exchange rows i and j of a 3-D array."""
+    for c in range(a.shape[1]):
+        for d in range(a.shape[2]):
+            a[i, c, d], a[j, c, d] = a[j, c, d], a[i, c, d]
 
 
 @njit(SIMULATE_SIG, cache=True, error_model="numpy")
@@ -366,22 +555,26 @@ def simulate(
     n_valid,
     fail_index,
 ):  # pragma: no cover - compiled
-    """Integrate a batch of closed loops with an explicit Runge-Kutta method.
+    """Integrate a batch of closed loops in lock step with an explicit Runge-Kutta method.
 
-    At every sampling instant t_k = k dt the controller reads y_k = C x_k (+ noise) and
-    sets u_k, held constant (zero-order hold) while the plant is integrated to t_{k+1}
+    At every sampling instant t_k = k dt each controller reads y_k = C x_k (+ noise) and
+    sets u_k, held constant (zero-order hold) while its plant is integrated to t_{k+1}
     with the Butcher tableau (rk_a, rk_b); stage i is evaluated at t_k + c_i dt with
     c_i = sum_j rk_a[i, j]. Friction (Appendix A) acts on the axis of each input: a sliding
     axis whose velocity reaches zero within a step is stopped there and sticks until its
-    holding force exceeds mu_s F_N. A run whose state becomes non-finite or leaves
-    ``bounds`` stops early: its status is set and the remaining samples are left untouched.
+    holding force exceeds mu_s F_N (such variants are stepped one by one). A variant whose
+    state becomes non-finite or leaves ``bounds`` stops: its status is set, the remaining
+    samples are left untouched and it leaves the batch (the active variants are kept in
+    the leading rows of the working arrays; ``vid`` maps a row to its variant).
     """
-    n_batch = x0.shape[0]
-    n = x0.shape[1]
+    n_batch, n = x0.shape
     n_stage = rk_b.shape[0]
     n_y = C.shape[0]
     n_u = U.shape[2]
+    n_r = ref.shape[2]
+    n_log = LOG.shape[2]
     n_steps = X.shape[1] - 1
+    record = LOG.shape[1] == n_steps + 1
     c = np.zeros(n_stage)
     for i in range(n_stage):
         for j in range(n_stage):
@@ -392,209 +585,249 @@ def simulate(
         and rk_a[2, 0] == 0.0 and rk_a[3, 0] == 0.0 and rk_a[3, 1] == 0.0
         and rk_b[0] == 1.0 / 6.0 and rk_b[1] == 2.0 / 6.0 and rk_b[2] == 2.0 / 6.0 and rk_b[3] == 1.0 / 6.0
     )  # fmt: skip
-    k_stage = np.empty((n_stage, n))
-    x = np.empty(n)
-    xs = np.empty(n)
-    y = np.empty(n_y)
-    u = np.empty(n_u)
-    u_total = np.empty(n_u)
-    f = np.empty(n_u)
-    mode = np.zeros(n_u, dtype=np.int64)
-    direction = np.zeros(n_u)
-    work = np.empty(n_u)
-    A = np.empty((n_u, n_u))
-    rhs_s = np.empty(n_u)
-    dx = np.empty(n)
-    x_new = np.empty(n)
-    x_mid = np.empty(n)
-    hold = np.zeros(n_u)
-    d_tmp = np.empty(dist.shape[3])
+    # y_i = x_j where row i of C is the unit vector e_j (exact: the other terms are 0 x_k)
+    picked = np.full(n_y, -1)
+    for i in range(n_y):
+        for j in range(n):
+            if C[i, j] == 1.0 and picked[i] == -1:
+                picked[i] = j
+            elif C[i, j] != 0.0:
+                picked[i] = -2
+    for i in range(n_y):
+        if picked[i] == -2:
+            picked[i] = -1
+    # per-row working state (rows are permuted when a variant leaves the batch)
+    vid = np.arange(n_batch)
+    x = x0.copy()
+    pw = np.empty((n_batch, p.shape[1]))
+    cpw = cp.copy()
+    cs = cs0.copy()
+    fw = np.empty((n_batch, n_u, FRICTION_FIELDS))
+    bw = np.empty((n_batch, n))
     for b in range(n_batch):
-        pb = p[_row(p.shape[0], b)]
-        cs = cs0[b].copy()
-        cpb = cp[b]
-        rb = ref[_row(ref.shape[0], b)]
-        db = dist[_row(dist.shape[0], b)]
-        nyb = noise_y[_row(noise_y.shape[0], b)]
-        nub = noise_u[_row(noise_u.shape[0], b)]
-        fb = fric[_row(fric.shape[0], b)]
-        bb = bounds[_row(bounds.shape[0], b)]
-        x[:] = x0[b]
-        has_friction = False
+        pw[b] = p[_row(p.shape[0], b)]
+        fw[b] = fric[_row(fric.shape[0], b)]
+        bw[b] = bounds[_row(bounds.shape[0], b)]
+    y = np.empty((n_batch, n_y))
+    r = np.empty((n_batch, n_r))
+    u = np.empty((n_batch, n_u))
+    log = np.full((n_batch, n_log), np.nan)
+    x_new = np.empty((n_batch, n))
+    xs = np.empty((n_batch, n))
+    k1, k2, k3, k4 = np.empty((n_batch, n)), np.empty((n_batch, n)), np.empty((n_batch, n)), np.empty((n_batch, n))
+    mode = np.zeros((n_batch, n_u), dtype=np.int64)
+    direction = np.zeros((n_batch, n_u))
+    hold = np.zeros((n_batch, n_u))
+    frictional = np.zeros(n_batch, dtype=np.bool_)
+    for b in range(n_batch):
         for j in range(n_u):
-            mode[j] = 0
-            if int(fb[j, 0]) != FRICTION_NONE:
-                has_friction = True
-                v0 = x[int(fb[j, 7])]
-                mode[j] = _STUCK if v0 == 0.0 else _SLIP
-                direction[j] = 1.0 if v0 > 0.0 else -1.0
-                hold[j] = x[int(fb[j, 8])]
+            if int(fw[b, j, 0]) != FRICTION_NONE:
+                frictional[b] = True
+                v0 = x[b, int(fw[b, j, 7])]
+                mode[b, j] = _STUCK if v0 == 0.0 else _SLIP
+                direction[b, j] = 1.0 if v0 > 0.0 else -1.0
+                hold[b, j] = x[b, int(fw[b, j, 8])]
         status[b] = STATUS_OK
         fail_index[b] = -1
         n_valid[b] = n_steps + 1
-        for k in range(n_steps + 1):
-            t = k * dt
-            X[b, k] = x
+    # scratch of the one-variant friction path
+    one = (np.empty((1, n)), np.empty((1, n_u)), np.empty((1, p.shape[1])), np.empty((1, n)))
+    xo = np.empty(n)
+    xo_new = np.empty(n)
+    xo_mid = np.empty(n)
+    uo = np.empty(n_u)
+    k_stage = np.empty((n_stage, n))
+    xso = np.empty(n)
+    f = np.empty(n_u)
+    u_total = np.empty(n_u)
+    work = np.empty(n_u)
+    A = np.empty((n_u, n_u))
+    rhs_s = np.empty(n_u)
+    dxo = np.empty(n)
+    d_tmp = np.empty(dist.shape[3])
+    stopped = np.zeros(n_batch, dtype=np.bool_)
+    nb = n_batch
+    # views on the active rows, remade only when a variant leaves
+    xv, yv, rv, uv, xnv, xsv = x, y, r, u, x_new, xs
+    pv, cpv, csv, logv = pw, cpw, cs, log
+    k1v, k2v, k3v, k4v = k1, k2, k3, k4
+    # flat views (the active rows are the leading rows, so the first nb * n entries)
+    size = n_batch * n
+    xf, xsf, xnf = x.reshape(size), xs.reshape(size), x_new.reshape(size)
+    k1f, k2f, k3f, k4f = k1.reshape(size), k2.reshape(size), k3.reshape(size), k4.reshape(size)
+    any_friction = False
+    for b in range(n_batch):
+        any_friction = any_friction or frictional[b]
+    for k in range(n_steps + 1):
+        t = k * dt
+        kny = _row(noise_y.shape[1], k)
+        kr = _row(ref.shape[1], k)
+        for b in range(nb):
+            v = vid[b]
+            for i in range(n):
+                X[v, k, i] = x[b, i]
+            bny = _row(noise_y.shape[0], v)
             for i in range(n_y):
-                acc = 0.0
-                for j in range(n):
-                    acc += C[i, j] * x[j]
-                y[i] = acc + nyb[_row(nyb.shape[0], k), i]
-            u[:] = 0.0
-            controller(t, dt, x, y, rb[_row(rb.shape[0], k)], cpb, cs, u, LOG[b, k], schedules)
-            for i in range(n_u):
-                u[i] += nub[_row(nub.shape[0], k), i]
-            U[b, k] = u
+                if picked[i] >= 0:  # a row of C that selects one state
+                    acc = x[b, picked[i]]
+                else:
+                    acc = 0.0
+                    for j in range(n):
+                        acc += C[i, j] * x[b, j]
+                y[b, i] = acc + noise_y[bny, kny, i]
+            br = _row(ref.shape[0], v)
+            for i in range(n_r):
+                r[b, i] = ref[br, kr, i]
+            for j in range(n_u):
+                u[b, j] = 0.0
+        controller(t, dt, xv, yv, rv, cpv, csv, uv, logv, schedules)
+        knu = _row(noise_u.shape[1], k)
+        kd = _row(dist.shape[1], k)
+        n_stop = 0
+        for b in range(nb):
+            v = vid[b]
+            if record:
+                for i in range(n_log):
+                    LOG[v, k, i] = log[b, i]
+            bnu = _row(noise_u.shape[0], v)
             bad_u = -1
-            for i in range(n_u):
-                if not np.isfinite(u[i]):
-                    bad_u = i
-                    break
+            for j in range(n_u):
+                u[b, j] += noise_u[bnu, knu, j]
+                U[v, k, j] = u[b, j]
+                if bad_u < 0 and not np.isfinite(u[b, j]):
+                    bad_u = j
             if bad_u >= 0:
-                status[b] = STATUS_NONFINITE
-                fail_index[b] = n + bad_u
-                n_valid[b] = k + 1
-                break
-            drow = db[_row(db.shape[0], k)]
-            if has_friction:
-                _update_friction_modes(rhs, t, x, u, pb, drow[0], dist_map, fb, mode, direction, f, work, A, rhs_s, dx)
-                _friction_forces(rhs, t, x, u, pb, drow[0], dist_map, fb, mode, direction, f, work, A, rhs_s, dx)
-                FRICTION[b, k] = f
-            else:
-                FRICTION[b, k] = 0.0
-            if k == n_steps:
-                break
-            _rk_step(
-                rhs,
-                t,
-                dt,
-                0.0,
-                1.0,
-                x,
-                x_new,
-                u,
-                pb,
-                drow,
-                c,
-                dist_map,
-                fb,
-                mode,
-                direction,
-                has_friction,
-                rk_a,
-                rk_b,
-                k_stage,
-                xs,
-                f,
-                u_total,
-                work,
-                A,
-                rhs_s,
-                dx,
-                d_tmp,
-                classic,
-            )
-            if has_friction:
-                # event: a sliding axis whose velocity reaches zero inside the step stops there
-                frac = 1.0
+                status[v] = STATUS_NONFINITE
+                fail_index[v] = n + bad_u
+                n_valid[v] = k + 1
+                stopped[b] = True
+                n_stop += 1
+                continue
+            if frictional[b]:
+                for i in range(n):
+                    xo[i] = x[b, i]
                 for j in range(n_u):
-                    vi = int(fb[j, 7])
-                    if mode[j] == _SLIP and x_new[vi] * direction[j] <= 0.0 and x[vi] != x_new[vi]:
-                        frac = min(frac, x[vi] / (x[vi] - x_new[vi]))
-                if frac < 1.0:
-                    h1 = frac * dt
-                    _rk_step(
+                    uo[j] = u[b, j]
+                for i in range(pw.shape[1]):
+                    one[2][0, i] = pw[b, i]
+                drow = dist[_row(dist.shape[0], v), kd]
+                _update_friction_modes(
+                    rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
+                )
+                _friction_forces(
+                    rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
+                )
+                if record:
+                    for j in range(n_u):
+                        FRICTION[v, k, j] = f[j]
+            elif record:
+                for j in range(n_u):
+                    FRICTION[v, k, j] = 0.0
+        if k < n_steps and nb > n_stop:
+            if classic:  # the classic RK4 written out (the common case)
+                rhs(t, xv, uv, pv, k1v)
+                _add_disturbances(k1v, dist, vid, kd, 0, dist_map)
+                for q in range(nb * n):  # flat over the active rows: vectorisable
+                    xsf[q] = xf[q] + 0.5 * dt * k1f[q]
+                rhs(t + 0.5 * dt, xsv, uv, pv, k2v)
+                _add_disturbances(k2v, dist, vid, kd, 1, dist_map)
+                for q in range(nb * n):
+                    xsf[q] = xf[q] + 0.5 * dt * k2f[q]
+                rhs(t + 0.5 * dt, xsv, uv, pv, k3v)
+                _add_disturbances(k3v, dist, vid, kd, 2, dist_map)
+                for q in range(nb * n):
+                    xsf[q] = xf[q] + dt * k3f[q]
+                rhs(t + dt, xsv, uv, pv, k4v)
+                _add_disturbances(k4v, dist, vid, kd, 3, dist_map)
+                for q in range(nb * n):
+                    xnf[q] = xf[q] + dt / 6.0 * (k1f[q] + 2.0 * (k2f[q] + k3f[q]) + k4f[q])
+            else:
+                _rk_step_batch(
+                    rhs, t, dt, xv, xnv, uv, pv, dist, vid, kd, dist_map, rk_a, rk_b, c, (k1v, k2v, k3v, k4v), xsv
+                )
+            if any_friction:
+                for b in range(nb):
+                    if not frictional[b] or stopped[b]:
+                        continue
+                    v = vid[b]
+                    for i in range(n):
+                        xo[i] = x[b, i]
+                    for j in range(n_u):
+                        uo[j] = u[b, j]
+                    for i in range(pw.shape[1]):
+                        one[2][0, i] = pw[b, i]
+                    _step_with_friction(
                         rhs,
                         t,
-                        h1,
-                        0.0,
-                        frac,
-                        x,
-                        x_mid,
-                        u,
-                        pb,
-                        drow,
+                        dt,
+                        xo,
+                        xo_new,
+                        xo_mid,
+                        uo,
+                        dist[_row(dist.shape[0], v), kd],
                         c,
                         dist_map,
-                        fb,
-                        mode,
-                        direction,
-                        has_friction,
+                        fw[b],
+                        mode[b],
+                        direction[b],
+                        hold[b],
                         rk_a,
                         rk_b,
                         k_stage,
-                        xs,
+                        xso,
                         f,
                         u_total,
                         work,
                         A,
                         rhs_s,
-                        dx,
+                        dxo,
                         d_tmp,
-                        classic,
+                        one,
                     )
+                    for i in range(n):
+                        x_new[b, i] = xo_new[i]
+            for b in range(nb):
+                if stopped[b]:
+                    continue
+                v = vid[b]
+                bad = -1
+                code = STATUS_OK
+                for i in range(n):
+                    x[b, i] = x_new[b, i]
+                    if bad >= 0:
+                        continue
+                    if not np.isfinite(x[b, i]):
+                        bad = i
+                        code = STATUS_NONFINITE
+                    elif abs(x[b, i]) > bw[b, i]:
+                        bad = i
+                        code = STATUS_BOUND
+                if bad >= 0:
+                    status[v] = code
+                    fail_index[v] = bad
+                    n_valid[v] = k + 1
+                    stopped[b] = True
+                    n_stop += 1
+        if n_stop > 0:
+            # move the stopped variants behind the active ones
+            b = 0
+            while b < nb:
+                if not stopped[b]:
+                    b += 1
+                    continue
+                last = nb - 1
+                if b != last:
+                    vid[b], vid[last] = vid[last], vid[b]
+                    stopped[b], stopped[last] = stopped[last], stopped[b]
+                    frictional[b], frictional[last] = frictional[last], frictional[b]
+                    for a in (x, pw, cpw, cs, log, bw, direction, hold):
+                        _swap_rows(a, b, last)
+                    _swap_rows3(fw, b, last)
                     for j in range(n_u):
-                        vi = int(fb[j, 7])
-                        if mode[j] == _SLIP and x_new[vi] * direction[j] <= 0.0:
-                            x_mid[vi] = 0.0
-                            mode[j] = _STUCK
-                            hold[j] = x_mid[int(fb[j, 8])]
-                    _disturbance_at(drow, c, frac, d_tmp)
-                    _update_friction_modes(
-                        rhs, t + h1, x_mid, u, pb, d_tmp, dist_map, fb, mode, direction, f, work, A, rhs_s, dx
-                    )
-                    _rk_step(
-                        rhs,
-                        t + h1,
-                        dt - h1,
-                        frac,
-                        1.0 - frac,
-                        x_mid,
-                        x_new,
-                        u,
-                        pb,
-                        drow,
-                        c,
-                        dist_map,
-                        fb,
-                        mode,
-                        direction,
-                        has_friction,
-                        rk_a,
-                        rk_b,
-                        k_stage,
-                        xs,
-                        f,
-                        u_total,
-                        work,
-                        A,
-                        rhs_s,
-                        dx,
-                        d_tmp,
-                        classic,
-                    )
-                for j in range(n_u):
-                    vi = int(fb[j, 7])
-                    if mode[j] == _SLIP and x_new[vi] * direction[j] <= 0.0:  # a second stop: rare
-                        mode[j] = _STUCK
-                        hold[j] = x_new[int(fb[j, 8])]
-                    if mode[j] == _STUCK:
-                        x_new[vi] = 0.0
-                        x_new[int(fb[j, 8])] = hold[j]
-            x[:] = x_new
-            bad = -1
-            code = STATUS_OK
-            for i in range(n):
-                if not np.isfinite(x[i]):
-                    bad = i
-                    code = STATUS_NONFINITE
-                    break
-                if abs(x[i]) > bb[i]:
-                    bad = i
-                    code = STATUS_BOUND
-                    break
-            if bad >= 0:
-                status[b] = code
-                fail_index[b] = bad
-                n_valid[b] = k + 1
+                        mode[b, j], mode[last, j] = mode[last, j], mode[b, j]
+                nb -= 1
+            if nb == 0:
                 break
+            xv, yv, rv, uv, xnv, xsv = x[:nb], y[:nb], r[:nb], u[:nb], x_new[:nb], xs[:nb]
+            pv, cpv, csv, logv = pw[:nb], cpw[:nb], cs[:nb], log[:nb]
+            k1v, k2v, k3v, k4v = k1[:nb], k2[:nb], k3[:nb], k4[:nb]

@@ -114,7 +114,16 @@ class Variant:
     seed: int
 
     def overrides(self) -> list[str]:
+        """The variant as ``key=value`` overrides (what ``--dry-run`` prints)."""
         return [f"{key}={json.dumps(value)}" for key, value in self.values.items()] + [f"seed={self.seed}"]
+
+    def settings(self) -> list[tuple[list[str], Any]]:
+        """The variant as (key path, value) pairs for :func:`nlcx.config.set_values`."""
+        return [(key.split("."), value) for key, value in self.values.items()] + [(["seed"], self.seed)]
+
+    def resolve(self, base_raw: dict[str, Any]) -> dict[str, Any]:
+        """The variant's raw config: the base with its values and seed set, interpolated."""
+        return cfg.interpolate(cfg.set_values(base_raw, self.settings()))
 
 
 def _lookup(raw: dict[str, Any], key: str) -> Any:
@@ -168,10 +177,17 @@ def expand(spec: SweepSection, base_raw: dict[str, Any]) -> list[Variant]:
     ]
 
 
-def config_hash(raw: dict[str, Any]) -> str:
-    """A stable hash of a resolved config (what identifies a result for resuming)."""
+def config_hash(raw: Any) -> str:
+    """A stable hash of a config (canonical JSON)."""
     text = json.dumps(raw, sort_keys=True, default=str, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def variant_hash(base_digest: str, variant: Variant) -> str:
+    """What identifies a variant's result for resuming: the hash of its base config (before
+    interpolation, so a change anywhere in it counts) with the values and seed it sets; the
+    variant's resolved config is a function of exactly these."""
+    return config_hash({"base": base_digest, "values": variant.values, "seed": variant.seed})
 
 
 @dataclass
@@ -209,8 +225,7 @@ def run_batch(batch: Batch) -> BatchResult:
         row: dict[str, Any] = {"variant": variant.index, "seed": variant.seed, "config_hash": digest}
         row.update({f"value:{k}": v for k, v in variant.values.items()})
         try:
-            exp = cfg.build(cfg.interpolate(cfg.apply_overrides(batch.base_raw, variant.overrides())))
-            prepared_of[pos] = engine.prepare(exp)
+            prepared_of[pos] = engine.prepare(cfg.build(variant.resolve(batch.base_raw)))
             row.update(status="ok", message="")
         except Exception as exc:  # a bad variant is recorded; the others go on
             row.update(status="failed", message=str(exc).splitlines()[0])
@@ -229,7 +244,7 @@ def run_batch(batch: Batch) -> BatchResult:
             new = engine.items_of(prepared_of[pos])
             items += new
             owner += [pos] * len(new)
-        runs = engine.simulate_items(items, prepared_of[members[0]].grid, integrator)
+        runs = engine.simulate_items(items, prepared_of[members[0]].grid, integrator, record_logs=batch.timeseries)
         plants: dict[tuple[Any, ...], list[int]] = {}
         for k, pos in enumerate(owner):
             plant = prepared_of[pos].plant
@@ -277,19 +292,16 @@ def load(path: str | Path, overrides: list[str] | None = None) -> tuple[dict[str
 def plan(base_raw: dict[str, Any], spec: SweepSection) -> tuple[list[Variant], list[str]]:
     """The variants and the hash of each one's resolved config."""
     variants = expand(spec, cfg.interpolate(base_raw))
-    hashes = [config_hash(cfg.interpolate(cfg.apply_overrides(base_raw, v.overrides()))) for v in variants]
-    return variants, hashes
+    base_digest = config_hash(base_raw)
+    return variants, [variant_hash(base_digest, v) for v in variants]
 
 
-def completed(out_dir: Path) -> dict[str, tuple[str, pd.DataFrame]]:
-    """config hash -> (part name, index row) of every variant with a complete result."""
-    done: dict[str, tuple[str, pd.DataFrame]] = {}
+def completed(out_dir: Path) -> set[str]:
+    """Config hashes of every variant with a complete result (status ok or unstable)."""
+    done: set[str] = set()
     for path in sorted((out_dir / "parts").glob("*.index.csv")):
-        part = path.name.removesuffix(".index.csv")
-        index = pd.read_csv(path)
-        for _, row in index.iterrows():
-            if row["status"] in ("ok", "unstable"):
-                done[str(row["config_hash"])] = (part, row)
+        index = pd.read_csv(path, dtype={"config_hash": str})
+        done.update(index.config_hash[index.status.isin(["ok", "unstable"])])
     return done
 
 
@@ -403,25 +415,32 @@ def assemble(
     from nlcx import report
 
     want = {h: v.index for v, h in zip(variants, hashes, strict=True)}
-    index_rows, metric_frames = {}, []
-    for path in sorted((out_dir / "parts").glob("*.index.csv")):
+    indexes, metric_parts = [], []
+    for part_no, path in enumerate(sorted((out_dir / "parts").glob("*.index.csv"))):
         part = path.name.removesuffix(".index.csv")
-        index = pd.read_csv(path, dtype={"config_hash": str})
-        metrics = pd.read_csv(out_dir / "parts" / f"{part}.metrics.csv", keep_default_na=False, na_values=[""])
-        for _, row in index.iterrows():
-            h = str(row["config_hash"])
-            if h in want and (h not in index_rows or index_rows[h]["status"] == "failed"):
-                index_rows[h] = row.to_dict() | {"variant": want[h]}
-                rows = metrics[metrics.variant == row["variant"]].copy()
-                rows["variant"] = want[h]
-                metric_frames.append(rows)
-    index = pd.DataFrame(sorted(index_rows.values(), key=lambda r: r["variant"]))
-    keep = set(index.variant)
-    metrics = pd.concat(metric_frames, ignore_index=True) if metric_frames else pd.DataFrame()
+        indexes.append(pd.read_csv(path, dtype={"config_hash": str}).assign(_part=part_no))
+        metrics_part = pd.read_csv(out_dir / "parts" / f"{part}.metrics.csv", keep_default_na=False, na_values=[""])
+        metric_parts.append(metrics_part.assign(_part=part_no))
+    if not indexes:
+        report.write_csv(out_dir / "sweep.csv", pd.DataFrame())
+        report.write_csv(out_dir / "metrics.csv", pd.DataFrame())
+        return pd.DataFrame()
+    rows = pd.concat(indexes, ignore_index=True)
+    rows = rows[rows.config_hash.isin(want)]
+    # per variant: its first complete result, else its last failure (a retry supersedes a failure)
+    complete = rows[rows.status != "failed"].drop_duplicates("config_hash", keep="first")
+    failed = rows[(rows.status == "failed") & ~rows.config_hash.isin(complete.config_hash)]
+    chosen = pd.concat([complete, failed.drop_duplicates("config_hash", keep="last")])
+    chosen = chosen.assign(new_variant=chosen.config_hash.map(want))
+    metrics = pd.concat(metric_parts, ignore_index=True)
     if not metrics.empty:
-        metrics = metrics[metrics.variant.isin(keep)]
+        link = chosen[["_part", "variant", "new_variant"]]
+        metrics = metrics.merge(link, on=["_part", "variant"], how="inner", sort=False)
+        metrics = metrics.assign(variant=metrics.new_variant).drop(columns=["_part", "new_variant"])
         metrics = metrics.drop_duplicates(subset=["variant", "controller", "signal", "metric"], keep="last")
         metrics = metrics.sort_values("variant", kind="stable").reset_index(drop=True)
+    index = chosen.assign(variant=chosen.new_variant).drop(columns=["_part", "new_variant"])
+    index = index.sort_values("variant", kind="stable").reset_index(drop=True)
     report.write_csv(out_dir / "sweep.csv", index)
     report.write_csv(out_dir / "metrics.csv", metrics)
     resolved = {**cfg.interpolate(base_raw), "sweep": spec.model_dump()}

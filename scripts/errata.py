@@ -32,6 +32,7 @@ sys.path.insert(0, str(ROOT / "scripts"))
 
 import derive_pendulums  # noqa: E402
 
+from nlcx.plants.base import evaluate_rhs  # noqa: E402
 from nlcx.plants.pendulum import PendulumModel, PendulumParams  # noqa: E402
 from nlcx.plants.x_pendulum import XPendulum  # noqa: E402
 from nlcx.plants.xy_pendulum import XYPendulum  # noqa: E402
@@ -117,13 +118,8 @@ def example(model: Model) -> tuple[np.ndarray, np.ndarray]:
 
 
 def accelerations(rhs: Callable, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """q'' of every sample (rows of x and u)."""
-    out = np.empty((x.shape[0], x.shape[1] // 2))
-    dx = np.empty(x.shape[1])
-    for k in range(x.shape[0]):
-        rhs(0.0, np.ascontiguousarray(x[k]), np.ascontiguousarray(u[k]), P, dx)
-        out[k] = dx[1::2]
-    return out
+    """q'' of every sample (rows of x and u), all in one call of the batched right-hand side."""
+    return evaluate_rhs(rhs, x, u, P)[:, 1::2]
 
 
 def term_groups(model: Model, rhs_a: Callable, rhs_b: Callable, X: np.ndarray) -> dict[str, np.ndarray]:

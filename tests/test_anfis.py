@@ -188,9 +188,10 @@ def test_compiled_schedule_equals_predict(trained: dict, clip_inputs: bool) -> N
     expected = np.column_stack(
         [AnfisModel.from_config(raw[k]).predict(X, clip=clip_inputs) for k in ("kp", "ki", "kd")]
     )
-    out = np.zeros(3)
+    row = np.concatenate([np.full(5, 9.0), sp])  # the schedule's parameters at an offset, as in a PID
+    p = np.stack([row, np.zeros_like(row)])
     for x, want in zip(X, expected, strict=True):
-        anfis_gains(0.0, x[0], x[1], sp, out)
+        out = np.array(anfis_gains(0.0, x[0], x[1], p, 0, 5))
         assert np.max(np.abs(out - want)) < 1e-12
     lo, hi = np.array(raw["kp"]["ranges"]).T  # the three models share the training data's ranges
     inside = np.all(np.clip(X, lo, hi) == X, axis=1)
@@ -208,9 +209,8 @@ def test_gain_clipping_and_gauss_models(trained: dict) -> None:
     E, D = np.meshgrid(np.linspace(-3, 3, 15), np.linspace(-20, 8, 15))
     surface = np.stack(anfis_surface(cfg, E, D), axis=-1)
     assert surface[..., 0].min() == 1.2 and surface[..., 0].max() == 1.8
-    out = np.zeros(3)
     for idx in np.ndindex(E.shape):
-        anfis_gains(0.0, E[idx], D[idx], sp, out)
+        out = np.array(anfis_gains(0.0, E[idx], D[idx], sp[None], 0, 0))
         assert np.max(np.abs(out - surface[idx])) < 1e-12
     assert np.allclose(
         surface[..., 2], gauss.predict(np.column_stack([E.ravel(), D.ravel()]), clip=True).reshape(E.shape)

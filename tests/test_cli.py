@@ -150,8 +150,9 @@ def test_third_party_plant_through_an_entry_point(tmp_path: Path) -> None:
 
         @njit(RHS_SIG, cache=False)
         def rhs(t, x, u, p, dx):
-            dx[0] = x[1]
-            dx[1] = -p[0] * p[0] * x[0] + u[0]
+            for b in range(x.shape[0]):  # row b: one variant
+                dx[b, 0] = x[b, 1]
+                dx[b, 1] = -p[b, 0] * p[b, 0] * x[b, 0] + u[b, 0]
 
         class Oscillator(PlantModel):
             """Toy harmonic oscillator from a third-party package."""

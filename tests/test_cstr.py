@@ -106,21 +106,22 @@ def test_single_neuron_against_eqs_5_15_to_5_19(printed_second: bool, printed_ru
     prep = engine.prepare(config.build(raw))
     c = prep.controllers[0]
     hold = round(0.1 / 0.001)
-    cs = c.cs0.copy()
+    cp, cs = c.cp[None].copy(), c.cs0[None].copy()  # one row: one variant
     rng = np.random.default_rng(2)
     e_samples = np.cumsum(rng.normal(size=30)) * 0.1 + 1.0
     u_samples = []
     for k in range(30 * hold):
         e = e_samples[k // hold]
-        u = np.zeros(1)
-        log = np.zeros(4)
+        u = np.zeros((1, 1))
+        log = np.zeros((1, 4))
         neuron_step(
-            k * 0.001, 0.001, np.zeros(2), np.array([1.0 - e]), np.array([1.0]), c.cp, cs, u, log, schedule_slots()
-        )
+            k * 0.001, 0.001, np.zeros((1, 2)), np.array([[1.0 - e]]), np.array([[1.0]]), cp, cs, u, log,
+            schedule_slots(),
+        )  # fmt: skip
         if k % hold == 0:
-            u_samples.append(u[0])
+            u_samples.append(u[0, 0])
         else:
-            assert u[0] == u_samples[-1]  # held between samples
+            assert u[0, 0] == u_samples[-1]  # held between samples
     expected = neuron_reference(e_samples, 0.12, (0.4, 0.35, 0.4), (0.1, 0.1, 0.1), printed_second, printed_rule)
     assert np.allclose(u_samples, expected, rtol=1e-12, atol=1e-12)
 

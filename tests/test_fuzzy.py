@@ -49,9 +49,10 @@ def cfg_of(**extra) -> FuzzyConfig:
 
 
 def compiled(sp: np.ndarray, e: float, edot: float) -> np.ndarray:
-    out = np.zeros(3)
-    fuzzy_gains(0.0, float(e), float(edot), sp, out)
-    return out
+    """The compiled schedule, its tables placed in row 1 after unrelated parameters (offset 3)."""
+    row = np.concatenate([[7.0, -1.0, 2.0], sp])
+    p = np.stack([np.full_like(row, 5.0), row])
+    return np.array(fuzzy_gains(0.0, float(e), float(edot), p, 1, 3))
 
 
 # ------------------------------------------------------------------ tables and rules

@@ -12,6 +12,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from nlcx import config, engine
+from nlcx.plants.base import evaluate_rhs
 from nlcx.plants.pendulum import PendulumModel, PendulumParams
 from nlcx.plants.x_pendulum import XPendulum, x_pendulum_rhs
 from nlcx.plants.xy_pendulum import XYPendulum, xy_printed_rhs
@@ -63,9 +64,7 @@ def open_loop(
 
 
 def rhs(plant: str, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-    dx = np.zeros(len(names(plant)))
-    PLANTS[plant].rhs(0.0, np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(u, dtype=float), PV, dx)
-    return dx
+    return evaluate_rhs(PLANTS[plant].rhs, x, u, PV)
 
 
 def energy(plant: str, x: np.ndarray) -> np.ndarray:

@@ -24,25 +24,15 @@ def build(raw_ctrl: dict) -> engine.Prepared:
 def drive(prep: engine.Prepared, ys: np.ndarray, rs: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Call the compiled step on a prescribed measurement sequence; returns (u, log)."""
     c = prep.controllers[0]
-    cs = c.cs0.copy()
+    cp, cs = c.cp[None].copy(), c.cs0[None].copy()  # one row: one variant
     us, logs = [], []
     for k, (y, r) in enumerate(zip(ys, rs, strict=True)):
-        u = np.zeros(1)
-        log = np.zeros(len(c.log_names))
-        pid_step(
-            k * dt,
-            dt,
-            np.zeros(4),
-            np.ascontiguousarray(y),
-            np.ascontiguousarray(r),
-            c.cp,
-            cs,
-            u,
-            log,
-            schedule_slots(),
-        )
-        us.append(u[0])
-        logs.append(log)
+        u = np.zeros((1, 1))
+        log = np.zeros((1, len(c.log_names)))
+        pid_step(k * dt, dt, np.zeros((1, 4)), np.array([y], dtype=float), np.array([r], dtype=float), cp, cs, u,
+                 log, schedule_slots())  # fmt: skip
+        us.append(u[0, 0])
+        logs.append(log[0])
     return np.array(us), np.array(logs)
 
 

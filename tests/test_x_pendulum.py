@@ -8,6 +8,7 @@ import numpy as np
 from conftest import open_loop_pendulum
 from scipy.integrate import solve_ivp
 
+from nlcx.plants.base import evaluate_rhs
 from nlcx.plants.x_pendulum import XPendulum, XPendulumParams, x_pendulum_rhs
 
 P = XPendulumParams()
@@ -15,9 +16,7 @@ M, m, l, g = P.M, P.m, P.l, P.g
 
 
 def f(x: np.ndarray, F: float) -> np.ndarray:
-    dx = np.zeros(4)
-    x_pendulum_rhs(0.0, np.ascontiguousarray(x, dtype=float), np.array([float(F)]), np.array([M, m, l, g]), dx)
-    return dx
+    return evaluate_rhs(x_pendulum_rhs, x, [F], [M, m, l, g])
 
 
 def test_upright_equilibrium_at_any_base_position() -> None:

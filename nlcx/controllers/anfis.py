@@ -131,16 +131,25 @@ def anfis_eval(sp, off, x1, x2, clip):  # pragma: no cover - compiled
     return fsum / (n * n)  # no rule fires: the mean rule output, as AnfisModel.predict
 
 
+@njit(cache=True, error_model="numpy")
+def _anfis_gain(p, o, which, e, edot, clip):  # pragma: no cover - compiled
+    """Gain ``which`` (0 k_p, 1 k_i, 2 k_d) of the packed schedule at p[o:] (one row), clipped if set."""
+    g = anfis_eval(p, o + int(p[o + 10 + which]), e, edot, clip)
+    h = o + 1 + 3 * which
+    if p[h] != 0.0:
+        g = min(max(g, p[h + 1]), p[h + 2])
+    return g
+
+
 @njit(SCHEDULE_SIG, cache=True, error_model="numpy")
-def anfis_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
-    """sp = (clip inputs, 3 x (clip?, min, max), 3 model offsets, 3 packed models)."""
-    clip = sp[0] != 0.0
-    for o in range(3):
-        g = anfis_eval(sp, int(sp[10 + o]), e, edot, clip)
-        h = 1 + 3 * o
-        if sp[h] != 0.0:
-            g = min(max(g, sp[h + 1]), sp[h + 2])
-        gains[o] = g
+def anfis_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+    """p[row, o:] = (clip inputs, 3 x (clip?, min, max), 3 model offsets, 3 packed models)."""
+    sp = p[row]
+    clip = sp[o] != 0.0
+    kp = _anfis_gain(sp, o, 0, e, edot, clip)
+    ki = _anfis_gain(sp, o, 1, e, edot, clip)
+    kd = _anfis_gain(sp, o, 2, e, edot, clip)
+    return kp, ki, kd
 
 
 def models(cfg: ANFISConfig) -> dict[str, AnfisModel]:

@@ -394,9 +394,48 @@ def _centroid(sp, base, n, piecewise, w0, w1, w2, w3, w4):  # pragma: no cover -
     return 0.5 * (sp[z0] + sp[z0 + n - 1])
 
 
+@njit(cache=True, error_model="numpy")
+def _fuzzy_gain(sp, g, me, md, n, piecewise):  # pragma: no cover - compiled
+    """Output g (0 k_p1, 1 k_i1, 2 k_d1) for the input memberships me (e) and md (de/dt),
+    scaled to its gain range (eqs. 5.12-5.14)."""
+    # W_s = max over the rules concluding set s of min(mu_e, mu_de): max_r min(w_r, mu_s(z))
+    # = min(W_s, mu_s(z)) for the rules sharing s, so 5 clipped sets make the aggregate.
+    w0 = 0.0
+    w1 = 0.0
+    w2 = 0.0
+    w3 = 0.0
+    w4 = 0.0
+    rb = _RULES + 25 * g
+    for i in range(5):
+        a = me[i]
+        if a <= 0.0:
+            continue
+        for j in range(5):
+            w = min(a, md[j])
+            if w <= 0.0:
+                continue
+            s = int(sp[rb + 5 * i + j])
+            if s == 0:
+                w0 = max(w0, w)
+            elif s == 1:
+                w1 = max(w1, w)
+            elif s == 2:
+                w2 = max(w2, w)
+            elif s == 3:
+                w3 = max(w3, w)
+            else:
+                w4 = max(w4, w)
+    k1 = _centroid(sp, _GRID + n + 5 * n * g, n, piecewise, w0, w1, w2, w3, w4)
+    lo = sp[_GAINS + 2 * g]
+    return lo + k1 * (sp[_GAINS + 2 * g + 1] - lo)
+
+
 @njit(SCHEDULE_SIG, cache=True, error_model="numpy")
-def fuzzy_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
-    """Mamdani self-tuning PID, section 5.4.1: (e, de/dt) -> (k_p1, k_i1, k_d1) -> eqs. 5.12-5.14."""
+def fuzzy_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+    """Mamdani self-tuning PID, section 5.4.1: (e, de/dt) -> (k_p1, k_i1, k_d1) -> eqs. 5.12-5.14.
+
+    The packed tables start at p[row, o] (layout above)."""
+    sp = p[row, o:]
     n = int(sp[_N])
     piecewise = sp[_MODE] != 0.0
     emin, emax, dmin, dmax = sp[_UNIV], sp[_UNIV + 1], sp[_UNIV + 2], sp[_UNIV + 3]
@@ -416,37 +455,10 @@ def fuzzy_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
         _mf(v, sp[_DE_SETS + 6], sp[_DE_SETS + 7], 3, dmin, dmax),
         _mf(v, sp[_DE_SETS + 8], sp[_DE_SETS + 9], 4, dmin, dmax),
     )
-    for o in range(3):
-        # W_s = max over the rules concluding set s of min(mu_e, mu_de): max_r min(w_r, mu_s(z))
-        # = min(W_s, mu_s(z)) for the rules sharing s, so 5 clipped sets make the aggregate.
-        w0 = 0.0
-        w1 = 0.0
-        w2 = 0.0
-        w3 = 0.0
-        w4 = 0.0
-        rb = _RULES + 25 * o
-        for i in range(5):
-            a = me[i]
-            if a <= 0.0:
-                continue
-            for j in range(5):
-                w = min(a, md[j])
-                if w <= 0.0:
-                    continue
-                s = int(sp[rb + 5 * i + j])
-                if s == 0:
-                    w0 = max(w0, w)
-                elif s == 1:
-                    w1 = max(w1, w)
-                elif s == 2:
-                    w2 = max(w2, w)
-                elif s == 3:
-                    w3 = max(w3, w)
-                else:
-                    w4 = max(w4, w)
-        k1 = _centroid(sp, _GRID + n + 5 * n * o, n, piecewise, w0, w1, w2, w3, w4)
-        lo = sp[_GAINS + 2 * o]
-        gains[o] = lo + k1 * (sp[_GAINS + 2 * o + 1] - lo)
+    kp = _fuzzy_gain(sp, 0, me, md, n, piecewise)
+    ki = _fuzzy_gain(sp, 1, me, md, n, piecewise)
+    kd = _fuzzy_gain(sp, 2, me, md, n, piecewise)
+    return kp, ki, kd
 
 
 def _tables(cfg: FuzzyConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -59,9 +59,10 @@ class NeuronConfig(ControllerConfig):
 #: cs layout: step counter, e(k-1), e(k-2), u(k-1), w1, w2, w3, started.
 
 
-@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
-def neuron_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
-    """Eqs. 5.15-5.19 at every ``hold``-th simulation step; the input is held in between."""
+@njit(cache=True, error_model="numpy")
+def _neuron_row(t, dt, y, r, cp, cs, u, log):  # pragma: no cover - compiled
+    """Eqs. 5.15-5.19 for one variant at every ``hold``-th simulation step; the input is
+    held in between."""
     yi, ri, ui = int(cp[0]), int(cp[1]), int(cp[2])
     hold = max(1, round(cp[10] / dt))
     if int(cs[0]) % hold == 0:
@@ -100,6 +101,13 @@ def neuron_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover 
     cs[0] += 1.0
     u[ui] = cp[11] + cs[3]
     log[3] = cs[3]
+
+
+@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
+def neuron_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+    """The single-neuron adaptive PID (eqs. 5.15-5.19), every row."""
+    for b in range(y.shape[0]):
+        _neuron_row(t, dt, y[b], r[b], cp[b], cs[b], u[b], log[b])
 
 
 class SingleNeuron(ControllerModel):

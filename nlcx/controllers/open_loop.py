@@ -18,9 +18,10 @@ class OpenLoopConfig(ControllerConfig):
 
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
 def open_loop_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
-    """u_j(t) = r_j(t): the reference channels are the plant inputs."""
-    for j in range(u.shape[0]):
-        u[j] = r[j]
+    """u_j(t) = r_j(t): the reference channels are the plant inputs (every row)."""
+    for b in range(u.shape[0]):
+        for j in range(u.shape[1]):
+            u[b, j] = r[b, j]
 
 
 class OpenLoop(ControllerModel):

@@ -82,51 +82,60 @@ class PIDConfig(ControllerConfig):
 
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
 def pid_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
-    """Multi-loop PID with pluggable gain schedules (one sample, zero-order hold)."""
-    n_loops = int(cp[0])
-    n_u = int(cp[1])
-    for j in range(n_u):
-        u[j] = cp[2 + j]
-    base = 2 + n_u
-    for i in range(n_loops):
-        h = base + LOOP_FIELDS * i
-        yi = int(cp[h])
-        ri = int(cp[h + 1])
-        ui = int(cp[h + 2])
-        sign = cp[h + 3]
-        slot = int(cp[h + 4])
-        filtered = cp[h + 5] != 0.0
-        N = cp[h + 6]
-        on_measurement = cp[h + 7] != 0.0
-        gain_inside = cp[h + 8] != 0.0
-        off = int(cp[h + 9])
-        n_sp = int(cp[h + 10])
-        b_weight = cp[h + 11]
-        c = LOOP_STATE * i
-        e = r[ri] - y[yi]
-        if cs[c + 4] == 0.0:
-            cs[c + 1] = e
-            cs[c + 3] = y[yi]
-            cs[c + 4] = 1.0
-        dv = (cs[c + 3] - y[yi]) if on_measurement else (e - cs[c + 1])
-        if filtered:
-            d = (cs[c + 2] + N * dv) / (1.0 + N * dt)
-            cs[c + 2] = d
-        else:
-            d = dv / dt
-        gains = log[4 * i : 4 * i + 3]
-        schedules[slot](t, e, d, cp[off : off + n_sp], gains)
-        if gain_inside:
-            cs[c] += gains[1] * e * dt
-            integral_term = cs[c]
-        else:
-            cs[c] += e * dt
-            integral_term = gains[1] * cs[c]
-        out = sign * (gains[0] * (b_weight * r[ri] - y[yi]) + integral_term + gains[2] * d)
-        log[4 * i + 3] = out
-        u[ui] += out
-        cs[c + 1] = e
-        cs[c + 3] = y[yi]
+    """Multi-loop PID with pluggable gain schedules, one sample (zero-order hold), every row.
+
+    Per loop i: e = r - y, I += e dt (or k_i e dt with the gain inside), D = de/dt by a
+    backward difference or filtered by N/(s + N), (k_p, k_i, k_d) from the loop's schedule,
+    u += sign (k_p (b r - y) + k_i I + k_d D).
+    """
+    for row in range(x.shape[0]):
+        n_loops = int(cp[row, 0])
+        n_u = int(cp[row, 1])
+        for j in range(n_u):
+            u[row, j] = cp[row, 2 + j]
+        base = 2 + n_u
+        for i in range(n_loops):
+            h = base + LOOP_FIELDS * i
+            yi = int(cp[row, h])
+            ri = int(cp[row, h + 1])
+            ui = int(cp[row, h + 2])
+            sign = cp[row, h + 3]
+            slot = int(cp[row, h + 4])
+            filtered = cp[row, h + 5] != 0.0
+            N = cp[row, h + 6]
+            on_measurement = cp[row, h + 7] != 0.0
+            gain_inside = cp[row, h + 8] != 0.0
+            off = int(cp[row, h + 9])
+            b_weight = cp[row, h + 11]
+            c = LOOP_STATE * i
+            y_i = y[row, yi]
+            r_i = r[row, ri]
+            e = r_i - y_i
+            if cs[row, c + 4] == 0.0:
+                cs[row, c + 1] = e
+                cs[row, c + 3] = y_i
+                cs[row, c + 4] = 1.0
+            dv = (cs[row, c + 3] - y_i) if on_measurement else (e - cs[row, c + 1])
+            if filtered:
+                d = (cs[row, c + 2] + N * dv) / (1.0 + N * dt)
+                cs[row, c + 2] = d
+            else:
+                d = dv / dt
+            kp, ki, kd = schedules[slot](t, e, d, cp, row, off)
+            if gain_inside:
+                cs[row, c] += ki * e * dt
+                integral_term = cs[row, c]
+            else:
+                cs[row, c] += e * dt
+                integral_term = ki * cs[row, c]
+            out = sign * (kp * (b_weight * r_i - y_i) + integral_term + kd * d)
+            log[row, 4 * i] = kp
+            log[row, 4 * i + 1] = ki
+            log[row, 4 * i + 2] = kd
+            log[row, 4 * i + 3] = out
+            u[row, ui] += out
+            cs[row, c + 1] = e
+            cs[row, c + 3] = y_i
 
 
 class MultiLoopPID(ControllerModel):

@@ -98,24 +98,19 @@ def companion_matrices(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def linearize(plant: Plant, x_eq: np.ndarray, u_eq: np.ndarray, rel_step: float = 1e-6) -> tuple[np.ndarray, ...]:
     """(A, B) = (df/dx, df/du) at (x_eq, u_eq) by central differences of ``plant.rhs``."""
     n, m = x_eq.size, u_eq.size
-    f_plus, f_minus = np.zeros(n), np.zeros(n)
-
-    def f(x: np.ndarray, u: np.ndarray, out: np.ndarray) -> np.ndarray:
-        plant.rhs(0.0, np.ascontiguousarray(x), np.ascontiguousarray(u), plant.p, out)
-        return out
-
+    f = plant.f
     A = np.zeros((n, n))
     for j in range(n):
         h = rel_step * max(1.0, abs(x_eq[j]))
         e = np.zeros(n)
         e[j] = h
-        A[:, j] = (f(x_eq + e, u_eq, f_plus) - f(x_eq - e, u_eq, f_minus)) / (2 * h)
+        A[:, j] = (f(x_eq + e, u_eq) - f(x_eq - e, u_eq)) / (2 * h)
     B = np.zeros((n, m))
     for j in range(m):
         h = rel_step * max(1.0, abs(u_eq[j]))
         e = np.zeros(m)
         e[j] = h
-        B[:, j] = (f(x_eq, u_eq + e, f_plus) - f(x_eq, u_eq - e, f_minus)) / (2 * h)
+        B[:, j] = (f(x_eq, u_eq + e) - f(x_eq, u_eq - e)) / (2 * h)
     return A, B
 
 
@@ -387,9 +382,9 @@ def design_preview(
 # --------------------------------------------------------------------------- run time
 
 
-@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
-def preview_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
-    """Preview servo (eq. 5.21), sampled every Ts = N dt and held in between.
+@njit(cache=True, error_model="numpy")
+def _preview_row(t, dt, x, r, cp, cs, u, log):  # pragma: no cover - compiled
+    """Preview servo (eq. 5.21) for one variant, sampled every Ts = N dt and held in between.
 
     cp: n, m, h, integrator, Ts, y*, x* (n), u* (m), c (n), Kx (m x n), Kv (m), Kd (m x (h+1)).
     cs: counter, v, u (m), preview term (m), feedback term (m).
@@ -437,6 +432,13 @@ def preview_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover
         log[3 * j + 1] = cs[STATE_HEAD + m + j]
         log[3 * j + 2] = cs[STATE_HEAD + 2 * m + j]
     log[3 * m] = cs[1]
+
+
+@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
+def preview_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+    """The preview servo (eq. 5.21), every row (full state information: it reads x)."""
+    for b in range(x.shape[0]):
+        _preview_row(t, dt, x[b], r[b], cp[b], cs[b], u[b], log[b])
 
 
 class PreviewConfig(ControllerConfig):

@@ -72,39 +72,60 @@ class ErrorAGSConfig(AGSConfig):
     error: Literal["abs", "signed"] = "abs"
 
 
-@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
-def constant_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
-    """Conventional PID: fixed gains, sp = (k_p, k_i, k_d)."""
-    gains[0] = sp[0]
-    gains[1] = sp[1]
-    gains[2] = sp[2]
+@njit(cache=True, error_model="numpy")
+def _decays(k_p, k_i, k_d, s):  # pragma: no cover - compiled
+    """(exp(-k_p s), exp(-k_i s), exp(-k_d s)), each exponential evaluated once per distinct
+    rate (the thesis's schedules share k between k_p and k_i)."""
+    a_p = math.exp(-k_p * s)
+    a_i = a_p if k_i == k_p else math.exp(-k_i * s)
+    if k_d == k_p:
+        a_d = a_p
+    elif k_d == k_i:
+        a_d = a_i
+    else:
+        a_d = math.exp(-k_d * s)
+    return a_p, a_i, a_d
 
 
 @njit(SCHEDULE_SIG, cache=True, error_model="numpy")
-def time_ags_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
-    """Eqs. 2.17-2.19, sp = (kp_min, kp_max, ki_min, ki_max, kd_min, kd_max, k_p, k_i, k_d).
+def constant_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+    """Conventional PID: fixed gains, p[row, o:] = (k_p, k_i, k_d)."""
+    return p[row, o], p[row, o + 1], p[row, o + 2]
+
+
+@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
+def time_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+    """Eqs. 2.17-2.19, p[row, o:] = (kp_min, kp_max, ki_min, ki_max, kd_min, kd_max, k_p, k_i, k_d).
 
     k_p(t) = kp_min + (kp_max - kp_min) exp(-k t)     (2.17)
     k_i(t) = ki_max - (ki_max - ki_min) exp(-k t)     (2.18)
     k_d(t) = kd_min + (kd_max - kd_min) exp(-k t)     (2.19)
     """
-    gains[0] = sp[0] + (sp[1] - sp[0]) * math.exp(-sp[6] * t)
-    gains[1] = sp[3] - (sp[3] - sp[2]) * math.exp(-sp[7] * t)
-    gains[2] = sp[4] + (sp[5] - sp[4]) * math.exp(-sp[8] * t)
+    kp_min, kp_max, ki_min, ki_max = p[row, o], p[row, o + 1], p[row, o + 2], p[row, o + 3]
+    kd_min, kd_max = p[row, o + 4], p[row, o + 5]
+    a_p, a_i, a_d = _decays(p[row, o + 6], p[row, o + 7], p[row, o + 8], t)
+    kp = kp_min + (kp_max - kp_min) * a_p
+    ki = ki_max - (ki_max - ki_min) * a_i
+    kd = kd_min + (kd_max - kd_min) * a_d
+    return kp, ki, kd
 
 
 @njit(SCHEDULE_SIG, cache=True, error_model="numpy")
-def error_ags_gains(t, e, edot, sp, gains):  # pragma: no cover - compiled
-    """Eqs. 2.20-2.22 on s = |e| (sp[9] = 1) or s = e (sp[9] = 0), sp as for time-AGS.
+def error_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+    """Eqs. 2.20-2.22 on s = |e| (p[row, o + 9] = 1) or s = e (0), p[row, o:] as for time-AGS.
 
     k_p = kp_max - (kp_max - kp_min) exp(-k s)     (2.20)
     k_i = ki_min - (ki_min - ki_max) exp(-k s)     (2.21)
     k_d = kd_max - (kd_max - kd_min) exp(-k s)     (2.22)
     """
-    s = abs(e) if sp[9] != 0.0 else e
-    gains[0] = sp[1] - (sp[1] - sp[0]) * math.exp(-sp[6] * s)
-    gains[1] = sp[2] - (sp[2] - sp[3]) * math.exp(-sp[7] * s)
-    gains[2] = sp[5] - (sp[5] - sp[4]) * math.exp(-sp[8] * s)
+    kp_min, kp_max, ki_min, ki_max = p[row, o], p[row, o + 1], p[row, o + 2], p[row, o + 3]
+    kd_min, kd_max = p[row, o + 4], p[row, o + 5]
+    s = abs(e) if p[row, o + 9] != 0.0 else e
+    a_p, a_i, a_d = _decays(p[row, o + 6], p[row, o + 7], p[row, o + 8], s)
+    kp = kp_max - (kp_max - kp_min) * a_p
+    ki = ki_min - (ki_min - ki_max) * a_i
+    kd = kd_max - (kd_max - kd_min) * a_d
+    return kp, ki, kd
 
 
 class ScheduleModel:

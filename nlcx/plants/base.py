@@ -82,6 +82,10 @@ class Plant:
     def state_index(self, name: str) -> int:
         return self.state_names.index(name)
 
+    def f(self, x: Any, u: Any, t: float = 0.0) -> np.ndarray:
+        """dx/dt = f(t, x, u; p) for one state (1-D x, u) or for each row of 2-D x, u."""
+        return evaluate_rhs(self.rhs, x, u, self.p, t)
+
     def unit_of(self, name: str) -> str:
         for sig in (*self.states, *self.inputs, *self.outputs):
             if sig.name == name:
@@ -213,16 +217,9 @@ def equilibrium_input(plant: Plant, x_eq: np.ndarray | None = None, tol: float =
     n, m = len(plant.states), len(plant.inputs)
     if x_eq is None:
         x_eq = plant.x_op if plant.x_op is not None else np.zeros(n)
-    x = np.ascontiguousarray(x_eq, dtype=float)
-    f0 = np.zeros(n)
-    plant.rhs(0.0, x, np.zeros(m), plant.p, f0)
-    B = np.zeros((n, m))
-    for j in range(m):
-        e = np.zeros(m)
-        e[j] = 1.0
-        fj = np.zeros(n)
-        plant.rhs(0.0, x, e, plant.p, fj)
-        B[:, j] = fj - f0
+    x = np.asarray(x_eq, dtype=float)
+    f0 = plant.f(x, np.zeros(m))
+    B = np.column_stack([plant.f(x, e) - f0 for e in np.eye(m)])
     u, *_ = np.linalg.lstsq(B, -f0, rcond=None)
     residual = f0 + B @ u
     if np.max(np.abs(residual)) > tol * max(1.0, np.max(np.abs(f0))):
@@ -241,11 +238,51 @@ def linearize(
     x0 = (plant.x_op if plant.x_op is not None else np.zeros(n)) if x_op is None else np.asarray(x_op, float)
     u0 = equilibrium_input(plant, x0) if u_op is None else np.asarray(u_op, float)
 
-    def f(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        out = np.zeros(n)
-        plant.rhs(0.0, np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(u, dtype=float), plant.p, out)
-        return out
-
+    f = plant.f
     A = np.column_stack([(f(x0 + h * e, u0) - f(x0 - h * e, u0)) / (2 * h) for e in np.eye(n)])
     B = np.column_stack([(f(x0, u0 + h * e) - f(x0, u0 - h * e)) / (2 * h) for e in np.eye(m)])
     return A, B, plant.C.copy()
+
+
+def evaluate_rhs(rhs: Any, x: Any, u: Any, p: Any, t: float = 0.0) -> np.ndarray:
+    """Call a compiled right-hand side (:data:`nlcx.kernel.RHS_SIG`, rows are variants) on one
+    state (1-D x, u; returns 1-D) or on rows of states (2-D; p one row or one per row)."""
+    x = np.asarray(x, dtype=float)
+    single = x.ndim == 1
+    X = np.atleast_2d(x).copy()
+
+    def rows(a: Any) -> np.ndarray:
+        a = np.atleast_2d(np.asarray(a, dtype=float))
+        return np.broadcast_to(a, (X.shape[0], a.shape[1])).copy()
+
+    U, P = rows(u), rows(p)
+    out = np.zeros_like(X)
+    rhs(float(t), X, U, P, out)
+    return out[0] if single else out
+
+
+_ROWS_CHECKED: set[int] = set()
+
+
+def check_rows(plant: Plant) -> None:
+    """Guard against a right-hand side written for a single state: two different rows
+    evaluated together must equal each row evaluated alone (rows are variants, see
+    :data:`nlcx.kernel.RHS_SIG`). Checked once per compiled function."""
+    key = id(plant.rhs)
+    if key in _ROWS_CHECKED:
+        return
+    n, m = len(plant.states), len(plant.inputs)
+    base = plant.x_op if plant.x_op is not None else np.zeros(n)
+    X = np.stack([base, base + 0.01 * (1 + np.arange(n))])
+    U = np.stack([np.zeros(m), 0.5 + np.arange(m)])
+    P = np.stack([plant.p, plant.p * 1.01])
+    together = evaluate_rhs(plant.rhs, X, U, P)
+    alone = np.stack([evaluate_rhs(plant.rhs, X[i], U[i], P[i]) for i in range(2)])
+    if not np.array_equal(together, alone, equal_nan=True):
+        raise ConfigError(
+            "plant.name",
+            plant.name,
+            "its right-hand side does not evaluate the rows of x independently; it must loop "
+            "over the rows (variants) as nlcx.kernel.RHS_SIG documents",
+        )
+    _ROWS_CHECKED.add(key)

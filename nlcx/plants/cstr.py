@@ -33,12 +33,13 @@ class CSTRParams(PlantParams):
 
 @njit(RHS_SIG, cache=True, error_model="numpy")
 def cstr_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-    """Eqs. 5.1-5.2 with p = (k1, k2, k3, C_Af) and u = (F/V,)."""
-    k1, k2, k3, caf = p[0], p[1], p[2], p[3]
-    ca, cb = x[0], x[1]
-    d = u[0]
-    dx[0] = d * (caf - ca) - k1 * ca - k3 * ca * ca
-    dx[1] = -d * cb + k1 * ca - k2 * cb
+    """Eqs. 5.1-5.2 for every row b: p[b] = (k1, k2, k3, C_Af), u[b] = (F/V,)."""
+    for b in range(x.shape[0]):
+        k1, k2, k3, caf = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        ca, cb = x[b, 0], x[b, 1]
+        d = u[b, 0]
+        dx[b, 0] = d * (caf - ca) - k1 * ca - k3 * ca * ca  # eq. 5.1
+        dx[b, 1] = -d * cb + k1 * ca - k2 * cb  # eq. 5.2
 
 
 def steady_state(params: CSTRParams) -> tuple[float, float]:

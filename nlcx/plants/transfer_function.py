@@ -49,14 +49,16 @@ class TransferFunctionParams(PlantParams):
 
 @njit(RHS_SIG, cache=True, error_model="numpy")
 def companion_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-    """Controllable canonical form: x_i' = x_{i+1}, x_n' = -sum_j a_j x_{j+1} + u, p = a_0..a_{n-1}."""
-    n = x.shape[0]
-    acc = u[0]
-    for j in range(n):
-        acc -= p[j] * x[j]
-    for i in range(n - 1):
-        dx[i] = x[i + 1]
-    dx[n - 1] = acc
+    """Controllable canonical form for every row b: x_i' = x_{i+1},
+    x_n' = -sum_j a_j x_{j+1} + u, p[b] = a_0..a_{n-1}."""
+    n = x.shape[1]
+    for b in range(x.shape[0]):
+        acc = u[b, 0]
+        for j in range(n):
+            acc -= p[b, j] * x[b, j]
+        for i in range(n - 1):
+            dx[b, i] = x[b, i + 1]
+        dx[b, n - 1] = acc
 
 
 def canonical_form(num: list[float], den: list[float]) -> tuple[np.ndarray, np.ndarray]:

@@ -34,17 +34,18 @@ class XPendulumParams(PendulumParams):
 
 @njit(RHS_SIG, cache=True, error_model="numpy")
 def x_pendulum_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-    """Eqs. 2.8-2.11 as printed, with p = (M, m, l, g) and u = (F_x,)."""
-    M, m, l, g = p[0], p[1], p[2], p[3]
-    theta, theta_dot = x[2], x[3]
-    F = u[0]
-    s = math.sin(theta)
-    c = math.cos(theta)
-    den = M + m * s * s
-    dx[0] = x[1]  # eq. 2.8
-    dx[1] = (-m * g * c * s + m * l * s * theta_dot * theta_dot + F) / den  # eq. 2.9
-    dx[2] = theta_dot  # eq. 2.10
-    dx[3] = (-m * l * c * s * theta_dot * theta_dot - c * F + (M + m) * g * s) / (l * den)  # eq. 2.11
+    """Eqs. 2.8-2.11 as printed, for every row b: p[b] = (M, m, l, g), u[b] = (F_x,)."""
+    for b in range(x.shape[0]):
+        M, m, l, g = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        theta, theta_dot = x[b, 2], x[b, 3]
+        F = u[b, 0]
+        s = math.sin(theta)
+        c = math.cos(theta)
+        den = M + m * s * s
+        dx[b, 0] = x[b, 1]  # eq. 2.8
+        dx[b, 1] = (-m * g * c * s + m * l * s * theta_dot * theta_dot + F) / den  # eq. 2.9
+        dx[b, 2] = theta_dot  # eq. 2.10
+        dx[b, 3] = (-m * l * c * s * theta_dot * theta_dot - c * F + (M + m) * g * s) / (l * den)  # eq. 2.11
 
 
 #: The printed variant under the name the other pendulums use.

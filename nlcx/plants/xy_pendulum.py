@@ -22,8 +22,8 @@ from nlcx.plants.generated.pendulums import xy_derived_rhs, xy_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
 
 
-@njit(RHS_SIG, cache=True, error_model="numpy")
-def xy_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def _xy_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 3.11-3.18 transcribed literally (typos included), p = (M, m, l, g), u = (F_x, F_y)."""
     M, m, l, g = p[0], p[1], p[2], p[3]
     F_x, F_y = u[0], u[1]
@@ -70,6 +70,13 @@ def xy_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
         - M * m * l * c5**3 * s7 * c7 * x8**2
         - M * m * l * c5 * s7 * c7 * x6**2
     ) / den
+
+
+@njit(RHS_SIG, cache=True, error_model="numpy")
+def xy_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
+    """The printed equations for every row (variant) b of x (one row: :func:`_xy_printed_row`)."""
+    for b in range(x.shape[0]):
+        _xy_printed_row(t, x[b], u[b], p[b], dx[b])
 
 
 class XYPendulum(PendulumModel):

@@ -23,8 +23,8 @@ from nlcx.plants.generated.pendulums import xyz_derived_rhs, xyz_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
 
 
-@njit(RHS_SIG, cache=True, error_model="numpy")
-def xyz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def _xyz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 4.18-4.27 transcribed literally (typos included), p = (M, m, l, g), u = (F_x, F_y, F_z).
 
     Eq. 4.21 writes sin(theta) for sin(x7); eq. 4.25 has x9^2 where x10^2 is expected.
@@ -90,6 +90,13 @@ def xyz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
         + 2 * m**2 * l * s7**2 * c7 * s9 * c9 * x8**2
         + 2 * m * l * (M + m) * c7 * s7**2 * s9 * c9 * x10**2
     ) / (M**2 * l * c7)
+
+
+@njit(RHS_SIG, cache=True, error_model="numpy")
+def xyz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
+    """The printed equations for every row (variant) b of x (one row: :func:`_xyz_printed_row`)."""
+    for b in range(x.shape[0]):
+        _xyz_printed_row(t, x[b], u[b], p[b], dx[b])
 
 
 class XYZPendulum(PendulumModel):

@@ -23,8 +23,8 @@ from nlcx.plants.generated.pendulums import xz_derived_rhs, xz_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
 
 
-@njit(RHS_SIG, cache=True, error_model="numpy")
-def xz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def _xz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 3.42-3.47 transcribed literally (typos included), p = (M, m, l, g), u = (F_x, F_z).
 
     The printed equations write theta and theta_dot for x5 and x6.
@@ -43,6 +43,13 @@ def xz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     ) / (M * (M + m))
     dx[4] = x[5]  # eq. 3.46
     dx[5] = (-c * F_x + s * F_z) / (M * l)  # eq. 3.47
+
+
+@njit(RHS_SIG, cache=True, error_model="numpy")
+def xz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
+    """The printed equations for every row (variant) b of x (one row: :func:`_xz_printed_row`)."""
+    for b in range(x.shape[0]):
+        _xz_printed_row(t, x[b], u[b], p[b], dx[b])
 
 
 class XZPendulum(PendulumModel):
