@@ -15,6 +15,9 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e ".[test,dask]"
+	# byte-compile nlcx as a regular install does (an editable one leaves it to the first import,
+	# which cannot write it where PYTHONDONTWRITEBYTECODE is set)
+	$(BIN)/python -m compileall -q nlcx
 	touch $(STAMP)
 
 ## install: create .venv and install nlcx with its test tools
