@@ -213,8 +213,11 @@ def _set_threads() -> None:
         os.environ[name] = "1"
 
 
-def run_batch(batch: Batch) -> BatchResult:
-    """Simulate a batch of variants and write its part files (the metrics, then the index)."""
+def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
+    """Simulate a batch of variants and write its part files (the metrics, then the index).
+
+    ``return_metrics=False`` leaves the metrics out of the result (a pool worker's result
+    travels back pickled; the sweep reads the metrics from the part files)."""
     from nlcx import engine, report
 
     _set_threads()
@@ -275,7 +278,7 @@ def run_batch(batch: Batch) -> BatchResult:
     part = f"{batch.variants[0].index:06d}-{digest}"
     report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", metrics)
     report.write_csv(batch.out_dir / "parts" / f"{part}.index.csv", pd.DataFrame(rows))  # last: marks it complete
-    return BatchResult(index=rows, metrics=metrics, part=part)
+    return BatchResult(index=rows, metrics=metrics if return_metrics else None, part=part)
 
 
 def load(path: str | Path, overrides: list[str] | None = None) -> tuple[dict[str, Any], SweepSection, Any]:
@@ -378,7 +381,7 @@ def run(
         if pool is None:
             results = (run_batch(b) for b in batches)
         else:
-            futures: list[Future[BatchResult]] = [pool.submit(run_batch, b) for b in batches]
+            futures: list[Future[BatchResult]] = [pool.submit(run_batch, b, False) for b in batches]
             results = (f.result() for f in as_completed(futures))
         for result in results:
             finished += len(result.index)

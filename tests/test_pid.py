@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
-from nlcx import config, engine
-from nlcx.controllers.pid import LOOP_STATE, pid_step
+from nlcx import config, engine, registry
+from nlcx.controllers.pid import LOOP_FIELDS, LOOP_STATE, pid_step
 from nlcx.controllers.schedules import schedule_slots
 
 
@@ -145,3 +147,46 @@ def test_integral_with_time_varying_gain(where: str) -> None:
 def test_state_layout_matches_loop_count() -> None:
     prep = build(CONST)
     assert prep.controllers[0].cs0.size == 2 * LOOP_STATE
+
+
+@pytest.mark.parametrize("kind", ["constant", "time_ags", "error_ags"])
+def test_built_in_schedules_called_directly_equal_the_slot_table(x_error_raw: dict, kind: str) -> None:
+    """The PID calls the built-in schedules directly; the same schedule registered by a third
+    party (a distinct compiled function) goes through its slot. Both give the same run."""
+    from typing import Literal
+
+    from numba import njit
+    from pydantic import create_model
+
+    from nlcx.controllers import schedules as sch
+    from nlcx.kernel import SCHEDULE_SIG
+
+    builtin = registry.schedules.get(kind)
+    copy_fn = njit(SCHEDULE_SIG, error_model="numpy")(builtin.gains.py_func)
+    name = f"{kind}_third_party"
+    config_model = create_model(f"Config_{name}", __base__=builtin.Config, kind=(Literal[name], name))
+    attributes = {"gains": staticmethod(copy_fn), "Config": config_model}
+    third_party = type("ThirdParty", (type(builtin),), attributes)()
+    registry.schedules.register(name, third_party)
+    try:
+        x_error_raw["controllers"].pop("conventional")
+        loops = x_error_raw["controllers"]["proposed"]["loops"]
+        ags = {k: v for k, v in loops["theta"]["schedule"].items() if k in ("kp", "ki", "kd", "rate")}
+        schedule = {
+            "constant": {"kind": "constant", "kp": 30, "ki": 2.5, "kd": 4},
+            "time_ags": {**ags, "kind": "time_ags"},
+            "error_ags": {**ags, "kind": "error_ags", "error": "abs"},
+        }[kind]
+        loops["theta"]["schedule"] = schedule
+        direct = engine.run_experiment(config.build(copy.deepcopy(x_error_raw)))
+        loops["theta"]["schedule"] = {**schedule, "kind": name}
+        via_slot = engine.run_experiment(config.build(x_error_raw))
+        cp_direct, cp_slot = direct.prepared.controllers[0].cp, via_slot.prepared.controllers[0].cp
+        field = 2 + 1 + LOOP_FIELDS * 0 + 12  # first loop (theta), "direct" field
+        assert cp_direct[field] != 0 and cp_slot[field] == 0
+        (a,), (b,) = direct.runs, via_slot.runs
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.log, b.log)
+        assert sch.schedule_index(name) >= 5
+    finally:
+        registry.schedules._entries.pop(name)
+        registry.schedules._loaded.pop(name, None)
