@@ -513,6 +513,20 @@ def _rk_step_batch(rhs, t, h, x, x_out, u, p, dist, vid, kd, dist_map, rk_a, rk_
 
 
 @njit(cache=True, error_model="numpy")
+def _swap_variants(i, j, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode):  # pragma: no cover
+    """Exchange the working rows i and j (two variants' state, parameters and bookkeeping)."""
+    if i == j:
+        return
+    vid[i], vid[j] = vid[j], vid[i]
+    stopped[i], stopped[j] = stopped[j], stopped[i]
+    for a in (x, pw, cpw, cs, log, bw, direction, hold):
+        _swap_rows(a, i, j)
+    _swap_rows3(fw, i, j)
+    for c in range(mode.shape[1]):
+        mode[i, c], mode[j, c] = mode[j, c], mode[i, c]
+
+
+@njit(cache=True, error_model="numpy")
 def _swap_rows(a, i, j):  # pragma: no cover - compiled
     """Exchange rows i and j of a 2-D array."""
     for c in range(a.shape[1]):
@@ -597,17 +611,39 @@ def simulate(
         if picked[i] == -2:
             picked[i] = -1
     # per-row working state (rows are permuted when a variant leaves the batch)
-    vid = np.arange(n_batch)
-    x = x0.copy()
+    # rows: the variants without friction first (stepped together), then those with friction
+    # (stepped one by one); a variant that stops moves behind the active rows
+    has_friction = np.zeros(n_batch, dtype=np.bool_)
+    for v in range(n_batch):
+        fv = fric[_row(fric.shape[0], v)]
+        for j in range(n_u):
+            if int(fv[j, 0]) != FRICTION_NONE:
+                has_friction[v] = True
+    vid = np.empty(n_batch, dtype=np.int64)
+    n_free = 0
+    for v in range(n_batch):
+        if not has_friction[v]:
+            vid[n_free] = v
+            n_free += 1
+    b = n_free
+    for v in range(n_batch):
+        if has_friction[v]:
+            vid[b] = v
+            b += 1
+    x = np.empty((n_batch, n))
     pw = np.empty((n_batch, p.shape[1]))
-    cpw = cp.copy()
-    cs = cs0.copy()
+    cpw = np.empty((n_batch, cp.shape[1]))
+    cs = np.empty((n_batch, cs0.shape[1]))
     fw = np.empty((n_batch, n_u, FRICTION_FIELDS))
     bw = np.empty((n_batch, n))
     for b in range(n_batch):
-        pw[b] = p[_row(p.shape[0], b)]
-        fw[b] = fric[_row(fric.shape[0], b)]
-        bw[b] = bounds[_row(bounds.shape[0], b)]
+        v = vid[b]
+        x[b] = x0[v]
+        pw[b] = p[_row(p.shape[0], v)]
+        cpw[b] = cp[v]
+        cs[b] = cs0[v]
+        fw[b] = fric[_row(fric.shape[0], v)]
+        bw[b] = bounds[_row(bounds.shape[0], v)]
     y = np.empty((n_batch, n_y))
     r = np.empty((n_batch, n_r))
     u = np.empty((n_batch, n_u))
@@ -618,11 +654,9 @@ def simulate(
     mode = np.zeros((n_batch, n_u), dtype=np.int64)
     direction = np.zeros((n_batch, n_u))
     hold = np.zeros((n_batch, n_u))
-    frictional = np.zeros(n_batch, dtype=np.bool_)
     for b in range(n_batch):
         for j in range(n_u):
             if int(fw[b, j, 0]) != FRICTION_NONE:
-                frictional[b] = True
                 v0 = x[b, int(fw[b, j, 7])]
                 mode[b, j] = _STUCK if v0 == 0.0 else _SLIP
                 direction[b, j] = 1.0 if v0 > 0.0 else -1.0
@@ -647,17 +681,15 @@ def simulate(
     d_tmp = np.empty(dist.shape[3])
     stopped = np.zeros(n_batch, dtype=np.bool_)
     nb = n_batch
-    # views on the active rows, remade only when a variant leaves
-    xv, yv, rv, uv, xnv, xsv = x, y, r, u, x_new, xs
-    pv, cpv, csv, logv = pw, cpw, cs, log
-    k1v, k2v, k3v, k4v = k1, k2, k3, k4
-    # flat views (the active rows are the leading rows, so the first nb * n entries)
+    # views on the active rows (the controller's) and on the frictionless ones (stepped
+    # together), remade only when a variant leaves
+    yv, rv, uv, xv, cpv, csv, logv = y, r, u, x, cpw, cs, log
+    xr, xnr, xsr, ur, pr = x[:n_free], x_new[:n_free], xs[:n_free], u[:n_free], pw[:n_free]
+    k1r, k2r, k3r, k4r = k1[:n_free], k2[:n_free], k3[:n_free], k4[:n_free]
+    # flat views: the rows stepped together are the leading rows, so the first n_free * n entries
     size = n_batch * n
     xf, xsf, xnf = x.reshape(size), xs.reshape(size), x_new.reshape(size)
     k1f, k2f, k3f, k4f = k1.reshape(size), k2.reshape(size), k3.reshape(size), k4.reshape(size)
-    any_friction = False
-    for b in range(n_batch):
-        any_friction = any_friction or frictional[b]
     for k in range(n_steps + 1):
         t = k * dt
         kny = _row(noise_y.shape[1], k)
@@ -703,7 +735,7 @@ def simulate(
                 stopped[b] = True
                 n_stop += 1
                 continue
-            if frictional[b]:
+            if b >= n_free:
                 for i in range(n):
                     xo[i] = x[b, i]
                 for j in range(n_u):
@@ -724,30 +756,30 @@ def simulate(
                 for j in range(n_u):
                     FRICTION[v, k, j] = 0.0
         if k < n_steps and nb > n_stop:
-            if classic:  # the classic RK4 written out (the common case)
-                rhs(t, xv, uv, pv, k1v)
-                _add_disturbances(k1v, dist, vid, kd, 0, dist_map)
-                for q in range(nb * n):  # flat over the active rows: vectorisable
+            if n_free > 0 and classic:  # the classic RK4 written out (the common case)
+                rhs(t, xr, ur, pr, k1r)
+                _add_disturbances(k1r, dist, vid, kd, 0, dist_map)
+                for q in range(n_free * n):  # flat over the rows: vectorisable
                     xsf[q] = xf[q] + 0.5 * dt * k1f[q]
-                rhs(t + 0.5 * dt, xsv, uv, pv, k2v)
-                _add_disturbances(k2v, dist, vid, kd, 1, dist_map)
-                for q in range(nb * n):
+                rhs(t + 0.5 * dt, xsr, ur, pr, k2r)
+                _add_disturbances(k2r, dist, vid, kd, 1, dist_map)
+                for q in range(n_free * n):
                     xsf[q] = xf[q] + 0.5 * dt * k2f[q]
-                rhs(t + 0.5 * dt, xsv, uv, pv, k3v)
-                _add_disturbances(k3v, dist, vid, kd, 2, dist_map)
-                for q in range(nb * n):
+                rhs(t + 0.5 * dt, xsr, ur, pr, k3r)
+                _add_disturbances(k3r, dist, vid, kd, 2, dist_map)
+                for q in range(n_free * n):
                     xsf[q] = xf[q] + dt * k3f[q]
-                rhs(t + dt, xsv, uv, pv, k4v)
-                _add_disturbances(k4v, dist, vid, kd, 3, dist_map)
-                for q in range(nb * n):
+                rhs(t + dt, xsr, ur, pr, k4r)
+                _add_disturbances(k4r, dist, vid, kd, 3, dist_map)
+                for q in range(n_free * n):
                     xnf[q] = xf[q] + dt / 6.0 * (k1f[q] + 2.0 * (k2f[q] + k3f[q]) + k4f[q])
-            else:
+            elif n_free > 0:
                 _rk_step_batch(
-                    rhs, t, dt, xv, xnv, uv, pv, dist, vid, kd, dist_map, rk_a, rk_b, c, (k1v, k2v, k3v, k4v), xsv
+                    rhs, t, dt, xr, xnr, ur, pr, dist, vid, kd, dist_map, rk_a, rk_b, c, (k1r, k2r, k3r, k4r), xsr
                 )
-            if any_friction:
-                for b in range(nb):
-                    if not frictional[b] or stopped[b]:
+            if nb > n_free:
+                for b in range(n_free, nb):
+                    if stopped[b]:
                         continue
                     v = vid[b]
                     for i in range(n):
@@ -809,25 +841,23 @@ def simulate(
                     stopped[b] = True
                     n_stop += 1
         if n_stop > 0:
-            # move the stopped variants behind the active ones
+            # move the stopped variants behind the active ones, keeping the frictionless rows
+            # in front: a stopped frictionless row trades places with the last frictionless
+            # row, which then trades with the last active row
             b = 0
             while b < nb:
                 if not stopped[b]:
                     b += 1
                     continue
-                last = nb - 1
-                if b != last:
-                    vid[b], vid[last] = vid[last], vid[b]
-                    stopped[b], stopped[last] = stopped[last], stopped[b]
-                    frictional[b], frictional[last] = frictional[last], frictional[b]
-                    for a in (x, pw, cpw, cs, log, bw, direction, hold):
-                        _swap_rows(a, b, last)
-                    _swap_rows3(fw, b, last)
-                    for j in range(n_u):
-                        mode[b, j], mode[last, j] = mode[last, j], mode[b, j]
+                if b < n_free:
+                    _swap_variants(b, n_free - 1, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode)
+                    _swap_variants(n_free - 1, nb - 1, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode)
+                    n_free -= 1
+                else:
+                    _swap_variants(b, nb - 1, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode)
                 nb -= 1
             if nb == 0:
                 break
-            xv, yv, rv, uv, xnv, xsv = x[:nb], y[:nb], r[:nb], u[:nb], x_new[:nb], xs[:nb]
-            pv, cpv, csv, logv = pw[:nb], cpw[:nb], cs[:nb], log[:nb]
-            k1v, k2v, k3v, k4v = k1[:nb], k2[:nb], k3[:nb], k4[:nb]
+            yv, rv, uv, xv, cpv, csv, logv = y[:nb], r[:nb], u[:nb], x[:nb], cpw[:nb], cs[:nb], log[:nb]
+            xr, xnr, xsr, ur, pr = x[:n_free], x_new[:n_free], xs[:n_free], u[:n_free], pw[:n_free]
+            k1r, k2r, k3r, k4r = k1[:n_free], k2[:n_free], k3[:n_free], k4[:n_free]
