@@ -24,6 +24,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -95,7 +96,7 @@ def bench_a() -> dict[str, float]:
     return {"simulate_s": sim, "warmup_in_process_s": warmup, "end_to_end_s": end_to_end, "cold_compile_run_s": cold}
 
 
-def bench_b(n: int = 10_000) -> dict[str, float]:
+def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
     raw = yaml.safe_load((ROOT / "configs" / "x_error_ags.yaml").read_text())
     del raw["controllers"]["conventional"]
     raw.update(name="bench_sweep", outputs={"figure": False, "timeseries": False, "gains_figure": False})
@@ -112,10 +113,14 @@ def bench_b(n: int = 10_000) -> dict[str, float]:
     work = Path(tempfile.mkdtemp())
     path = work / "sweep.yaml"
     path.write_text(yaml.safe_dump(raw))
-    cmd = [*NLCX, "sweep", str(path), "--jobs", "2", "--out", str(work / "out")]
-    wall, peak_kb, out = run_measured(cmd, ROOT)
+    walls, peaks = [], []
+    for repeat in range(repeats):  # a fresh output directory each time: nothing is resumed
+        cmd = [*NLCX, "sweep", str(path), "--jobs", "2", "--out", str(work / f"out{repeat}")]
+        wall, peak_kb, out = run_measured(cmd, ROOT)
+        walls.append(wall)
+        peaks.append(peak_kb / 1024)
     summary = out.strip().splitlines()[-1]
-    return {"variants": n, "wall_s": wall, "peak_memory_mb": peak_kb / 1024, "summary": summary}
+    return {"variants": n, "wall_s": min(walls), "walls_s": walls, "peak_memory_mb": max(peaks), "summary": summary}
 
 
 def bench_c() -> dict[str, float]:
@@ -246,7 +251,8 @@ def main() -> None:
     b = bench_b()
     print(
         f"(b) {b['variants']} x-pendulum variants (error-AGS, M, m, l +-20 %, 20 s, dt 1 ms), --jobs 2: "
-        f"{b['wall_s']:.1f} s wall [target <= 30], peak {b['peak_memory_mb']:.0f} MB [target <= 2048]"
+        f"{b['wall_s']:.1f} s wall [target <= 30] (best of {', '.join(f'{w:.1f}' for w in b['walls_s'])}), "
+        f"peak {b['peak_memory_mb']:.0f} MB [target <= 2048]"
     )
     print(f"    {b['summary']}")
 

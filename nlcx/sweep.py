@@ -24,6 +24,7 @@ wall time) and one long ``metrics.csv`` for all variants.
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import itertools
 import json
@@ -213,6 +214,15 @@ def _set_threads() -> None:
         os.environ[name] = "1"
 
 
+def _settle_heap() -> None:
+    """Collect, then freeze what survives (imported modules, loaded kernels, caches).
+
+    A worker's later collections then scan only the objects of the batch in hand instead of
+    numba's and pandas' object graphs again and again (about 15 % of a batch's time)."""
+    gc.collect()
+    gc.freeze()
+
+
 def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
     """Simulate a batch of variants and write its part files (the metrics, then the index).
 
@@ -278,6 +288,7 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
     part = f"{batch.variants[0].index:06d}-{digest}"
     report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", metrics)
     report.write_csv(batch.out_dir / "parts" / f"{part}.index.csv", pd.DataFrame(rows))  # last: marks it complete
+    _settle_heap()
     return BatchResult(index=rows, metrics=metrics if return_metrics else None, part=part)
 
 
