@@ -10,9 +10,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_ruff_clean() -> None:
+def _ruff() -> str:
     ruff = shutil.which("ruff", path=str(Path(sys.executable).parent)) or shutil.which("ruff")
     assert ruff, "ruff is a test dependency (pip install -e '.[test]')"
+    return ruff
+
+
+def test_ruff_clean() -> None:
+    ruff = _ruff()
     proc = subprocess.run(
         [ruff, "check", "nlcx", "tests", "scripts", "benchmarks"], cwd=ROOT, capture_output=True, text=True
     )
@@ -20,7 +25,6 @@ def test_ruff_clean() -> None:
 
 
 def test_ruff_format_clean() -> None:
-    ruff = shutil.which("ruff", path=str(Path(sys.executable).parent)) or shutil.which("ruff")
-    assert ruff, "ruff is a test dependency (pip install -e '.[test]')"
+    ruff = _ruff()
     proc = subprocess.run([ruff, "format", "--check", "."], cwd=ROOT, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
