@@ -268,40 +268,17 @@ def _disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
 
 @njit(cache=True, error_model="numpy")
 def _rk_step_one(
-    rhs,
-    t,
-    h,
-    frac0,
-    h_frac,
-    x_in,
-    x_out,
-    u,
-    drow,
-    c,
-    dist_map,
-    fb,
-    mode,
-    direction,
-    rk_a,
-    rk_b,
-    k_stage,
-    xs,
-    f,
-    u_total,
-    work,
-    A,
-    rhs_s,
-    dx,
-    d_tmp,
-    one,
+    rhs, t, h, frac0, h_frac, x_in, x_out, u, drow, c, dist_map, fb, mode, direction, rk_a, rk_b, scratch
 ):  # pragma: no cover - compiled
     """One explicit Runge-Kutta step of one variant with friction, size h from x_in at t
     (u held) into x_out.
 
     The step covers the fraction [frac0, frac0 + h_frac] of the sampling step; the
     disturbance is exact at the stage nodes of a full step and interpolated between them
-    for a partial step (one that ends where a sliding axis stops).
+    for a partial step (one that ends where a sliding axis stops). ``scratch`` is the
+    friction path's work space, see :func:`_step_with_friction`.
     """
+    k_stage, xs, f, u_total, work, A, rhs_s, dx, d_tmp, one = scratch
     n = x_in.shape[0]
     n_stage = rk_b.shape[0]
     partial = frac0 != 0.0 or h_frac != 1.0
@@ -329,65 +306,16 @@ def _rk_step_one(
 
 @njit(cache=True, error_model="numpy")
 def _step_with_friction(
-    rhs,
-    t,
-    dt,
-    x,
-    x_new,
-    x_mid,
-    u,
-    drow,
-    c,
-    dist_map,
-    fb,
-    mode,
-    direction,
-    hold,
-    rk_a,
-    rk_b,
-    k_stage,
-    xs,
-    f,
-    u_total,
-    work,
-    A,
-    rhs_s,
-    dx,
-    d_tmp,
-    one,
+    rhs, t, dt, x, x_new, x_mid, u, drow, c, dist_map, fb, mode, direction, hold, rk_a, rk_b, scratch
 ):  # pragma: no cover - compiled
     """One sampling step of one variant with friction (Appendix A): a sliding axis whose
     velocity reaches zero inside the step is stopped there (the step is split at that
-    instant); a stuck axis is held at its position until it breaks away."""
+    instant); a stuck axis is held at its position until it breaks away.
+
+    ``scratch`` = (k_stage (s, n), xs (n,), f, u_total, work (n_u,), A (n_u, n_u), rhs_s (n_u,),
+    dx (n,), d_tmp (n_d,), one): work space allocated once per :func:`simulate` call."""
     n_u = u.shape[0]
-    _rk_step_one(
-        rhs,
-        t,
-        dt,
-        0.0,
-        1.0,
-        x,
-        x_new,
-        u,
-        drow,
-        c,
-        dist_map,
-        fb,
-        mode,
-        direction,
-        rk_a,
-        rk_b,
-        k_stage,
-        xs,
-        f,
-        u_total,
-        work,
-        A,
-        rhs_s,
-        dx,
-        d_tmp,
-        one,
-    )
+    _rk_step_one(rhs, t, dt, 0.0, 1.0, x, x_new, u, drow, c, dist_map, fb, mode, direction, rk_a, rk_b, scratch)
     frac = 1.0
     for j in range(n_u):
         vi = int(fb[j, 7])
@@ -395,40 +323,14 @@ def _step_with_friction(
             frac = min(frac, x[vi] / (x[vi] - x_new[vi]))
     if frac < 1.0:
         h1 = frac * dt
-        _rk_step_one(
-            rhs,
-            t,
-            h1,
-            0.0,
-            frac,
-            x,
-            x_mid,
-            u,
-            drow,
-            c,
-            dist_map,
-            fb,
-            mode,
-            direction,
-            rk_a,
-            rk_b,
-            k_stage,
-            xs,
-            f,
-            u_total,
-            work,
-            A,
-            rhs_s,
-            dx,
-            d_tmp,
-            one,
-        )
+        _rk_step_one(rhs, t, h1, 0.0, frac, x, x_mid, u, drow, c, dist_map, fb, mode, direction, rk_a, rk_b, scratch)
         for j in range(n_u):
             vi = int(fb[j, 7])
             if mode[j] == _SLIP and x_new[vi] * direction[j] <= 0.0:
                 x_mid[vi] = 0.0
                 mode[j] = _STUCK
                 hold[j] = x_mid[int(fb[j, 8])]
+        _, _, f, _, work, A, rhs_s, dx, d_tmp, one = scratch
         _disturbance_at(drow, c, frac, d_tmp)
         _update_friction_modes(rhs, t + h1, x_mid, u, d_tmp, dist_map, fb, mode, direction, f, work, A, rhs_s, dx, one)
         _rk_step_one(
@@ -448,16 +350,7 @@ def _step_with_friction(
             direction,
             rk_a,
             rk_b,
-            k_stage,
-            xs,
-            f,
-            u_total,
-            work,
-            A,
-            rhs_s,
-            dx,
-            d_tmp,
-            one,
+            scratch,
         )
     for j in range(n_u):
         vi = int(fb[j, 7])
@@ -679,6 +572,7 @@ def simulate(
     rhs_s = np.empty(n_u)
     dxo = np.empty(n)
     d_tmp = np.empty(dist.shape[3])
+    scratch = (k_stage, xso, f, u_total, work, A, rhs_s, dxo, d_tmp, one)
     stopped = np.zeros(n_batch, dtype=np.bool_)
     nb = n_batch
     # views on the active rows (the controller's) and on the frictionless ones (stepped
@@ -746,10 +640,10 @@ def simulate(
                 _update_friction_modes(
                     rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
                 )
-                _friction_forces(
-                    rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
-                )
-                if record:
+                if record:  # the force at t_k, only to be recorded (the step evaluates its own)
+                    _friction_forces(
+                        rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
+                    )
                     for j in range(n_u):
                         FRICTION[v, k, j] = f[j]
             elif record:
@@ -805,16 +699,7 @@ def simulate(
                         hold[b],
                         rk_a,
                         rk_b,
-                        k_stage,
-                        xso,
-                        f,
-                        u_total,
-                        work,
-                        A,
-                        rhs_s,
-                        dxo,
-                        d_tmp,
-                        one,
+                        scratch,
                     )
                     for i in range(n):
                         x_new[b, i] = xo_new[i]

@@ -16,6 +16,17 @@ ROOT = Path(__file__).resolve().parent.parent
 CONFIGS = ROOT / "configs"
 
 
+def reproduce_only(only: str, out: Path) -> Any:
+    """``nlcx reproduce --only ONLY`` on the committed thesis configs, two jobs, into ``out``
+    (the CLI runner's result)."""
+    from typer.testing import CliRunner
+
+    from nlcx.cli import app
+
+    args = ["reproduce", "--only", only, "--jobs", "2", "--out", str(out), "--configs", str(CONFIGS / "thesis")]
+    return CliRunner().invoke(app, args)
+
+
 def load_yaml(name: str) -> dict[str, Any]:
     return yaml.safe_load((CONFIGS / name).read_text())
 

@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from conftest import reproduce_only
 from typer.testing import CliRunner
 
 from nlcx.cli import app
@@ -217,20 +218,7 @@ def test_console_script_one_line_error() -> None:
 
 def test_reproduce_only_some_figures_and_tables(tmp_path: Path) -> None:
     out = tmp_path / "thesis"
-    result = runner.invoke(
-        app,
-        [
-            "reproduce",
-            "--only",
-            "fig-2.4,fig-2.3,table-2.3,table-2.1,table-2.2",
-            "--jobs",
-            "2",
-            "--out",
-            str(out),
-            "--configs",
-            str(ROOT / "configs" / "thesis"),
-        ],
-    )
+    result = reproduce_only("fig-2.4,fig-2.3,table-2.3,table-2.1,table-2.2", out)
     assert result.exit_code == 0, result.output
     assert {p.name for p in (out / "figures").iterdir()} == {"fig_2_4.png", "fig_2_3.png"}
     assert {p.name for p in (out / "tables").iterdir()} == {"table_2_3.csv", "table_2_1.csv", "table_2_2.csv"}

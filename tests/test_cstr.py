@@ -9,6 +9,7 @@ import control as ct
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import reproduce_only
 from typer.testing import CliRunner
 
 from nlcx import config, engine
@@ -144,20 +145,7 @@ def test_ga_tuner_same_result_serial_or_parallel(tmp_path: Path) -> None:
 
 def test_chapter_5_tables_and_figures(tmp_path: Path) -> None:
     out = tmp_path / "thesis"
-    result = runner.invoke(
-        app,
-        [
-            "reproduce",
-            "--only",
-            "table-5.8,table-5.1,table-5.2,table-5.3,fig-5.4,fig-5.19",
-            "--out",
-            str(out),
-            "--configs",
-            str(ROOT / "configs" / "thesis"),
-            "--jobs",
-            "2",
-        ],
-    )
+    result = reproduce_only("table-5.8,table-5.1,table-5.2,table-5.3,fig-5.4,fig-5.19", out)
     assert result.exit_code == 0, result.output
     t58 = pd.read_csv(out / "tables" / "table_5_8.csv")
     assert set(t58.method) == {"ZN", "Fuzzy", "ANN", "ANFIS", "GA"}

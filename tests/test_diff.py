@@ -6,6 +6,7 @@ import shutil
 from pathlib import Path
 
 import pandas as pd
+from conftest import reproduce_only
 from typer.testing import CliRunner
 
 from nlcx.cli import app
@@ -40,20 +41,7 @@ def test_committed_baselines_still_reproduce(tmp_path: Path) -> None:
     To refresh the baselines after a deliberate change: `make baseline`, review the diff, commit.
     """
     out = tmp_path / "ci"
-    result = runner.invoke(
-        app,
-        [
-            "reproduce",
-            "--only",
-            BASELINE_TABLES,
-            "--jobs",
-            "2",
-            "--out",
-            str(out),
-            "--configs",
-            str(ROOT / "configs" / "thesis"),
-        ],
-    )
+    result = reproduce_only(BASELINE_TABLES, out)
     assert result.exit_code == 0, result.output
     check = runner.invoke(app, ["diff", str(BASELINE), str(out / "tables")])
     assert check.exit_code == 0, check.output

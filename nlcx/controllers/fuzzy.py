@@ -42,7 +42,7 @@ import numpy as np
 from numba import njit
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator
 
-from nlcx.controllers.schedules import GainRange, ScheduleConfig, ScheduleModel
+from nlcx.controllers.schedules import GainRange, ScheduleConfig, ScheduleModel, gain_ranges
 from nlcx.kernel import SCHEDULE_SIG
 
 #: Linguistic values, in order: negative big, negative small, zero, positive small, positive big.
@@ -484,12 +484,7 @@ class Fuzzy(ScheduleModel):
             *cfg.universes.de_dt,
             *np.ravel(cfg.sets.ranges("e")),
             *np.ravel(cfg.sets.ranges("de_dt")),
-            cfg.kp.min,
-            cfg.kp.max,
-            cfg.ki.min,
-            cfg.ki.max,
-            cfg.kd.min,
-            cfg.kd.max,
+            *gain_ranges(cfg),
         ]
         sp = np.concatenate([np.array(head, dtype=float), rules.ravel().astype(float), z, mu.ravel()])
         assert sp.size == _GRID + cfg.resolution * 16

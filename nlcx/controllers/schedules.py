@@ -149,18 +149,13 @@ class Constant(ScheduleModel):
         return np.array([cfg.kp, cfg.ki, cfg.kd])
 
 
+def gain_ranges(cfg: Any) -> list[float]:
+    """(kp_min, kp_max, ki_min, ki_max, kd_min, kd_max) of a schedule with kp/ki/kd ranges."""
+    return [cfg.kp.min, cfg.kp.max, cfg.ki.min, cfg.ki.max, cfg.kd.min, cfg.kd.max]
+
+
 def _pack_ags(cfg: AGSConfig) -> list[float]:
-    return [
-        cfg.kp.min,
-        cfg.kp.max,
-        cfg.ki.min,
-        cfg.ki.max,
-        cfg.kd.min,
-        cfg.kd.max,
-        cfg.rate.kp,
-        cfg.rate.ki,
-        cfg.rate.kd,
-    ]
+    return [*gain_ranges(cfg), cfg.rate.kp, cfg.rate.ki, cfg.rate.kd]
 
 
 class TimeAGS(ScheduleModel):
