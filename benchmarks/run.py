@@ -143,7 +143,7 @@ def bench_d() -> dict[str, float]:
     proposed = next(c for c in prepared.controllers if c.label == "proposed")
     prepared.controllers = [proposed]
     engine.simulate_runs(prepared)
-    ours_s = best(lambda: engine.simulate_runs(prepared), 5)
+    ours_s = best(lambda: engine.simulate_runs(prepared), 20)
     (ours,) = engine.simulate_runs(prepared)
 
     # the same closed loop as a continuous ODE: plant states + one integrator per loop
@@ -194,7 +194,7 @@ def bench_d() -> dict[str, float]:
     t_eval = ours.t
     sol_box: list = []
     scipy_s = best(
-        lambda: sol_box.append(solve_ivp(field, (0, t_eval[-1]), z0, t_eval=t_eval, rtol=1e-6, atol=1e-9)), 1
+        lambda: sol_box.append(solve_ivp(field, (0, t_eval[-1]), z0, t_eval=t_eval, rtol=1e-6, atol=1e-9)), 3
     )
     sol = sol_box[-1]
     sys_ct = ct.nlsys(lambda t, z, u, params: field(t, z), None, states=len(z0), inputs=0, outputs=len(z0))
@@ -203,7 +203,7 @@ def bench_d() -> dict[str, float]:
         lambda: ct_box.append(
             ct.input_output_response(sys_ct, t_eval, 0, z0, solve_ivp_kwargs={"rtol": 1e-6, "atol": 1e-9})
         ),
-        1,
+        3,
     )
     resp = ct_box[-1]
     x_idx = [names.index(s) for s in ("x", "y", "z", "theta", "phi")]

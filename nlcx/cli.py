@@ -101,6 +101,8 @@ def run(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only the run directory.")] = False,
 ) -> None:
     """Run an experiment: every controller of CONFIG on its plant, then write the run directory."""
+    import matplotlib.figure  # noqa: F401 - the run draws; imported while the collector is off
+
     from nlcx import config as cfg
     from nlcx import engine, report
 

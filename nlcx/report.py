@@ -18,15 +18,17 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import suppress
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 import yaml
-from matplotlib.figure import Figure
 
 import nlcx
 from nlcx.engine import Result, Run
+
+if TYPE_CHECKING:  # matplotlib is imported by the commands that draw, not by sweeps and diffs
+    from matplotlib.figure import Figure
 
 PACKAGES = (
     "numpy", "scipy", "numba", "llvmlite", "pandas", "pyarrow", "pydantic", "matplotlib", "PyYAML", "typer", "pymoo",
@@ -73,6 +75,8 @@ def write_csv(path: Path, frame: pd.DataFrame) -> None:
 
 def new_figure(n_rows: int, n_cols: int, figsize: tuple[float, float]) -> tuple[Figure, np.ndarray]:
     """A figure and its (n_rows, n_cols) axes, rendered by Agg without pyplot's global state."""
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=figsize)
     axes = fig.subplots(n_rows, n_cols, squeeze=False)
     return fig, axes
