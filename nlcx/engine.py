@@ -21,13 +21,14 @@ from nlcx import metrics as m
 from nlcx import registry
 from nlcx.config import Experiment, MetricsSection, controller_section
 from nlcx.controllers.base import ControllerInstance
-from nlcx.controllers.schedules import schedule_slots
 from nlcx.errors import ConfigError
-from nlcx.kernel import FRICTION_FIELDS, STATUS_BOUND, STATUS_NONFINITE, simulate
+from nlcx.kernel.abi import ELEMENT_ENTRY, HOOKS, STATUS_BOUND, STATUS_NONFINITE, callback_slots, element_slots
+from nlcx.kernel.friction import FRICTION_AXIS
+from nlcx.kernel.integrator import simulate
 from nlcx.plants.base import Plant, check_rows
 from nlcx.references.base import MetricPlan
 from nlcx.tuning.base import TuneContext
-from nlcx.uncertainty.base import Perturbations
+from nlcx.uncertainty.base import Element, Hooks
 
 #: Butcher tableaus (A, b) of the fixed-step explicit Runge-Kutta methods.
 TABLEAUS: dict[str, tuple[np.ndarray, np.ndarray]] = {
@@ -99,7 +100,7 @@ class Prepared:
     controllers: list[ControllerInstance]
     references: dict[str, tuple[Any, Any]]
     grid: TimeGrid
-    perturbations: Perturbations
+    hooks: Hooks
     seed_sequence: np.random.SeedSequence
     #: Rows of tuning.csv: what the tuners of each controller found.
     tuning: list[dict[str, Any]] = field(default_factory=list)
@@ -152,10 +153,10 @@ def prepare(exp: Experiment) -> Prepared:
     grid = time_grid(sim.t_end, sim.dt, sim.integrator)
     seed_sequence = np.random.SeedSequence(sec.seed)
     children = seed_sequence.spawn(max(1, len(exp.uncertainties)))
-    perturbations = Perturbations(plant=plant, t=grid.t, stage_times=grid.stage_times, rng=np.random.default_rng(0))
+    hooks = Hooks(plant=plant, t=grid.t, stage_times=grid.stage_times, rng=np.random.default_rng(0))
     for child, unc in zip(children, exp.uncertainties, strict=False):
-        perturbations.rng = np.random.default_rng(child)
-        unc.model.apply(unc.config, perturbations, f"uncertainty.{unc.label}")
+        hooks.rng = np.random.default_rng(child)
+        unc.model.apply(unc.config, hooks, f"uncertainty.{unc.label}")
     return Prepared(
         experiment=exp,
         plant=plant,
@@ -163,7 +164,7 @@ def prepare(exp: Experiment) -> Prepared:
         tuning=tuning,
         references=_reference_models(exp, plant),
         grid=grid,
-        perturbations=perturbations,
+        hooks=hooks,
         seed_sequence=seed_sequence,
     )
 
@@ -222,30 +223,52 @@ def _failure_reason(plant: Plant, status: int, index: int, t_fail: float) -> str
 
 @dataclass
 class Item:
-    """One closed loop to simulate: a plant instance, a controller and what perturbs it."""
+    """One closed loop to simulate: a plant instance, a controller and what acts at its hook points."""
 
     plant: Plant
     controller: ControllerInstance
     ref: np.ndarray  # (K+1, n_r)
     dist: np.ndarray  # (K|1, s, n_d)
     dist_map: np.ndarray  # (n, n_d)
-    noise_y: np.ndarray | None = None  # (K+1, n_y)
-    noise_u: np.ndarray | None = None  # (K+1, n_u)
-    friction: np.ndarray | None = None  # (n_u, FRICTION_FIELDS)
+    elements: tuple[Element, ...] = ()
+    element_data: np.ndarray | None = None  # (K+1, n_cols): the elements' time series side by side
+    friction: np.ndarray | None = None  # (n_u, FRICTION_AXIS.size)
 
 
 def items_of(prepared: Prepared) -> list[Item]:
     """The closed loops of one experiment: its plant under each of its controllers."""
-    pert = prepared.perturbations
-    dist, dist_map = pert.dist_arrays()
+    hooks = prepared.hooks
+    dist, dist_map = hooks.dist_arrays()
+    data = hooks.element_data()
     refs: dict[tuple[Any, ...], np.ndarray] = {}
     out = []
     for c in prepared.controllers:
         key = (c.reference_signals, c.reference_offsets)
         if key not in refs:
             refs[key] = reference_array(prepared, c.reference_signals, c.reference_offsets)
-        out.append(Item(prepared.plant, c, refs[key], dist[0], dist_map, pert.noise_y, pert.noise_u, pert.friction))
+        out.append(Item(prepared.plant, c, refs[key], dist[0], dist_map, tuple(hooks.elements), data, hooks.friction))
     return out
+
+
+def _element_arrays(group: list[Item]) -> tuple[tuple[Any, ...], tuple[np.ndarray, ...]]:
+    """(function slots, (table, ep, es0, data)) of the loop elements of a group of items that
+    share their element structure (hooks, functions and block sizes); rows are the items."""
+    elements = group[0].elements
+    functions = tuple(dict.fromkeys(e.function for e in elements))
+    table = np.zeros((len(elements), ELEMENT_ENTRY.size))
+    p_off = s_off = d_off = 0
+    for i, e in enumerate(elements):
+        table[i] = ELEMENT_ENTRY.pack(
+            hook=HOOKS[e.hook], slot=functions.index(e.function),
+            param_offset=p_off, state_offset=s_off, data_offset=d_off,
+        )  # fmt: skip
+        p_off += e.params.size
+        s_off += e.state.size
+        d_off += 0 if e.data is None else e.data.shape[1]
+    ep = _pad_rows([np.concatenate([np.zeros(0), *(e.params for e in g.elements)]) for g in group])
+    es = _pad_rows([np.concatenate([np.zeros(0), *(e.state for e in g.elements)]) for g in group])
+    data = _stack([g.element_data for g in group], (1, d_off))
+    return element_slots(functions), (table, ep, es, data)
 
 
 def _stack(arrays: list[np.ndarray | None], empty_shape: tuple[int, ...]) -> np.ndarray:
@@ -262,9 +285,12 @@ def _stack(arrays: list[np.ndarray | None], empty_shape: tuple[int, ...]) -> np.
 
 def _group_key(item: Item) -> tuple[Any, ...]:
     c, plant = item.controller, item.plant
+    elements = tuple((e.hook, id(e.function), e.params.size, e.state.size) for e in item.elements)
+    data_width = 0 if item.element_data is None else item.element_data.shape[1]
     return (
-        id(plant.rhs), id(c.step), len(plant.states), len(plant.inputs), plant.C.tobytes(), len(c.log_names),
-        item.ref.shape, item.dist.shape, item.dist_map.tobytes(),
+        id(plant.rhs), id(c.step), tuple(id(f) for f in c.callbacks), len(plant.states), len(plant.inputs),
+        plant.C.tobytes(), len(c.log_names), item.ref.shape, item.dist.shape, item.dist_map.tobytes(),
+        elements, data_width,
     )  # fmt: skip
 
 
@@ -284,7 +310,7 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_lo
         group = [items[i] for i in indices]
         plant = group[0].plant
         check_rows(plant)
-        n, n_u, n_y = len(plant.states), len(plant.inputs), len(plant.outputs)
+        n, n_u = len(plant.states), len(plant.inputs)
         n_b = len(group)
         plants = [g.plant for g in group]
         # the kernel writes every sample up to where a run stops; the rest is never read
@@ -296,32 +322,33 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_lo
         status = np.zeros(n_b, dtype=np.int64)
         n_valid = np.zeros(n_b, dtype=np.int64)
         fail_index = np.zeros(n_b, dtype=np.int64)
+        element_fns, element_arrays = _element_arrays(group)
         simulate(
             plant.rhs,
             group[0].controller.step,
-            schedule_slots(),
-            a,
-            b,
-            np.ascontiguousarray(np.stack([q.x0 for q in plants])),
-            _stack([q.p for q in plants], plant.p.shape),
-            np.ascontiguousarray(plant.C),
-            _pad_rows([g.controller.cp for g in group]),
-            _pad_rows([g.controller.cs0 for g in group]),
-            _stack([g.ref for g in group], group[0].ref.shape),
-            _stack([g.dist for g in group], group[0].dist.shape),
-            np.ascontiguousarray(group[0].dist_map),
-            _stack([g.noise_y for g in group], (1, n_y)),
-            _stack([g.noise_u for g in group], (1, n_u)),
-            _stack([g.friction for g in group], (n_u, FRICTION_FIELDS)),
-            _stack([q.bounds for q in plants], plant.bounds.shape),
+            callback_slots(group[0].controller.callbacks),
+            element_fns,
+            (a, b),
+            (
+                np.ascontiguousarray(np.stack([q.x0 for q in plants])),
+                _stack([q.p for q in plants], plant.p.shape),
+                np.ascontiguousarray(plant.C),
+                _stack([q.bounds for q in plants], plant.bounds.shape),
+            ),
+            (
+                _pad_rows([g.controller.cp for g in group]),
+                _pad_rows([g.controller.cs0 for g in group]),
+                _stack([g.ref for g in group], group[0].ref.shape),
+            ),
+            element_arrays,
+            (
+                _stack([g.dist for g in group], group[0].dist.shape),
+                np.ascontiguousarray(group[0].dist_map),
+                _stack([g.friction for g in group], (n_u, FRICTION_AXIS.size)),
+            ),
             grid.dt,
-            X,
-            U,
-            LOG,
-            FRIC,
-            status,
-            n_valid,
-            fail_index,
+            (X, U, LOG, FRIC),
+            (status, n_valid, fail_index),
         )
         for j, i in enumerate(indices):
             k = int(n_valid[j])

@@ -143,7 +143,7 @@ def test_third_party_plant_through_an_entry_point(tmp_path: Path) -> None:
         import numpy as np
         from numba import njit
         from pydantic import Field
-        from nlcx.kernel import RHS_SIG
+        from nlcx.kernel.abi import RHS_SIG
         from nlcx.plants.base import PlantModel, PlantParams, Signal
 
         class Params(PlantParams):

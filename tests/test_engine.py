@@ -179,7 +179,7 @@ def test_a_right_hand_side_that_ignores_the_rows_is_refused() -> None:
     """A plant written for one state (RHS_SIG's rows are variants) is caught before it runs."""
     from numba import njit
 
-    from nlcx.kernel import RHS_SIG
+    from nlcx.kernel.abi import RHS_SIG
     from nlcx.plants.base import check_rows
 
     @njit(RHS_SIG)

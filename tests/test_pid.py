@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from nlcx import config, engine, registry
-from nlcx.controllers.pid import LOOP_FIELDS, LOOP_STATE, pid_step
+from nlcx.controllers.pid import HEAD, LOOP, LOOP_STATE, pid_step
 from nlcx.controllers.schedules import schedule_slots
 
 
@@ -146,7 +146,7 @@ def test_integral_with_time_varying_gain(where: str) -> None:
 
 def test_state_layout_matches_loop_count() -> None:
     prep = build(CONST)
-    assert prep.controllers[0].cs0.size == 2 * LOOP_STATE
+    assert prep.controllers[0].cs0.size == 2 * LOOP_STATE.size
 
 
 @pytest.mark.parametrize("kind", ["constant", "time_ags", "error_ags"])
@@ -159,10 +159,10 @@ def test_built_in_schedules_called_directly_equal_the_slot_table(x_error_raw: di
     from pydantic import create_model
 
     from nlcx.controllers import schedules as sch
-    from nlcx.kernel import SCHEDULE_SIG
+    from nlcx.kernel.abi import CALLBACK_SIG
 
     builtin = registry.schedules.get(kind)
-    copy_fn = njit(SCHEDULE_SIG, error_model="numpy")(builtin.gains.py_func)
+    copy_fn = njit(CALLBACK_SIG, error_model="numpy")(builtin.gains.py_func)
     name = f"{kind}_third_party"
     config_model = create_model(f"Config_{name}", __base__=builtin.Config, kind=(Literal[name], name))
     attributes = {"gains": staticmethod(copy_fn), "Config": config_model}
@@ -182,8 +182,9 @@ def test_built_in_schedules_called_directly_equal_the_slot_table(x_error_raw: di
         loops["theta"]["schedule"] = {**schedule, "kind": name}
         via_slot = engine.run_experiment(config.build(x_error_raw))
         cp_direct, cp_slot = direct.prepared.controllers[0].cp, via_slot.prepared.controllers[0].cp
-        field = 2 + 1 + LOOP_FIELDS * 0 + 12  # first loop (theta), "direct" field
-        assert cp_direct[field] != 0 and cp_slot[field] == 0
+        first_loop = HEAD.size + 1  # after the head and the one input's bias
+        direct_field, slot_field = LOOP.unpack(cp_direct, first_loop), LOOP.unpack(cp_slot, first_loop)
+        assert direct_field["direct_schedule"] != 0 and slot_field["direct_schedule"] == 0
         (a,), (b,) = direct.runs, via_slot.runs
         assert np.array_equal(a.x, b.x) and np.array_equal(a.log, b.log)
         assert sch.schedule_index(name) >= 5

@@ -70,6 +70,12 @@ def test_friction_only_dissipates(model: str) -> None:
         assert np.sum(excess) < -1e-3  # it did dissipate
 
 
+def sensor_noise(prepared: engine.Prepared) -> np.ndarray:
+    """The noise sequence (K+1, n_y) of the one sensor element of a run."""
+    (element,) = [e for e in prepared.hooks.elements if e.hook == "sensor"]
+    return element.data
+
+
 def noise_runs(seed: int) -> engine.Result:
     exp = config.load(CONFIGS / "thesis" / "ch2" / "fig_2_07.yaml", [f"seed={seed}", "simulation.t_end=2"])
     return engine.run_experiment(exp)
@@ -77,7 +83,7 @@ def noise_runs(seed: int) -> engine.Result:
 
 def test_noise_same_seed_same_noise_other_seed_other_noise() -> None:
     a, b, c = noise_runs(3), noise_runs(3), noise_runs(4)
-    na, nb, nc = (r.prepared.perturbations.noise_y for r in (a, b, c))
+    na, nb, nc = (sensor_noise(r.prepared) for r in (a, b, c))
     assert np.array_equal(na, nb) and not np.array_equal(na, nc)
     assert np.array_equal(a.runs[0].x, b.runs[0].x) and not np.array_equal(a.runs[0].x, c.runs[0].x)
 
@@ -88,7 +94,7 @@ def test_noise_is_band_limited_white_noise() -> None:
         CONFIGS / "thesis" / "ch2" / "fig_2_07.yaml",
         ["simulation.t_end=200", "uncertainty.noise.power=1e-4", "uncertainty.noise.sample_time=0.02"],
     )
-    noise = engine.prepare(exp).perturbations.noise_y
+    noise = sensor_noise(engine.prepare(exp))
     held = noise[:-1].reshape(-1, 20, noise.shape[1])
     assert np.all(held == held[:, :1, :])  # constant within each 20-step hold
     samples = held[:, 0, :].ravel()
@@ -100,4 +106,5 @@ def test_noise_is_band_limited_white_noise() -> None:
 def test_both_controllers_see_the_same_noise() -> None:
     """Common random numbers: the comparison is not confounded by two noise draws."""
     result = noise_runs(5)
-    assert result.prepared.perturbations.noise_y.ndim == 2  # one sequence, broadcast to every controller
+    items = engine.items_of(result.prepared)
+    assert len(items) == 2 and items[0].element_data is items[1].element_data  # one sequence, broadcast

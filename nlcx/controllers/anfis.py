@@ -29,7 +29,7 @@ from numba import njit
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nlcx.controllers.schedules import GainRange, ScheduleConfig, ScheduleModel
-from nlcx.kernel import SCHEDULE_SIG
+from nlcx.kernel.abi import CALLBACK_SIG
 from nlcx.tuning.anfis import AnfisModel
 
 GAINS: tuple[str, ...] = ("kp", "ki", "kd")
@@ -141,7 +141,7 @@ def _anfis_gain(p, o, which, e, edot, clip):  # pragma: no cover - compiled
     return g
 
 
-@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
+@njit(CALLBACK_SIG, cache=True, error_model="numpy")
 def anfis_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     """p[row, o:] = (clip inputs, 3 x (clip?, min, max), 3 model offsets, 3 packed models)."""
     sp = p[row]

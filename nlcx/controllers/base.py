@@ -43,6 +43,9 @@ class ControllerInstance:
     records: dict[str, Any] = field(default_factory=dict)
     #: Logged values whose final value is a result (e.g. learned weights), recorded in tuning.csv.
     final_logs: tuple[str, ...] = ()
+    #: The controller's own compiled callbacks (:data:`nlcx.kernel.abi.CALLBACK_SIG`), which
+    #: the kernel hands its step function untouched: the PID's gain schedules.
+    callbacks: tuple[Any, ...] = ()
 
 
 class ControllerModel:

@@ -43,7 +43,7 @@ from numba import njit
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator
 
 from nlcx.controllers.schedules import GainRange, ScheduleConfig, ScheduleModel, gain_ranges
-from nlcx.kernel import SCHEDULE_SIG
+from nlcx.kernel.abi import CALLBACK_SIG
 
 #: Linguistic values, in order: negative big, negative small, zero, positive small, positive big.
 SET_NAMES: tuple[str, ...] = ("NB", "NS", "ZE", "PS", "PB")
@@ -430,7 +430,7 @@ def _fuzzy_gain(sp, g, me, md, n, piecewise):  # pragma: no cover - compiled
     return lo + k1 * (sp[_GAINS + 2 * g + 1] - lo)
 
 
-@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
+@njit(CALLBACK_SIG, cache=True, error_model="numpy")
 def fuzzy_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     """Mamdani self-tuning PID, section 5.4.1: (e, de/dt) -> (k_p1, k_i1, k_d1) -> eqs. 5.12-5.14.
 

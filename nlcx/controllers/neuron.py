@@ -22,7 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.errors import ConfigError
-from nlcx.kernel import CONTROLLER_SIG
+from nlcx.kernel.abi import CONTROLLER_SIG
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join
 
@@ -104,7 +104,7 @@ def _neuron_row(t, dt, y, r, cp, cs, u, log):  # pragma: no cover - compiled
 
 
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
-def neuron_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+def neuron_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """The single-neuron adaptive PID (eqs. 5.15-5.19), every row."""
     for b in range(y.shape[0]):
         _neuron_row(t, dt, y[b], r[b], cp[b], cs[b], u[b], log[b])

@@ -8,7 +8,7 @@ import numpy as np
 from numba import njit
 
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
-from nlcx.kernel import CONTROLLER_SIG
+from nlcx.kernel.abi import CONTROLLER_SIG
 from nlcx.plants.base import Plant
 
 
@@ -17,7 +17,7 @@ class OpenLoopConfig(ControllerConfig):
 
 
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
-def open_loop_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+def open_loop_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """u_j(t) = r_j(t): the reference channels are the plant inputs (every row)."""
     for b in range(u.shape[0]):
         for j in range(u.shape[1]):

@@ -18,30 +18,51 @@ from typing import Any, Literal
 
 import numpy as np
 from numba import njit
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, SerializeAsAny
 
 from nlcx import registry
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
-from nlcx.controllers.schedules import constant_gains, error_ags_gains, schedule_index, time_ags_gains
+from nlcx.controllers.schedules import (
+    ScheduleConfig,
+    constant_gains,
+    error_ags_gains,
+    schedule_index,
+    schedule_slots,
+    time_ags_gains,
+)
 from nlcx.errors import ConfigError
-from nlcx.kernel import CONTROLLER_SIG
+from nlcx.kernel.abi import CONTROLLER_SIG
+from nlcx.layout import Layout
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join, validate_model
 
-#: Per-loop header in the parameter vector: y index, r index, u index, sign, schedule slot,
-#: derivative method (0 backward, 1 filtered), N, derivative on measurement (0/1),
-#: integral gain inside the integral (0/1), offset and length of the schedule parameters,
-#: set-point weight b of the proportional term, built-in schedule called directly (below).
-LOOP_FIELDS = 13
+#: The head of the parameter row: number of loops and of inputs; the bias of each input follows.
+HEAD = Layout("PIDHead", ("n_loops", "n_inputs"))
+H = HEAD.at
+#: One loop's block, after the head and the biases: which output, reference and input it
+#: uses, the sign of its contribution, its schedule (slot in the callback table, offset and
+#: length of the schedule's parameters, built-in schedule called directly), the derivative
+#: (filtered or backward, N, on the measurement or the error), the integral gain inside the
+#: integral, and the set-point weight b of the proportional term.
+LOOP = Layout(
+    "PIDLoop",
+    (
+        "y_index", "r_index", "u_index", "sign", "schedule_slot", "filtered", "N", "on_measurement",
+        "gain_inside", "schedule_offset", "schedule_length", "setpoint_weight", "direct_schedule",
+    ),
+)  # fmt: skip
+L = LOOP.at
 #: The built-in schedules are called directly (the compiler inlines them; a call through the
 #: slot table cannot be inlined and cost ~15 % of a sweep's time); any other schedule,
 #: including a third party's or a replaced built-in, goes through its slot.
 VIA_SLOT, DIRECT_CONSTANT, DIRECT_TIME_AGS, DIRECT_ERROR_AGS = 0, 1, 2, 3
 _DIRECT = {constant_gains: DIRECT_CONSTANT, time_ags_gains: DIRECT_TIME_AGS, error_ags_gains: DIRECT_ERROR_AGS}
-#: Per-loop controller state: integral, previous error, filtered derivative, previous y, started.
-LOOP_STATE = 5
-#: Per-loop logged values: k_p, k_i, k_d and the loop's signed contribution to its input.
-LOOP_LOG = ("kp", "ki", "kd", "u")
+#: One loop's controller state: integral, previous error, filtered derivative, previous y, started.
+LOOP_STATE = Layout("PIDLoopState", ("integral", "e_prev", "d_filtered", "y_prev", "started"))
+S = LOOP_STATE.at
+#: One loop's logged values: k_p, k_i, k_d and the loop's signed contribution to its input.
+LOOP_LOG = Layout("PIDLoopLog", ("kp", "ki", "kd", "u"))
+G = LOOP_LOG.at
 
 
 class DerivativeConfig(BaseModel):
@@ -65,7 +86,9 @@ class LoopConfig(BaseModel):
     input: str | None = None
     #: Sign of the loop's contribution to the summed input (the sum block of Fig. 2.2).
     sign: Literal[-1, 1] = 1
-    schedule: dict[str, Any]
+    #: The gain schedule: a mapping in the YAML, its registered model's validated config
+    #: after :meth:`MultiLoopPID.normalize`.
+    schedule: dict[str, Any] | SerializeAsAny[ScheduleConfig]
     derivative: DerivativeConfig | None = None
 
 
@@ -85,70 +108,73 @@ class PIDConfig(ControllerConfig):
     setpoint_weight: float = 1.0
 
 
+@njit(cache=True, error_model="numpy")
+def _loop_gains(t, e, d, cp, row, h, callbacks):  # pragma: no cover - compiled
+    """(k_p, k_i, k_d) of the loop whose block starts at cp[row, h], from its schedule."""
+    off = int(cp[row, h + L.schedule_offset])
+    direct = int(cp[row, h + L.direct_schedule])
+    if direct == DIRECT_ERROR_AGS:
+        return error_ags_gains(t, e, d, cp, row, off)
+    if direct == DIRECT_TIME_AGS:
+        return time_ags_gains(t, e, d, cp, row, off)
+    if direct == DIRECT_CONSTANT:
+        return constant_gains(t, e, d, cp, row, off)
+    return callbacks[int(cp[row, h + L.schedule_slot])](t, e, d, cp, row, off)
+
+
+@njit(cache=True, error_model="numpy")
+def _loop_output(t, dt, y, r, cp, cs, log, row, i, h, callbacks):  # pragma: no cover - compiled
+    """One loop's signed contribution sign (k_p (b r - y) + k_i I + k_d D) at t; updates the
+    loop's state (I, previous e and y, filtered D) and logs its gains and output."""
+    c = len(S) * i
+    y_i = y[row, int(cp[row, h + L.y_index])]
+    r_i = r[row, int(cp[row, h + L.r_index])]
+    e = r_i - y_i
+    if cs[row, c + S.started] == 0.0:
+        cs[row, c + S.e_prev] = e
+        cs[row, c + S.y_prev] = y_i
+        cs[row, c + S.started] = 1.0
+    on_measurement = cp[row, h + L.on_measurement] != 0.0
+    dv = (cs[row, c + S.y_prev] - y_i) if on_measurement else (e - cs[row, c + S.e_prev])
+    if cp[row, h + L.filtered] != 0.0:
+        d = (cs[row, c + S.d_filtered] + cp[row, h + L.N] * dv) / (1.0 + cp[row, h + L.N] * dt)
+        cs[row, c + S.d_filtered] = d
+    else:
+        d = dv / dt
+    kp, ki, kd = _loop_gains(t, e, d, cp, row, h, callbacks)
+    if cp[row, h + L.gain_inside] != 0.0:
+        cs[row, c + S.integral] += ki * e * dt
+        integral_term = cs[row, c + S.integral]
+    else:
+        cs[row, c + S.integral] += e * dt
+        integral_term = ki * cs[row, c + S.integral]
+    out = cp[row, h + L.sign] * (kp * (cp[row, h + L.setpoint_weight] * r_i - y_i) + integral_term + kd * d)
+    g = len(G) * i
+    log[row, g + G.kp] = kp
+    log[row, g + G.ki] = ki
+    log[row, g + G.kd] = kd
+    log[row, g + G.u] = out
+    cs[row, c + S.e_prev] = e
+    cs[row, c + S.y_prev] = y_i
+    return out
+
+
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
-def pid_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """Multi-loop PID with pluggable gain schedules, one sample (zero-order hold), every row.
 
     Per loop i: e = r - y, I += e dt (or k_i e dt with the gain inside), D = de/dt by a
     backward difference or filtered by N/(s + N), (k_p, k_i, k_d) from the loop's schedule,
-    u += sign (k_p (b r - y) + k_i I + k_d D).
+    u += sign (k_p (b r - y) + k_i I + k_d D). ``callbacks`` holds the registered schedules.
     """
     for row in range(x.shape[0]):
-        n_loops = int(cp[row, 0])
-        n_u = int(cp[row, 1])
+        n_u = int(cp[row, H.n_inputs])
         for j in range(n_u):
-            u[row, j] = cp[row, 2 + j]
-        base = 2 + n_u
-        for i in range(n_loops):
-            h = base + LOOP_FIELDS * i
-            yi = int(cp[row, h])
-            ri = int(cp[row, h + 1])
-            ui = int(cp[row, h + 2])
-            sign = cp[row, h + 3]
-            slot = int(cp[row, h + 4])
-            filtered = cp[row, h + 5] != 0.0
-            N = cp[row, h + 6]
-            on_measurement = cp[row, h + 7] != 0.0
-            gain_inside = cp[row, h + 8] != 0.0
-            off = int(cp[row, h + 9])
-            b_weight = cp[row, h + 11]
-            c = LOOP_STATE * i
-            y_i = y[row, yi]
-            r_i = r[row, ri]
-            e = r_i - y_i
-            if cs[row, c + 4] == 0.0:
-                cs[row, c + 1] = e
-                cs[row, c + 3] = y_i
-                cs[row, c + 4] = 1.0
-            dv = (cs[row, c + 3] - y_i) if on_measurement else (e - cs[row, c + 1])
-            if filtered:
-                d = (cs[row, c + 2] + N * dv) / (1.0 + N * dt)
-                cs[row, c + 2] = d
-            else:
-                d = dv / dt
-            direct = int(cp[row, h + 12])
-            if direct == DIRECT_ERROR_AGS:
-                kp, ki, kd = error_ags_gains(t, e, d, cp, row, off)
-            elif direct == DIRECT_TIME_AGS:
-                kp, ki, kd = time_ags_gains(t, e, d, cp, row, off)
-            elif direct == DIRECT_CONSTANT:
-                kp, ki, kd = constant_gains(t, e, d, cp, row, off)
-            else:
-                kp, ki, kd = schedules[slot](t, e, d, cp, row, off)
-            if gain_inside:
-                cs[row, c] += ki * e * dt
-                integral_term = cs[row, c]
-            else:
-                cs[row, c] += e * dt
-                integral_term = ki * cs[row, c]
-            out = sign * (kp * (b_weight * r_i - y_i) + integral_term + kd * d)
-            log[row, 4 * i] = kp
-            log[row, 4 * i + 1] = ki
-            log[row, 4 * i + 2] = kd
-            log[row, 4 * i + 3] = out
-            u[row, ui] += out
-            cs[row, c + 1] = e
-            cs[row, c + 3] = y_i
+            u[row, j] = cp[row, len(H) + j]
+        base = len(H) + n_u
+        for i in range(int(cp[row, H.n_loops])):
+            h = base + len(L) * i
+            u[row, int(cp[row, h + L.u_index])] += _loop_output(t, dt, y, r, cp, cs, log, row, i, h, callbacks)
 
 
 class MultiLoopPID(ControllerModel):
@@ -158,74 +184,78 @@ class MultiLoopPID(ControllerModel):
     step = staticmethod(pid_step)
 
     def normalize(self, cfg: PIDConfig, path: str) -> PIDConfig:
-        """Validate each loop's gain schedule by its registered model, defaults filled in."""
+        """Validate each loop's gain schedule by its registered model (once), defaults filled in."""
         loops = {}
         for key, loop in cfg.loops.items():
+            if isinstance(loop.schedule, ScheduleConfig):
+                loops[key] = loop
+                continue
             spath = join(path, "loops", key, "schedule")
             model = registry.schedules.get(loop.schedule.get("kind"), path=join(spath, "kind"))
-            sched = validate_model(model.Config, loop.schedule, spath)
-            loops[key] = loop.model_copy(update={"schedule": sched.model_dump()})
+            loops[key] = loop.model_copy(update={"schedule": validate_model(model.Config, loop.schedule, spath)})
         return cfg.model_copy(update={"loops": loops})
 
     def build(self, label: str, cfg: PIDConfig, plant: Plant, path: str, dt: float | None = None) -> ControllerInstance:
-        outputs = plant.output_names
-        inputs = plant.input_names
+        cfg = self.normalize(cfg, path)
         loops = self._resolve_loops(cfg, plant, path)
-        n_u = len(inputs)
-        bias = equilibrium_input(plant) if cfg.feedforward == "equilibrium" else np.zeros(n_u)
-        for name, value in cfg.bias.items():
-            if name not in inputs:
-                raise ConfigError(join(path, "bias", name), value, f"unknown input; allowed: {', '.join(inputs)}")
-            bias[inputs.index(name)] += value
-        header: list[float] = [len(loops), n_u, *bias]
-        params: list[float] = []
-        sched_start = len(header) + LOOP_FIELDS * len(loops)
+        head = [*HEAD.pack(n_loops=len(loops), n_inputs=len(plant.inputs)), *self._bias(cfg, plant, path)]
+        blocks: list[np.ndarray] = []
+        schedules: list[np.ndarray] = []
+        offset = len(head) + LOOP.size * len(loops)
         log_names: list[str] = []
         log_units: list[str] = []
         for key, loop, signal, input_name in loops:
-            lpath = join(path, "loops", key)
-            kind = loop.schedule.get("kind")
-            model = registry.schedules.get(kind, path=join(lpath, "schedule", "kind"))
-            sched_cfg = validate_model(model.Config, loop.schedule, join(lpath, "schedule"))
-            sp = np.asarray(model.pack(sched_cfg), dtype=float)
-            deriv = loop.derivative or cfg.derivative
-            header += [
-                outputs.index(signal),
-                outputs.index(signal),
-                inputs.index(input_name),
-                loop.sign,
-                schedule_index(kind),
-                1.0 if deriv.method == "filtered" else 0.0,
-                deriv.N,
-                1.0 if deriv.on == "measurement" else 0.0,
-                1.0 if cfg.integral == "inside" else 0.0,
-                sched_start + len(params),
-                sp.size,
-                cfg.setpoint_weight,
-                _DIRECT.get(model.gains, VIA_SLOT),
-            ]
-            params += list(sp)
-            unit_in = plant.unit_of(input_name)
-            unit_sig = plant.unit_of(signal)
-            gain_units = (
-                f"{unit_in}/{unit_sig}",
-                f"{unit_in}/({unit_sig}*s)",
-                f"{unit_in}*s/{unit_sig}",
-                unit_in,
-            )
-            for suffix, unit in zip(LOOP_LOG, gain_units, strict=True):
-                log_names.append(f"{key}.{suffix}")
-                log_units.append(unit)
+            sp = np.asarray(registry.schedules.get(loop.schedule.kind).pack(loop.schedule), dtype=float)
+            blocks.append(self._loop_block(cfg, loop, plant, signal, input_name, offset, sp.size))
+            schedules.append(sp)
+            offset += sp.size
+            log_names += [f"{key}.{name}" for name in LOOP_LOG.fields]
+            log_units += _log_units(plant.unit_of(input_name), plant.unit_of(signal))
         return ControllerInstance(
             label=label,
             kind="pid",
             step=self.step,
-            cp=np.array(header + params, dtype=float),
-            cs0=np.zeros(LOOP_STATE * len(loops)),
-            reference_signals=tuple(outputs),
+            cp=np.concatenate([np.array(head, dtype=float), *blocks, *schedules]),
+            cs0=np.zeros(LOOP_STATE.size * len(loops)),
+            reference_signals=tuple(plant.output_names),
             log_names=tuple(log_names),
             log_units=tuple(log_units),
             config=cfg.model_dump(),
+            callbacks=schedule_slots(),
+        )
+
+    @staticmethod
+    def _bias(cfg: PIDConfig, plant: Plant, path: str) -> np.ndarray:
+        """The constant part of each input: the equilibrium feed-forward plus ``bias``."""
+        inputs = plant.input_names
+        bias = equilibrium_input(plant) if cfg.feedforward == "equilibrium" else np.zeros(len(inputs))
+        for name, value in cfg.bias.items():
+            if name not in inputs:
+                raise ConfigError(join(path, "bias", name), value, f"unknown input; allowed: {', '.join(inputs)}")
+            bias[inputs.index(name)] += value
+        return bias
+
+    @staticmethod
+    def _loop_block(
+        cfg: PIDConfig, loop: LoopConfig, plant: Plant, signal: str, input_name: str, offset: int, length: int
+    ) -> np.ndarray:
+        """One loop's :data:`LOOP` block; its schedule's parameters sit at ``offset``."""
+        deriv = loop.derivative or cfg.derivative
+        kind = loop.schedule.kind
+        return LOOP.pack(
+            y_index=plant.output_names.index(signal),
+            r_index=plant.output_names.index(signal),
+            u_index=plant.input_names.index(input_name),
+            sign=loop.sign,
+            schedule_slot=schedule_index(kind),
+            filtered=deriv.method == "filtered",
+            N=deriv.N,
+            on_measurement=deriv.on == "measurement",
+            gain_inside=cfg.integral == "inside",
+            schedule_offset=offset,
+            schedule_length=length,
+            setpoint_weight=cfg.setpoint_weight,
+            direct_schedule=_DIRECT.get(registry.schedules.get(kind).gains, VIA_SLOT),
         )
 
     @staticmethod
@@ -258,3 +288,8 @@ class MultiLoopPID(ControllerModel):
                 f"{', '.join(outputs)}); got {len(signals)} loop(s) on {', '.join(signals)}",
             )
         return resolved
+
+
+def _log_units(unit_in: str, unit_sig: str) -> list[str]:
+    """Units of a loop's logged k_p, k_i, k_d and output (:data:`LOOP_LOG`)."""
+    return [f"{unit_in}/{unit_sig}", f"{unit_in}/({unit_sig}*s)", f"{unit_in}*s/{unit_sig}", unit_in]

@@ -48,7 +48,7 @@ from pydantic import Field
 
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.errors import ConfigError
-from nlcx.kernel import CONTROLLER_SIG
+from nlcx.kernel.abi import CONTROLLER_SIG
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join
 
@@ -435,7 +435,7 @@ def _preview_row(t, dt, x, r, cp, cs, u, log):  # pragma: no cover - compiled
 
 
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
-def preview_step(t, dt, x, y, r, cp, cs, u, log, schedules):  # pragma: no cover - compiled
+def preview_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """The preview servo (eq. 5.21), every row (full state information: it reads x)."""
     for b in range(x.shape[0]):
         _preview_row(t, dt, x[b], r[b], cp[b], cs[b], u[b], log[b])

@@ -1,10 +1,11 @@
 """Gain schedules of the PID controller: constant, time-AGS and error-AGS (thesis section 2.3).
 
 A schedule maps (t, e, de/dt) and its parameters to the gains (k_p, k_i, k_d). It is a
-numba function with :data:`nlcx.kernel.SCHEDULE_SIG`; the PID controller calls it once per
-loop and sample. Every registered schedule occupies a slot of the tuple handed to the
-controllers, so third-party schedules registered through the ``nlcx.schedules`` entry point
-group work without touching the PID.
+numba function with :data:`nlcx.kernel.abi.CALLBACK_SIG`; the PID controller calls it once
+per loop and sample. Every registered schedule occupies a slot of the PID's callback table,
+so third-party schedules registered through the ``nlcx.schedules`` entry point group work
+without touching the PID. The parameters of each built-in schedule are a named
+:class:`~nlcx.layout.Layout` block.
 
 The thesis prints each AGS range as (min, max) but does not order them: Table 3.6 gives the
 z loop k_p from 25 ("min") to 15 ("max"). The formulas are applied literally to the two
@@ -23,7 +24,19 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from nlcx import registry
 from nlcx.errors import ConfigError
-from nlcx.kernel import SCHEDULE_SIG, SCHEDULE_SLOTS
+from nlcx.kernel.abi import CALLBACK_SIG, CALLBACK_SLOTS, callback_slots
+from nlcx.layout import Layout
+
+#: Conventional PID: the three constant gains.
+CONSTANT = Layout("ConstantGains", ("kp", "ki", "kd"))
+CG = CONSTANT.at
+#: Time-AGS (eqs. 2.17-2.19): the printed range end points and the rate of each gain.
+_AGS_FIELDS = ("kp_min", "kp_max", "ki_min", "ki_max", "kd_min", "kd_max", "kp_rate", "ki_rate", "kd_rate")
+TIME_AGS = Layout("TimeAGS", _AGS_FIELDS)
+TA = TIME_AGS.at
+#: Error-AGS (eqs. 2.20-2.22): as time-AGS, and whether the schedule runs on |e| (1) or e (0).
+ERROR_AGS = Layout("ErrorAGS", (*_AGS_FIELDS, "on_abs_error"))
+EA = ERROR_AGS.at
 
 
 class ScheduleConfig(BaseModel):
@@ -87,41 +100,51 @@ def _decays(k_p, k_i, k_d, s):  # pragma: no cover - compiled
     return a_p, a_i, a_d
 
 
-@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
+@njit(CALLBACK_SIG, cache=True, error_model="numpy")
 def constant_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
-    """Conventional PID: fixed gains, p[row, o:] = (k_p, k_i, k_d)."""
-    return p[row, o], p[row, o + 1], p[row, o + 2]
+    """Conventional PID: fixed gains, a :data:`CONSTANT` block at p[row, o]."""
+    return p[row, o + CG.kp], p[row, o + CG.ki], p[row, o + CG.kd]
 
 
-@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
+@njit(CALLBACK_SIG, cache=True, error_model="numpy")
 def time_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
-    """Eqs. 2.17-2.19, p[row, o:] = (kp_min, kp_max, ki_min, ki_max, kd_min, kd_max, k_p, k_i, k_d).
+    """Eqs. 2.17-2.19 from a :data:`TIME_AGS` block at p[row, o].
 
     k_p(t) = kp_min + (kp_max - kp_min) exp(-k t)     (2.17)
     k_i(t) = ki_max - (ki_max - ki_min) exp(-k t)     (2.18)
     k_d(t) = kd_min + (kd_max - kd_min) exp(-k t)     (2.19)
     """
-    kp_min, kp_max, ki_min, ki_max = p[row, o], p[row, o + 1], p[row, o + 2], p[row, o + 3]
-    kd_min, kd_max = p[row, o + 4], p[row, o + 5]
-    a_p, a_i, a_d = _decays(p[row, o + 6], p[row, o + 7], p[row, o + 8], t)
+    kp_min, kp_max, ki_min, ki_max = (
+        p[row, o + TA.kp_min],
+        p[row, o + TA.kp_max],
+        p[row, o + TA.ki_min],
+        p[row, o + TA.ki_max],
+    )
+    kd_min, kd_max = p[row, o + TA.kd_min], p[row, o + TA.kd_max]
+    a_p, a_i, a_d = _decays(p[row, o + TA.kp_rate], p[row, o + TA.ki_rate], p[row, o + TA.kd_rate], t)
     kp = kp_min + (kp_max - kp_min) * a_p
     ki = ki_max - (ki_max - ki_min) * a_i
     kd = kd_min + (kd_max - kd_min) * a_d
     return kp, ki, kd
 
 
-@njit(SCHEDULE_SIG, cache=True, error_model="numpy")
+@njit(CALLBACK_SIG, cache=True, error_model="numpy")
 def error_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
-    """Eqs. 2.20-2.22 on s = |e| (p[row, o + 9] = 1) or s = e (0), p[row, o:] as for time-AGS.
+    """Eqs. 2.20-2.22 on s = |e| (``on_abs_error`` = 1) or s = e (0), an :data:`ERROR_AGS` block at p[row, o].
 
     k_p = kp_max - (kp_max - kp_min) exp(-k s)     (2.20)
     k_i = ki_min - (ki_min - ki_max) exp(-k s)     (2.21)
     k_d = kd_max - (kd_max - kd_min) exp(-k s)     (2.22)
     """
-    kp_min, kp_max, ki_min, ki_max = p[row, o], p[row, o + 1], p[row, o + 2], p[row, o + 3]
-    kd_min, kd_max = p[row, o + 4], p[row, o + 5]
-    s = abs(e) if p[row, o + 9] != 0.0 else e
-    a_p, a_i, a_d = _decays(p[row, o + 6], p[row, o + 7], p[row, o + 8], s)
+    kp_min, kp_max, ki_min, ki_max = (
+        p[row, o + EA.kp_min],
+        p[row, o + EA.kp_max],
+        p[row, o + EA.ki_min],
+        p[row, o + EA.ki_max],
+    )
+    kd_min, kd_max = p[row, o + EA.kd_min], p[row, o + EA.kd_max]
+    s = abs(e) if p[row, o + EA.on_abs_error] != 0.0 else e
+    a_p, a_i, a_d = _decays(p[row, o + EA.kp_rate], p[row, o + EA.ki_rate], p[row, o + EA.kd_rate], s)
     kp = kp_max - (kp_max - kp_min) * a_p
     ki = ki_min - (ki_min - ki_max) * a_i
     kd = kd_max - (kd_max - kd_min) * a_d
@@ -146,7 +169,7 @@ class Constant(ScheduleModel):
     gains = staticmethod(constant_gains)
 
     def pack(self, cfg: ConstantConfig) -> np.ndarray:
-        return np.array([cfg.kp, cfg.ki, cfg.kd])
+        return CONSTANT.pack(kp=cfg.kp, ki=cfg.ki, kd=cfg.kd)
 
 
 def gain_ranges(cfg: Any) -> list[float]:
@@ -154,8 +177,10 @@ def gain_ranges(cfg: Any) -> list[float]:
     return [cfg.kp.min, cfg.kp.max, cfg.ki.min, cfg.ki.max, cfg.kd.min, cfg.kd.max]
 
 
-def _pack_ags(cfg: AGSConfig) -> list[float]:
-    return [*gain_ranges(cfg), cfg.rate.kp, cfg.rate.ki, cfg.rate.kd]
+def _ags_values(cfg: AGSConfig) -> dict[str, float]:
+    """The fields shared by :data:`TIME_AGS` and :data:`ERROR_AGS`, by name."""
+    ends = {f"{g}_{end}": getattr(getattr(cfg, g), end) for g in ("kp", "ki", "kd") for end in ("min", "max")}
+    return {**ends, "kp_rate": cfg.rate.kp, "ki_rate": cfg.rate.ki, "kd_rate": cfg.rate.kd}
 
 
 class TimeAGS(ScheduleModel):
@@ -165,7 +190,7 @@ class TimeAGS(ScheduleModel):
     gains = staticmethod(time_ags_gains)
 
     def pack(self, cfg: TimeAGSConfig) -> np.ndarray:
-        return np.array(_pack_ags(cfg))
+        return TIME_AGS.pack(_ags_values(cfg))
 
 
 class ErrorAGS(ScheduleModel):
@@ -175,20 +200,19 @@ class ErrorAGS(ScheduleModel):
     gains = staticmethod(error_ags_gains)
 
     def pack(self, cfg: ErrorAGSConfig) -> np.ndarray:
-        return np.array([*_pack_ags(cfg), 1.0 if cfg.error == "abs" else 0.0])
+        return ERROR_AGS.pack(_ags_values(cfg), on_abs_error=cfg.error == "abs")
 
 
 @cache
 def _slots(names: tuple[str, ...]) -> tuple[Any, ...]:
-    fns = [registry.schedules.get(name).gains for name in names]
-    return tuple(fns + [constant_gains] * (SCHEDULE_SLOTS - len(fns)))
+    return callback_slots(tuple(registry.schedules.get(name).gains for name in names))
 
 
 def schedule_slots() -> tuple[Any, ...]:
-    """The tuple of compiled schedule functions handed to every controller."""
+    """The PID's callback table: every registered schedule's compiled function, in registry order."""
     names = tuple(registry.schedules.names())
-    if len(names) > SCHEDULE_SLOTS:
-        raise ConfigError("schedules", len(names), f"at most {SCHEDULE_SLOTS} gain schedules can be registered")
+    if len(names) > CALLBACK_SLOTS:
+        raise ConfigError("schedules", len(names), f"at most {CALLBACK_SLOTS} gain schedules can be registered")
     return _slots(names)
 
 

@@ -3,7 +3,7 @@
 A registered plant is a :class:`PlantModel` subclass. It names its states, inputs and
 outputs with units, declares its parameters as a pydantic model (the one place their
 defaults live) and supplies a numba-compiled right-hand side with
-:data:`nlcx.kernel.RHS_SIG`. :meth:`PlantModel.build` turns a validated configuration
+:data:`nlcx.kernel.abi.RHS_SIG`. :meth:`PlantModel.build` turns a validated configuration
 into a :class:`Plant`, the numeric instance the engine integrates.
 """
 
@@ -245,7 +245,7 @@ def linearize(
 
 
 def evaluate_rhs(rhs: Any, x: Any, u: Any, p: Any, t: float = 0.0) -> np.ndarray:
-    """Call a compiled right-hand side (:data:`nlcx.kernel.RHS_SIG`, rows are variants) on one
+    """Call a compiled right-hand side (:data:`nlcx.kernel.abi.RHS_SIG`, rows are variants) on one
     state (1-D x, u; returns 1-D) or on rows of states (2-D; p one row or one per row)."""
     x = np.asarray(x, dtype=float)
     single = x.ndim == 1
@@ -267,7 +267,7 @@ _ROWS_CHECKED: set[int] = set()
 def check_rows(plant: Plant) -> None:
     """Guard against a right-hand side written for a single state: two different rows
     evaluated together must equal each row evaluated alone (rows are variants, see
-    :data:`nlcx.kernel.RHS_SIG`). Checked once per compiled function."""
+    :data:`nlcx.kernel.abi.RHS_SIG`). Checked once per compiled function."""
     key = id(plant.rhs)
     if key in _ROWS_CHECKED:
         return
@@ -283,6 +283,6 @@ def check_rows(plant: Plant) -> None:
             "plant.name",
             plant.name,
             "its right-hand side does not evaluate the rows of x independently; it must loop "
-            "over the rows (variants) as nlcx.kernel.RHS_SIG documents",
+            "over the rows (variants) as nlcx.kernel.abi.RHS_SIG documents",
         )
     _ROWS_CHECKED.add(key)

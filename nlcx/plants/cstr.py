@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 from pydantic import Field
 
-from nlcx.kernel import RHS_SIG
+from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.base import PlantModel, PlantParams, Signal
 
 

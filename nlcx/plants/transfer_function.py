@@ -8,7 +8,7 @@ import numpy as np
 from numba import njit
 from pydantic import Field, field_validator, model_validator
 
-from nlcx.kernel import RHS_SIG
+from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.base import (
     Plant,
     PlantModel,

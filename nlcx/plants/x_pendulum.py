@@ -17,7 +17,7 @@ from types import MappingProxyType
 
 from numba import njit
 
-from nlcx.kernel import RHS_SIG
+from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import x_derived_rhs, x_energy
 from nlcx.plants.pendulum import (
     ANGLE_BOUND,

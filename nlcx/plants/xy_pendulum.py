@@ -17,7 +17,7 @@ from types import MappingProxyType
 
 from numba import njit
 
-from nlcx.kernel import RHS_SIG
+from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import xy_derived_rhs, xy_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
 

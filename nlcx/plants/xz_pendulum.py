@@ -18,7 +18,7 @@ from types import MappingProxyType
 
 from numba import njit
 
-from nlcx.kernel import RHS_SIG
+from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import xz_derived_rhs, xz_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
 

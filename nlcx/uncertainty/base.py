@@ -1,4 +1,20 @@
-"""What an uncertainty is: a contribution to the perturbation terms the kernel applies."""
+"""What an uncertainty or loop element is: something it adds to the closed loop at a hook point.
+
+The signal path has four places where an uncertainty or loop element can act
+(docs/architecture.md)::
+
+    x --C--> y --[sensor]--> controller --> u --[actuator]--> plant: f(t, x, u + forces) + derivative terms
+
+- **sensor** and **actuator** elements are compiled functions (:data:`nlcx.kernel.abi.ELEMENT_SIG`)
+  with their own parameters, state and time series; any number, in the order they are added
+  (measurement noise, a quantiser, control-output noise, a dead zone, ...).
+- **derivative terms** d(t) sampled at the Runge-Kutta stage times and added to chosen state
+  derivatives (the thesis's disturbance, eqs. 2.13/2.15).
+- **plant force**: friction on the axis of each input (Appendix A, :mod:`nlcx.kernel.friction`).
+
+A registered uncertainty (or loop element) implements :meth:`UncertaintyModel.apply`, which
+adds to a :class:`Hooks` collector.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +24,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
+from nlcx.kernel.abi import HOOKS
 from nlcx.plants.base import Plant
 
 
@@ -17,35 +34,54 @@ class UncertaintyConfig(BaseModel):
 
 
 @dataclass
-class Perturbations:
-    """The perturbation terms of one run, collected from the configured uncertainties.
+class Element:
+    """One loop element at a hook point: its compiled function and the numbers it reads.
 
-    ``stage_times`` has shape (K, s): the times t_k + c_i dt at which the integrator
-    evaluates the right-hand side; disturbances are sampled there.
+    ``params`` and ``state`` are this run's blocks (the element's own layout); ``data`` is a
+    time series (K+1, n_cols), one row per sampling instant, or None."""
+
+    hook: str
+    function: Any
+    params: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    state: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    data: np.ndarray | None = None
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if self.hook not in HOOKS:
+            raise ValueError(f"element {self.name!r}: hook {self.hook!r}; allowed: {', '.join(HOOKS)}")
+
+
+@dataclass
+class Hooks:
+    """What the uncertainties and loop elements of one run add to its closed loop.
+
+    ``t`` are the sampling instants; ``stage_times`` (K, s) the times t_k + c_i dt at which
+    the integrator evaluates the right-hand side (derivative terms are sampled there).
     """
 
     plant: Plant
     t: np.ndarray
     stage_times: np.ndarray
     rng: np.random.Generator
+    elements: list[Element] = field(default_factory=list)
     dist_columns: list[np.ndarray] = field(default_factory=list)
     dist_values: list[np.ndarray] = field(default_factory=list)
-    noise_y: np.ndarray | None = None
-    noise_u: np.ndarray | None = None
-    #: (n_u, FRICTION_FIELDS) friction of each input's axis, see nlcx.kernel.
+    #: (n_u, FRICTION_AXIS.size) friction of each input's axis, see nlcx.kernel.friction.
     friction: np.ndarray | None = None
+
+    def add_element(self, element: Element) -> None:
+        """Add a sensor or actuator element; elements at one hook act in the order added."""
+        self.elements.append(element)
 
     def add_disturbance(self, column: np.ndarray, values: np.ndarray) -> None:
         """Add d(t) (sampled at ``stage_times``) times ``column`` to dx/dt."""
         self.dist_columns.append(np.asarray(column, dtype=float))
         self.dist_values.append(np.asarray(values, dtype=float))
 
-    def add_noise(self, where: str, values: np.ndarray) -> None:
-        """Add a noise sequence (K+1, n_y) to the measurements or (K+1, n_u) to the inputs."""
-        if where == "measurement":
-            self.noise_y = values if self.noise_y is None else self.noise_y + values
-        else:
-            self.noise_u = values if self.noise_u is None else self.noise_u + values
+    def set_friction(self, axes: np.ndarray) -> None:
+        """The friction of each input's axis (one FRICTION_AXIS block per input)."""
+        self.friction = axes
 
     def dist_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """(dist (1, K, s, n_d), dist_map (n, n_d)) for the kernel."""
@@ -56,11 +92,17 @@ class Perturbations:
         dist = np.stack(self.dist_values, axis=-1)[None]
         return np.ascontiguousarray(dist), np.ascontiguousarray(np.stack(self.dist_columns, axis=-1))
 
+    def element_data(self) -> np.ndarray | None:
+        """The elements' time series side by side (K+1, n_cols), or None when no element has one."""
+        series = [e.data for e in self.elements if e.data is not None]
+        return np.ascontiguousarray(np.concatenate(series, axis=1)) if series else None
+
 
 class UncertaintyModel:
-    """A registered uncertainty. Subclasses set ``Config`` and implement :meth:`apply`."""
+    """A registered uncertainty or loop element. Subclasses set ``Config`` and implement :meth:`apply`."""
 
     Config: ClassVar[type[UncertaintyConfig]] = UncertaintyConfig
 
-    def apply(self, cfg: Any, perturbations: Perturbations, path: str) -> None:
+    def apply(self, cfg: Any, hooks: Hooks, path: str) -> None:
+        """Add this uncertainty's elements, derivative terms or forces to ``hooks``."""
         raise NotImplementedError

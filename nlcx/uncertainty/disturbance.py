@@ -12,7 +12,7 @@ import numpy as np
 from pydantic import Field
 
 from nlcx.errors import ConfigError
-from nlcx.uncertainty.base import Perturbations, UncertaintyConfig, UncertaintyModel
+from nlcx.uncertainty.base import Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
 
 
@@ -35,8 +35,8 @@ class Disturbance(UncertaintyModel):
 
     Config = DisturbanceConfig
 
-    def apply(self, cfg: DisturbanceConfig, perturbations: Perturbations, path: str) -> None:
-        plant = perturbations.plant
+    def apply(self, cfg: DisturbanceConfig, hooks: Hooks, path: str) -> None:
+        plant = hooks.plant
         names = plant.state_names
         targets = cfg.states if cfg.states is not None else list(plant.velocity_states)
         column = np.zeros(len(names))
@@ -44,9 +44,9 @@ class Disturbance(UncertaintyModel):
             if name not in names:
                 raise ConfigError(join(path, "states", i), name, f"unknown state; allowed: {', '.join(names)}")
             column[names.index(name)] = 1.0
-        ts = perturbations.stage_times
+        ts = hooks.stage_times
         if cfg.waveform == "step":
             values = np.where(ts >= cfg.start, cfg.amplitude, 0.0)
         else:
             values = cfg.amplitude * np.sin(2 * np.pi * cfg.frequency * ts + cfg.phase)
-        perturbations.add_disturbance(column, values)
+        hooks.add_disturbance(column, values)

@@ -6,7 +6,7 @@ breakaway force mu_s F_N; sliding, the simple model gives Coulomb plus viscous f
 -[mu_c + (mu_s - mu_c) exp(-(|v|/v_s)^gamma)] F_N sgn(v) - eps v with form factor
 gamma = 2 and Stribeck velocity v_s = 0.105 m/s. F_N = (M + m) g.
 
-The stick-slip logic lives in the kernel (nlcx.kernel): a sliding axis whose velocity
+The stick-slip physics is a plant-force element (nlcx.kernel.friction): a sliding axis whose velocity
 reaches zero within a step stops there and sticks; a stuck axis gets exactly the force that
 keeps its acceleration zero (so it stays at rest, with no chattering from sgn(0)) while
 that force is at most mu_s F_N, and breaks away in the direction of the net force otherwise.
@@ -20,8 +20,8 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from nlcx.errors import ConfigError
-from nlcx.kernel import FRICTION_EXPONENTIAL, FRICTION_FIELDS, FRICTION_SIMPLE
-from nlcx.uncertainty.base import Perturbations, UncertaintyConfig, UncertaintyModel
+from nlcx.kernel.friction import FRICTION_AXIS, FRICTION_EXPONENTIAL, FRICTION_SIMPLE
+from nlcx.uncertainty.base import Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
 
 #: The input whose axis is vertical: gravity gives it no normal force.
@@ -63,9 +63,9 @@ class Friction(UncertaintyModel):
 
     Config = FrictionConfig
 
-    def apply(self, cfg: FrictionConfig, perturbations: Perturbations, path: str) -> None:
-        plant = perturbations.plant
-        if perturbations.friction is not None:
+    def apply(self, cfg: FrictionConfig, hooks: Hooks, path: str) -> None:
+        plant = hooks.plant
+        if hooks.friction is not None:
             raise ConfigError(path, cfg.kind, "only one friction model can act on a plant")
         if not plant.input_axes:
             raise ConfigError(join(path, "kind"), cfg.kind, f"{plant.name} has no mechanical axes for friction")
@@ -80,7 +80,7 @@ class Friction(UncertaintyModel):
             f_n = float(cfg.normal_force)
         if cfg.model == "none":
             return
-        table = np.zeros((len(plant.inputs), FRICTION_FIELDS))
+        table = np.zeros((len(plant.inputs), FRICTION_AXIS.size))
         model = FRICTION_SIMPLE if cfg.model == "simple" else FRICTION_EXPONENTIAL
         for i, name in enumerate(axes):
             if name not in plant.input_axes:
@@ -98,8 +98,9 @@ class Friction(UncertaintyModel):
             velocity_name = plant.input_axes[name]
             velocity = plant.state_names.index(velocity_name)
             position = plant.state_names.index(velocity_name.removesuffix("_dot"))
-            table[row] = [
-                model, cfg.mu_s, cfg.mu_c, cfg.viscous, normal,
-                cfg.stribeck_velocity, cfg.form_factor, velocity, position,
-            ]  # fmt: skip
-        perturbations.friction = table
+            table[row] = FRICTION_AXIS.pack(
+                model=model, mu_s=cfg.mu_s, mu_c=cfg.mu_c, viscous=cfg.viscous, normal_force=normal,
+                stribeck_velocity=cfg.stribeck_velocity, form_factor=cfg.form_factor,
+                velocity_index=velocity, position_index=position,
+            )  # fmt: skip
+        hooks.set_friction(table)

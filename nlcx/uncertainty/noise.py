@@ -13,10 +13,12 @@ import math
 from typing import Literal
 
 import numpy as np
+from numba import njit
 from pydantic import Field
 
 from nlcx.errors import ConfigError
-from nlcx.uncertainty.base import Perturbations, UncertaintyConfig, UncertaintyModel
+from nlcx.kernel.abi import ELEMENT_SIG
+from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
 
 
@@ -38,16 +40,16 @@ class Noise(UncertaintyModel):
 
     Config = NoiseConfig
 
-    def apply(self, cfg: NoiseConfig, perturbations: Perturbations, path: str) -> None:
-        plant = perturbations.plant
+    def apply(self, cfg: NoiseConfig, hooks: Hooks, path: str) -> None:
+        plant = hooks.plant
         measured = cfg.injection == "measurement"
         names = plant.output_names if measured else plant.input_names
         chosen = cfg.signals if cfg.signals is not None else names
-        t = perturbations.t
+        t = hooks.t
         dt = float(t[1] - t[0])
         hold = max(1, round(cfg.sample_time / dt))
         n_samples = -(-t.size // hold)
-        draws = perturbations.rng.standard_normal((n_samples, len(chosen)))
+        draws = hooks.rng.standard_normal((n_samples, len(chosen)))
         sigma = math.sqrt(cfg.power / (hold * dt))
         values = np.zeros((t.size, len(names)))
         held = np.repeat(draws, hold, axis=0)[: t.size] * sigma
@@ -60,4 +62,25 @@ class Noise(UncertaintyModel):
                     f"not an {kind} of {plant.name}; allowed: {', '.join(names)}",
                 )
             values[:, names.index(name)] += held[:, i]
-        perturbations.add_noise(cfg.injection, values)
+        add_sequence(hooks, "sensor" if measured else "actuator", values)
+
+
+@njit(ELEMENT_SIG, cache=True, error_model="numpy")
+def add_samples(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
+    """signal[b, j] += data[variant of b, k, d_off + j]: a sampled sequence added to every
+    channel of the signal (the noise sample of each output or input at t_k)."""
+    kk = k if data.shape[1] > 1 else 0
+    for b in range(signal.shape[0]):
+        bv = vid[b] if data.shape[0] > 1 else 0
+        for j in range(signal.shape[1]):
+            signal[b, j] += data[bv, kk, d_off + j]
+
+
+def add_sequence(hooks: Hooks, hook: str, values: np.ndarray) -> None:
+    """Add ``values`` (K+1, n_signal) to the signal at ``hook``; a second sequence at the same
+    hook is summed into the first (one element: the sum is added once)."""
+    for element in hooks.elements:
+        if element.function is add_samples and element.hook == hook and element.data is not None:
+            element.data = element.data + values
+            return
+    hooks.add_element(Element(hook=hook, function=add_samples, data=values, name=f"noise at {hook}"))

@@ -1,0 +1,113 @@
+"""What compiled plugins are written against: signatures, hook points, layouts, status codes.
+
+Arrays are contiguous float64; row ``b`` of every 2-D array handed to a plugin is one
+variant of the batch the kernel steps in lock step (see :mod:`nlcx.kernel.integrator`).
+
+The signal path of one sampling step t_k, with its hook points::
+
+    x_k --C--> y_k --[SENSOR elements]--> y_k (measured)
+        --controller--> u_k --[ACTUATOR elements]--> u_k (applied, held over the step)
+        --plant f(t, x, u + friction forces) + derivative terms--> x_{k+1}
+
+``rhs(t, x, u, p, dx)``
+    Plant right-hand side: ``dx[b] = f(t, x[b], u[b]; p[b])`` for every row ``b`` of ``x``.
+``controller(t, dt, x, y, r, cp, cs, u, log, callbacks)``
+    Controller sampled at t, for every row: reads the measured outputs ``y`` (and, for a
+    full-information controller, the plant state ``x``) and references ``r``, updates its
+    state ``cs`` in place, writes the plant input ``u`` and the values it logs. ``callbacks``
+    is the controller's own table of compiled functions (the PID's gain schedules); the
+    kernel passes it through untouched.
+``callback(t, e, edot, p, row, offset) -> (k_p, k_i, k_d)``
+    A controller callback; the PID calls its gain schedule with the parameters stored in
+    ``p[row]`` from column ``offset`` on.
+``element(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off)``
+    A loop element acting on the signal at its hook point (``y`` at SENSOR, ``u`` at
+    ACTUATOR) for every row ``b``; row ``b`` is variant ``vid[b]``, whose parameters are
+    ``ep[vid[b], p_off:]``, whose element state is ``es[vid[b], s_off:]`` and whose time
+    series (sample k) is ``data[vid[b] or 0, k or 0, d_off:]`` (a length-1 axis is shared).
+
+Hot-loop rules (they decide the speed, see benchmarks/): no array view is made per step and
+per variant (a view handed to a compiled-function value costs a reference-count round
+trip), and a function that calls a compiled-function value does so inside its loop over
+the rows, so its own reference counting is paid once per call, not once per variant.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+from numba import njit, types
+from numba.core.errors import NumbaExperimentalFeatureWarning
+
+from nlcx.layout import Layout
+
+warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
+
+F64 = types.float64
+VEC = types.float64[::1]
+MAT = types.float64[:, ::1]
+ARR3 = types.float64[:, :, ::1]
+ARR4 = types.float64[:, :, :, ::1]
+IVEC = types.int64[::1]
+I64 = types.int64
+
+#: Plant right-hand side ``rhs(t, x, u, p, dx)`` over the rows of x.
+RHS_SIG = types.void(F64, MAT, MAT, MAT, MAT)
+#: Controller callback ``callback(t, e, edot, p, row, offset) -> (k_p, k_i, k_d)``.
+CALLBACK_SIG = types.UniTuple(F64, 3)(F64, F64, F64, MAT, I64, I64)
+#: Number of callback slots a controller hands the kernel (its callbacks + padding).
+CALLBACK_SLOTS = 16
+CallbackTuple = types.UniTuple(types.FunctionType(CALLBACK_SIG), CALLBACK_SLOTS)
+#: Controller step ``controller(t, dt, x, y, r, cp, cs, u, log, callbacks)`` over the rows.
+CONTROLLER_SIG = types.void(F64, F64, MAT, MAT, MAT, MAT, MAT, MAT, MAT, CallbackTuple)
+#: Loop element ``element(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off)``.
+ELEMENT_SIG = types.void(F64, F64, I64, MAT, IVEC, MAT, MAT, ARR3, I64, I64, I64)
+#: Number of element slots (distinct element functions in one batch + padding).
+ELEMENT_SLOTS = 8
+ElementTuple = types.UniTuple(types.FunctionType(ELEMENT_SIG), ELEMENT_SLOTS)
+
+RhsFn = types.FunctionType(RHS_SIG)
+ControllerFn = types.FunctionType(CONTROLLER_SIG)
+
+#: Hook points of the signal path where loop elements act.
+SENSOR = 0
+ACTUATOR = 1
+HOOKS = {"sensor": SENSOR, "actuator": ACTUATOR}
+
+#: One row of the element table: hook point, function slot and where the element's
+#: parameters, state and time-series columns start.
+ELEMENT_ENTRY = Layout("ElementEntry", ("hook", "slot", "param_offset", "state_offset", "data_offset"))
+
+#: Most stages of a Runge-Kutta tableau the kernel integrates with.
+MAX_STAGES = 4
+
+#: Run status codes written by the integrator.
+STATUS_OK = 0
+STATUS_NONFINITE = 1
+STATUS_BOUND = 2
+
+
+@njit(CALLBACK_SIG, cache=True, error_model="numpy")
+def no_callback(t, e, edot, p, row, offset):  # pragma: no cover - compiled
+    """Padding of an unused callback slot."""
+    return 0.0, 0.0, 0.0
+
+
+@njit(ELEMENT_SIG, cache=True, error_model="numpy")
+def no_element(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
+    """Padding of an unused element slot."""
+    return
+
+
+def callback_slots(functions: tuple[object, ...] = ()) -> tuple[object, ...]:
+    """A controller's callbacks padded to :data:`CALLBACK_SLOTS`."""
+    if len(functions) > CALLBACK_SLOTS:
+        raise ValueError(f"at most {CALLBACK_SLOTS} controller callbacks, got {len(functions)}")
+    return tuple(functions) + (no_callback,) * (CALLBACK_SLOTS - len(functions))
+
+
+def element_slots(functions: tuple[object, ...] = ()) -> tuple[object, ...]:
+    """The element functions of a batch padded to :data:`ELEMENT_SLOTS`."""
+    if len(functions) > ELEMENT_SLOTS:
+        raise ValueError(f"at most {ELEMENT_SLOTS} distinct loop element functions in one run, got {len(functions)}")
+    return tuple(functions) + (no_element,) * (ELEMENT_SLOTS - len(functions))

@@ -1,0 +1,305 @@
+"""Stick-slip friction of Appendix A: the plant-force element acting on each input's axis.
+
+Appendix A (after Campbell et al.): at rest the friction holds the axis up to the breakaway
+force mu_s F_N; sliding, the simple model gives Coulomb plus viscous friction,
+-mu_c F_N sgn(v) - eps v, and the exponential model
+-[mu_c + (mu_s - mu_c) exp(-(|v|/v_s)^gamma)] F_N sgn(v) - eps v.
+
+A variant with friction is stepped on its own (:func:`step_with_friction`): a sliding axis
+whose velocity reaches zero inside a step is stopped there (the step is split at that
+instant) and sticks; a stuck axis gets exactly the force that keeps its acceleration zero
+(no chattering from sgn(0)) while that force is at most mu_s F_N, and breaks away in the
+direction of the net force otherwise. The parameters of each axis are a
+:data:`FRICTION_AXIS` block; the configuration lives in :mod:`nlcx.uncertainty.friction`.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from nlcx.layout import Layout
+
+#: Friction parameters of one input's axis: model (FRICTION_NONE, _SIMPLE, _EXPONENTIAL),
+#: mu_s, mu_c, viscous coefficient eps (N s/m), normal force F_N (N), Stribeck velocity v_s
+#: (m/s), form factor gamma, and the indices of the axis's velocity and position states.
+FRICTION_AXIS = Layout(
+    "FrictionAxis",
+    (
+        "model", "mu_s", "mu_c", "viscous", "normal_force",
+        "stribeck_velocity", "form_factor", "velocity_index", "position_index",
+    ),
+)  # fmt: skip
+FA = FRICTION_AXIS.at
+FRICTION_NONE = 0
+FRICTION_SIMPLE = 1
+FRICTION_EXPONENTIAL = 2
+#: Mode of an axis during a step.
+SLIP = 1
+STUCK = 2
+
+
+@njit(cache=True, error_model="numpy")
+def _derivative(rhs, t, x, u, dist_row, dist_map, dx, one):  # pragma: no cover - compiled
+    """dx = f(t, x, u; p) + dist_map @ d for one variant (eqs. 2.13/2.15: d enters the
+    state derivatives). ``one`` = (x, u, p, dx) scratch rows of shape (1, .); p is set."""
+    x1, u1, p1, dx1 = one
+    for i in range(x.shape[0]):
+        x1[0, i] = x[i]
+    for j in range(u.shape[0]):
+        u1[0, j] = u[j]
+    rhs(t, x1, u1, p1, dx1)
+    n_d = dist_row.shape[0]
+    for i in range(dx.shape[0]):
+        dx[i] = dx1[0, i]
+        if n_d > 0:
+            acc = 0.0
+            for j in range(n_d):
+                acc += dist_map[i, j] * dist_row[j]
+            dx[i] += acc
+
+
+@njit(cache=True, error_model="numpy")
+def slip_friction(fric_row, v, direction):  # pragma: no cover - compiled
+    """Friction while sliding in ``direction`` at velocity v (Appendix A).
+
+    simple:      F = -mu_c F_N sgn - eps v
+    exponential: F = -[mu_c + (mu_s - mu_c) exp(-(|v|/v_s)^gamma)] F_N sgn - eps v
+    The sign is the direction of the slip, fixed over a step, so the Runge-Kutta stages
+    never chatter on sgn(v).
+    """
+    model = int(fric_row[FA.model])
+    mu_s, mu_c, eps, f_n = fric_row[FA.mu_s], fric_row[FA.mu_c], fric_row[FA.viscous], fric_row[FA.normal_force]
+    if model == FRICTION_SIMPLE:
+        mu = mu_c
+    else:
+        mu = mu_c + (mu_s - mu_c) * math.exp(-((abs(v) / fric_row[FA.stribeck_velocity]) ** fric_row[FA.form_factor]))
+    return -mu * f_n * direction - eps * v
+
+
+@njit(cache=True, error_model="numpy")
+def _solve_small(A, b, n):  # pragma: no cover - compiled
+    """Solve A[:n, :n] z = b[:n] in place (Gaussian elimination, partial pivoting)."""
+    for col in range(n):
+        piv = col
+        for r in range(col + 1, n):
+            if abs(A[r, col]) > abs(A[piv, col]):
+                piv = r
+        if piv != col:
+            for c in range(n):
+                A[col, c], A[piv, c] = A[piv, c], A[col, c]
+            b[col], b[piv] = b[piv], b[col]
+        for r in range(col + 1, n):
+            factor = A[r, col] / A[col, col]
+            for c in range(col, n):
+                A[r, c] -= factor * A[col, c]
+            b[r] -= factor * b[col]
+    for col in range(n - 1, -1, -1):
+        acc = b[col]
+        for c in range(col + 1, n):
+            acc -= A[col, c] * b[c]
+        b[col] = acc / A[col, col]
+
+
+@njit(cache=True, error_model="numpy")
+def friction_forces(
+    rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, f_out, work, A, rhs_s, dx, one
+):  # pragma: no cover - compiled
+    """Friction force on every input's axis at state x (written to f_out).
+
+    Sliding axes get :func:`slip_friction`. Stuck axes get the force that keeps their
+    acceleration exactly zero: accelerations are affine in the generalised forces, so with
+    a0 the accelerations of the stuck axes under the other forces and B their response to
+    unit forces on the stuck axes, f_S = -B^{-1} a0 (solved jointly when several stick).
+    """
+    n_u = u.shape[0]
+    n_stuck = 0
+    for j in range(n_u):
+        f_out[j] = 0.0
+        if mode[j] == SLIP:
+            vi = int(fric_b[j, FA.velocity_index])
+            f_out[j] = slip_friction(fric_b[j], x[vi], direction[j])
+        elif mode[j] == STUCK:
+            n_stuck += 1
+    if n_stuck == 0:
+        return
+    for j in range(n_u):
+        work[j] = u[j] + f_out[j]
+    _derivative(rhs, t, x, work, dist_row, dist_map, dx, one)
+    k = 0
+    for j in range(n_u):
+        if mode[j] == STUCK:
+            rhs_s[k] = -dx[int(fric_b[j, FA.velocity_index])]
+            k += 1
+    col = 0
+    for jc in range(n_u):
+        if mode[jc] != STUCK:
+            continue
+        work[jc] += 1.0
+        _derivative(rhs, t, x, work, dist_row, dist_map, dx, one)
+        work[jc] -= 1.0
+        row = 0
+        for jr in range(n_u):
+            if mode[jr] == STUCK:
+                A[row, col] = dx[int(fric_b[jr, FA.velocity_index])] + rhs_s[row]
+                row += 1
+        col += 1
+    _solve_small(A, rhs_s, n_stuck)
+    k = 0
+    for j in range(n_u):
+        if mode[j] == STUCK:
+            f_out[j] = rhs_s[k]
+            k += 1
+
+
+@njit(cache=True, error_model="numpy")
+def update_friction_modes(
+    rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx, one
+):  # pragma: no cover - compiled
+    """Breakaway at the start of a step: a stuck axis whose holding force would exceed
+    mu_s F_N starts to slide in the direction of the net force (Appendix A's static case)."""
+    for _ in range(u.shape[0]):
+        friction_forces(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx, one)
+        released = False
+        for j in range(u.shape[0]):
+            if mode[j] == STUCK and abs(f_tmp[j]) > fric_b[j, FA.mu_s] * fric_b[j, FA.normal_force]:
+                mode[j] = SLIP
+                direction[j] = -1.0 if f_tmp[j] > 0 else 1.0
+                released = True
+        if not released:
+            return
+
+
+@njit(cache=True, error_model="numpy")
+def _disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
+    """d at fraction ``position`` of the step, interpolated linearly between the stage nodes c."""
+    n_stage = c.shape[0]
+    lo, hi = 0, 0
+    for s in range(n_stage):
+        if c[s] <= position and c[s] >= c[lo]:
+            lo = s
+        if c[s] >= position and (c[hi] < position or c[s] <= c[hi]):
+            hi = s
+    if c[hi] < position:
+        hi = lo
+    w = 0.0 if c[hi] == c[lo] else (position - c[lo]) / (c[hi] - c[lo])
+    for j in range(out.shape[0]):
+        out[j] = (1.0 - w) * drow[lo, j] + w * drow[hi, j]
+
+
+@njit(cache=True, error_model="numpy")
+def _rk_step_one(
+    rhs, t, h, frac0, h_frac, x_in, x_out, u, drow, c, dist_map, fb, mode, direction, rk_a, rk_b, scratch
+):  # pragma: no cover - compiled
+    """One explicit Runge-Kutta step of one variant with friction, size h from x_in at t
+    (u held) into x_out.
+
+    The step covers the fraction [frac0, frac0 + h_frac] of the sampling step; the
+    disturbance is exact at the stage nodes of a full step and interpolated between them
+    for a partial step (one that ends where a sliding axis stops). ``scratch`` is the
+    friction path's work space, see :func:`step_with_friction`.
+    """
+    k_stage, xs, f, u_total, work, A, rhs_s, dx, d_tmp, one = scratch
+    n = x_in.shape[0]
+    n_stage = rk_b.shape[0]
+    partial = frac0 != 0.0 or h_frac != 1.0
+    for s in range(n_stage):
+        xs[:] = x_in
+        for j in range(s):
+            if rk_a[s, j] != 0.0:
+                for i in range(n):
+                    xs[i] += h * rk_a[s, j] * k_stage[j, i]
+        ts = t + c[s] * h
+        if partial:
+            _disturbance_at(drow, c, frac0 + c[s] * h_frac, d_tmp)
+            d_s = d_tmp
+        else:
+            d_s = drow[s]
+        friction_forces(rhs, ts, xs, u, d_s, dist_map, fb, mode, direction, f, work, A, rhs_s, dx, one)
+        for j in range(u.shape[0]):
+            u_total[j] = u[j] + f[j]
+        _derivative(rhs, ts, xs, u_total, d_s, dist_map, k_stage[s], one)
+    x_out[:] = x_in
+    for s in range(n_stage):
+        for i in range(n):
+            x_out[i] += h * rk_b[s] * k_stage[s, i]
+
+
+@njit(cache=True, error_model="numpy")
+def step_with_friction(
+    rhs, t, dt, x, x_new, x_mid, u, drow, c, dist_map, fb, mode, direction, hold, rk_a, rk_b, scratch
+):  # pragma: no cover - compiled
+    """One sampling step of one variant with friction (Appendix A): a sliding axis whose
+    velocity reaches zero inside the step is stopped there (the step is split at that
+    instant); a stuck axis is held at its position until it breaks away.
+
+    ``scratch`` = (k_stage (s, n), xs (n,), f, u_total, work (n_u,), A (n_u, n_u), rhs_s (n_u,),
+    dx (n,), d_tmp (n_d,), one): work space allocated once per :func:`simulate` call."""
+    n_u = u.shape[0]
+    _rk_step_one(rhs, t, dt, 0.0, 1.0, x, x_new, u, drow, c, dist_map, fb, mode, direction, rk_a, rk_b, scratch)
+    frac = 1.0
+    for j in range(n_u):
+        vi = int(fb[j, FA.velocity_index])
+        if mode[j] == SLIP and x_new[vi] * direction[j] <= 0.0 and x[vi] != x_new[vi]:
+            frac = min(frac, x[vi] / (x[vi] - x_new[vi]))
+    if frac < 1.0:
+        h1 = frac * dt
+        _rk_step_one(rhs, t, h1, 0.0, frac, x, x_mid, u, drow, c, dist_map, fb, mode, direction, rk_a, rk_b, scratch)
+        for j in range(n_u):
+            vi = int(fb[j, FA.velocity_index])
+            if mode[j] == SLIP and x_new[vi] * direction[j] <= 0.0:
+                x_mid[vi] = 0.0
+                mode[j] = STUCK
+                hold[j] = x_mid[int(fb[j, FA.position_index])]
+        _, _, f, _, work, A, rhs_s, dx, d_tmp, one = scratch
+        _disturbance_at(drow, c, frac, d_tmp)
+        update_friction_modes(rhs, t + h1, x_mid, u, d_tmp, dist_map, fb, mode, direction, f, work, A, rhs_s, dx, one)
+        _rk_step_one(
+            rhs,
+            t + h1,
+            dt - h1,
+            frac,
+            1.0 - frac,
+            x_mid,
+            x_new,
+            u,
+            drow,
+            c,
+            dist_map,
+            fb,
+            mode,
+            direction,
+            rk_a,
+            rk_b,
+            scratch,
+        )
+    for j in range(n_u):
+        vi = int(fb[j, FA.velocity_index])
+        if mode[j] == SLIP and x_new[vi] * direction[j] <= 0.0:  # a second stop: rare
+            mode[j] = STUCK
+            hold[j] = x_new[int(fb[j, FA.position_index])]
+        if mode[j] == STUCK:
+            x_new[vi] = 0.0
+            x_new[int(fb[j, FA.position_index])] = hold[j]
+
+
+@njit(cache=True, error_model="numpy")
+def has_friction(axes):  # pragma: no cover - compiled
+    """Whether any input's axis (rows of ``axes``, FRICTION_AXIS blocks) has a friction model."""
+    for j in range(axes.shape[0]):  # noqa: SIM110 - compiled: numba has no any() over a generator
+        if int(axes[j, FA.model]) != FRICTION_NONE:
+            return True
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def initial_modes(axes, x, mode, direction, hold):  # pragma: no cover - compiled
+    """Mode of each axis at the start: stuck if its velocity is exactly zero, else sliding
+    in the direction of the velocity; a stuck axis is held at its initial position."""
+    for j in range(axes.shape[0]):
+        if int(axes[j, FA.model]) != FRICTION_NONE:
+            v0 = x[int(axes[j, FA.velocity_index])]
+            mode[j] = STUCK if v0 == 0.0 else SLIP
+            direction[j] = 1.0 if v0 > 0.0 else -1.0
+            hold[j] = x[int(axes[j, FA.position_index])]

@@ -1,0 +1,569 @@
+"""The closed loop, stepped in lock step over a batch of variants.
+
+Plants, controllers, controller callbacks and loop elements are numba-compiled functions
+with the signatures of :mod:`nlcx.kernel.abi`. They are passed to :func:`simulate` as
+first-class function values, so a single compiled (and disk-cached) kernel serves every
+plant, controller and element, including those registered by third-party packages.
+
+Every sampling instant, one call of the controller, one call of each loop element and one
+call of the right-hand side per Runge-Kutta stage serve every variant of the batch. A
+single trajectory is a chain of dependent operations (each stage needs the one before);
+stepping many variants together lets the processor overlap independent chains, and the
+cost of a call is shared by the whole batch. Variants with friction (Appendix A,
+:mod:`nlcx.kernel.friction`) are stepped one by one behind the frictionless rows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, types
+
+from nlcx.kernel.abi import (
+    ACTUATOR,
+    ARR3,
+    ARR4,
+    ELEMENT_ENTRY,
+    F64,
+    IVEC,
+    MAT,
+    SENSOR,
+    STATUS_BOUND,
+    STATUS_NONFINITE,
+    STATUS_OK,
+    VEC,
+    CallbackTuple,
+    ControllerFn,
+    ElementTuple,
+    RhsFn,
+)
+from nlcx.kernel.friction import (
+    FA,
+    friction_forces,
+    has_friction,
+    initial_modes,
+    step_with_friction,
+    update_friction_modes,
+)
+
+EE = ELEMENT_ENTRY.at
+
+#: The arrays of one batch, grouped by what they describe (rows are variants; an axis of
+#: length 1 is shared by every variant):
+#: plant (x0 (B, n), p (B|1, n_p), C (n_y, n), bounds (B|1, n): |x_i| > bounds[i] stops a run)
+PlantArrays = types.UniTuple(MAT, 4)
+#: control (cp (B, n_cp), cs0 (B, n_cs), ref (B|1, K+1|1, n_r) reference at the sampling instants)
+ControlArrays = types.Tuple((MAT, MAT, ARR3))
+#: elements (table (n_el, ELEMENT_ENTRY), ep (B, n_ep), es0 (B, n_es), data (B|1, K+1|1, n_data))
+ElementArrays = types.Tuple((MAT, MAT, MAT, ARR3))
+#: plant forces (dist (B|1, K|1, s, n_d) derivative terms at the stage times, dist_map (n, n_d):
+#: dx += dist_map @ d, friction (B|1, n_u, FRICTION_AXIS) of each input's axis)
+ForceArrays = types.Tuple((ARR4, MAT, ARR3))
+#: records, written (X (B, K+1, n), U (B, K+1, n_u), LOG (B, K+1|1, n_log), FRICTION (B, K+1|1, n_u));
+#: a time length of 1 for LOG and FRICTION: not recorded
+Records = types.UniTuple(ARR3, 4)
+#: outcome, written (status (B,), n_valid (B,), fail_index (B,): i < n state i, n + j input j, -1 none)
+Outcome = types.UniTuple(IVEC, 3)
+
+SIMULATE_SIG = types.void(
+    RhsFn,
+    ControllerFn,
+    CallbackTuple,
+    ElementTuple,
+    types.Tuple((MAT, VEC)),  # Butcher tableau (rk_a (s, s), rk_b (s,))
+    PlantArrays,
+    ControlArrays,
+    ElementArrays,
+    ForceArrays,
+    F64,  # dt
+    Records,
+    Outcome,
+)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _row(arr_len: int, b: int) -> int:
+    """Index into an axis that is either per-variant (length B) or broadcast (length 1)."""
+    return b if arr_len > 1 else 0
+
+
+@njit(cache=True, error_model="numpy")
+def _add_disturbances(dx, dist, vid, kd, stage, dist_map):  # pragma: no cover - compiled
+    """dx[b] += dist_map @ dist[variant of b, kd, stage] for every active row."""
+    n_d = dist.shape[3]
+    if n_d == 0:
+        return
+    n = dx.shape[1]
+    for b in range(dx.shape[0]):
+        bd = _row(dist.shape[0], vid[b])
+        for i in range(n):
+            acc = 0.0
+            for j in range(n_d):
+                acc += dist_map[i, j] * dist[bd, kd, stage, j]
+            dx[b, i] += acc
+
+
+@njit(cache=True, error_model="numpy")
+def _rk_step_batch(rhs, t, h, x, x_out, u, p, dist, vid, kd, dist_map, rk_a, rk_b, c, stages, xs):  # pragma: no cover
+    """One explicit Runge-Kutta step of size h for every row, any tableau of at most
+    :data:`MAX_STAGES` stages (u held, no friction). ``stages`` holds one (B, n) array per stage."""
+    nb, n = x.shape
+    n_stage = rk_b.shape[0]
+    for s in range(n_stage):
+        for b in range(nb):
+            for i in range(n):
+                acc = x[b, i]
+                for j in range(s):
+                    if rk_a[s, j] != 0.0:
+                        acc += h * rk_a[s, j] * stages[j][b, i]
+                xs[b, i] = acc
+        rhs(t + c[s] * h, xs, u, p, stages[s])
+        _add_disturbances(stages[s], dist, vid, kd, s, dist_map)
+    for b in range(nb):
+        for i in range(n):
+            acc = x[b, i]
+            for s in range(n_stage):
+                acc += h * rk_b[s] * stages[s][b, i]
+            x_out[b, i] = acc
+
+
+@njit(cache=True, error_model="numpy")
+def _swap_variants(i, j, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode):  # pragma: no cover
+    """Exchange the working rows i and j (two variants' state, parameters and bookkeeping)."""
+    if i == j:
+        return
+    vid[i], vid[j] = vid[j], vid[i]
+    stopped[i], stopped[j] = stopped[j], stopped[i]
+    for a in (x, pw, cpw, cs, log, bw, direction, hold):
+        _swap_rows(a, i, j)
+    _swap_rows3(fw, i, j)
+    for c in range(mode.shape[1]):
+        mode[i, c], mode[j, c] = mode[j, c], mode[i, c]
+
+
+@njit(cache=True, error_model="numpy")
+def _swap_rows(a, i, j):  # pragma: no cover - compiled
+    """Exchange rows i and j of a 2-D array."""
+    for c in range(a.shape[1]):
+        a[i, c], a[j, c] = a[j, c], a[i, c]
+
+
+@njit(cache=True, error_model="numpy")
+def _swap_rows3(a, i, j):  # pragma: no cover - compiled
+    """Exchange rows i and j of a 3-D array."""
+    for c in range(a.shape[1]):
+        for d in range(a.shape[2]):
+            a[i, c, d], a[j, c, d] = a[j, c, d], a[i, c, d]
+
+
+@njit(cache=True, error_model="numpy")
+def _stage_nodes(rk_a):  # pragma: no cover - compiled
+    """c_i = sum_j a_ij: the stage times t_k + c_i dt."""
+    n_stage = rk_a.shape[0]
+    c = np.zeros(n_stage)
+    for i in range(n_stage):
+        for j in range(n_stage):
+            c[i] += rk_a[i, j]
+    return c
+
+
+@njit(cache=True, error_model="numpy")
+def _is_classic_rk4(rk_a, rk_b):  # pragma: no cover - compiled
+    """Whether the tableau is the classic fourth-order Runge-Kutta method (stepped written out)."""
+    return (
+        rk_b.shape[0] == 4
+        and rk_a[1, 0] == 0.5 and rk_a[2, 1] == 0.5 and rk_a[3, 2] == 1.0
+        and rk_a[2, 0] == 0.0 and rk_a[3, 0] == 0.0 and rk_a[3, 1] == 0.0
+        and rk_b[0] == 1.0 / 6.0 and rk_b[1] == 2.0 / 6.0 and rk_b[2] == 2.0 / 6.0 and rk_b[3] == 1.0 / 6.0
+    )  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def _output_picks(C):  # pragma: no cover - compiled
+    """picked[i] = j where row i of C is the unit vector e_j (y_i = x_j exactly), else -1."""
+    n_y, n = C.shape
+    picked = np.full(n_y, -1)
+    for i in range(n_y):
+        for j in range(n):
+            if C[i, j] == 1.0 and picked[i] == -1:
+                picked[i] = j
+            elif C[i, j] != 0.0:
+                picked[i] = -2
+    for i in range(n_y):
+        if picked[i] == -2:
+            picked[i] = -1
+    return picked
+
+
+@njit(cache=True, error_model="numpy")
+def _row_order(friction, n_batch):  # pragma: no cover - compiled
+    """(vid, n_free): the variants without friction first (stepped together), then those with
+    friction (stepped one by one); vid maps a working row to its variant."""
+    vid = np.empty(n_batch, dtype=np.int64)
+    n_free = 0
+    for v in range(n_batch):
+        if not has_friction(friction[_row(friction.shape[0], v)]):
+            vid[n_free] = v
+            n_free += 1
+    b = n_free
+    for v in range(n_batch):
+        if has_friction(friction[_row(friction.shape[0], v)]):
+            vid[b] = v
+            b += 1
+    return vid, n_free
+
+
+@njit(cache=True, error_model="numpy")
+def _working_rows(vid, plant, control, friction, n_u):  # pragma: no cover - compiled
+    """The per-row working copies (x, p, cp, cs, friction axes, bounds) in the order of vid."""
+    x0, p, _, bounds = plant
+    cp, cs0, _ = control
+    n_batch, n = x0.shape
+    x = np.empty((n_batch, n))
+    pw = np.empty((n_batch, p.shape[1]))
+    cpw = np.empty((n_batch, cp.shape[1]))
+    cs = np.empty((n_batch, cs0.shape[1]))
+    fw = np.empty((n_batch, n_u, len(FA)))
+    bw = np.empty((n_batch, n))
+    for b in range(n_batch):
+        v = vid[b]
+        x[b] = x0[v]
+        pw[b] = p[_row(p.shape[0], v)]
+        cpw[b] = cp[v]
+        cs[b] = cs0[v]
+        fw[b] = friction[_row(friction.shape[0], v)]
+        bw[b] = bounds[_row(bounds.shape[0], v)]
+    return x, pw, cpw, cs, fw, bw
+
+
+@njit(cache=True, error_model="numpy")
+def _friction_scratch(n, n_u, n_p, n_stage, n_d):  # pragma: no cover - compiled
+    """Work space of the one-variant friction path, allocated once per :func:`simulate` call:
+    (x, x_new, x_mid, u) of the variant and the scratch tuple of
+    :func:`nlcx.kernel.friction.step_with_friction`."""
+    one = (np.empty((1, n)), np.empty((1, n_u)), np.empty((1, n_p)), np.empty((1, n)))
+    k_stage = np.empty((n_stage, n))
+    scratch = (
+        k_stage, np.empty(n), np.empty(n_u), np.empty(n_u), np.empty(n_u),
+        np.empty((n_u, n_u)), np.empty(n_u), np.empty(n), np.empty(n_d), one,
+    )  # fmt: skip
+    return (np.empty(n), np.empty(n), np.empty(n), np.empty(n_u)), scratch
+
+
+@njit(cache=True, error_model="numpy")
+def _apply_elements(hook, t, dt, k, signal, vid, fns, elements):  # pragma: no cover - compiled
+    """Every loop element at ``hook`` acts on ``signal`` (the active rows), in table order."""
+    table, ep, es, data = elements
+    for e in range(table.shape[0]):
+        if int(table[e, EE.hook]) == hook:
+            fn = fns[int(table[e, EE.slot])]
+            fn(
+                t, dt, k, signal, vid, ep, es, data,
+                int(table[e, EE.param_offset]), int(table[e, EE.state_offset]), int(table[e, EE.data_offset]),
+            )  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def _sample(k, nb, vid, x, C, picked, y, ref, r, u, X):  # pragma: no cover - compiled
+    """At t_k, for every active row: record x_k, measure y_k = C x_k, read r_k, clear u."""
+    n = x.shape[1]
+    kr = _row(ref.shape[1], k)
+    for b in range(nb):
+        v = vid[b]
+        for i in range(n):
+            X[v, k, i] = x[b, i]
+        for i in range(y.shape[1]):
+            if picked[i] >= 0:  # a row of C that selects one state
+                y[b, i] = x[b, picked[i]]
+            else:
+                acc = 0.0
+                for j in range(n):
+                    acc += C[i, j] * x[b, j]
+                y[b, i] = acc
+        br = _row(ref.shape[0], vid[b])
+        for i in range(r.shape[1]):
+            r[b, i] = ref[br, kr, i]
+        for j in range(u.shape[1]):
+            u[b, j] = 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def _record_inputs(k, nb, n, vid, u, log, stopped, records, outcome):  # pragma: no cover - compiled
+    """Record the logs and the applied input u_k of every active row; a row whose input is not
+    finite stops (status, failing input). Returns the number of rows stopped."""
+    _, U, LOG, _ = records
+    status, n_valid, fail_index = outcome
+    record = LOG.shape[1] > 1
+    n_stop = 0
+    for b in range(nb):
+        v = vid[b]
+        if record:
+            for i in range(log.shape[1]):
+                LOG[v, k, i] = log[b, i]
+        bad_u = -1
+        for j in range(u.shape[1]):
+            U[v, k, j] = u[b, j]
+            if bad_u < 0 and not np.isfinite(u[b, j]):
+                bad_u = j
+        if bad_u >= 0:
+            status[v] = STATUS_NONFINITE
+            fail_index[v] = n + bad_u
+            n_valid[v] = k + 1
+            stopped[b] = True
+            n_stop += 1
+    return n_stop
+
+
+@njit(cache=True, error_model="numpy")
+def _friction_at_sample(
+    rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records
+):  # pragma: no cover - compiled
+    """Breakaway at t_k for the frictional rows (Appendix A's static case), and the friction
+    force on each axis at t_k when it is recorded (the step evaluates its own)."""
+    mode, direction, _, stopped = state
+    dist, dist_map, _ = forces
+    FRICTION = records[3]
+    record = FRICTION.shape[1] > 1
+    (xo, _, _, uo), scratch = one_path
+    _, _, f, _, work, A, rhs_s, dxo, _, one = scratch
+    kd = _row(dist.shape[1], k)
+    for b in range(nb):
+        if stopped[b]:
+            continue
+        v = vid[b]
+        if b < n_free:
+            if record:
+                for j in range(u.shape[1]):
+                    FRICTION[v, k, j] = 0.0
+            continue
+        _load_one(b, x, u, pw, xo, uo, one)
+        drow = dist[_row(dist.shape[0], v), kd]
+        update_friction_modes(
+            rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
+        )
+        if record:
+            friction_forces(
+                rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
+            )
+            for j in range(u.shape[1]):
+                FRICTION[v, k, j] = f[j]
+
+
+@njit(cache=True, error_model="numpy")
+def _load_one(b, x, u, pw, xo, uo, one):  # pragma: no cover - compiled
+    """Copy row b's state, input and plant parameters into the one-variant work space."""
+    for i in range(x.shape[1]):
+        xo[i] = x[b, i]
+    for j in range(u.shape[1]):
+        uo[j] = u[b, j]
+    for i in range(pw.shape[1]):
+        one[2][0, i] = pw[b, i]
+
+
+@njit(cache=True, error_model="numpy")
+def _rk4_free_rows(rhs, t, dt, n_free, free, flat, dist, vid, kd, dist_map):  # pragma: no cover - compiled
+    """The classic RK4 step of the frictionless rows, written out (the common case); the
+    stage sums run flat over the rows (vectorisable)."""
+    xr, _, _, ur, pr, k1r, k2r, k3r, k4r = free
+    xf, xsf, xnf, k1f, k2f, k3f, k4f = flat
+    xsr = free[2]
+    m = n_free * xr.shape[1]
+    rhs(t, xr, ur, pr, k1r)
+    _add_disturbances(k1r, dist, vid, kd, 0, dist_map)
+    for q in range(m):
+        xsf[q] = xf[q] + 0.5 * dt * k1f[q]
+    rhs(t + 0.5 * dt, xsr, ur, pr, k2r)
+    _add_disturbances(k2r, dist, vid, kd, 1, dist_map)
+    for q in range(m):
+        xsf[q] = xf[q] + 0.5 * dt * k2f[q]
+    rhs(t + 0.5 * dt, xsr, ur, pr, k3r)
+    _add_disturbances(k3r, dist, vid, kd, 2, dist_map)
+    for q in range(m):
+        xsf[q] = xf[q] + dt * k3f[q]
+    rhs(t + dt, xsr, ur, pr, k4r)
+    _add_disturbances(k4r, dist, vid, kd, 3, dist_map)
+    for q in range(m):
+        xnf[q] = xf[q] + dt / 6.0 * (k1f[q] + 2.0 * (k2f[q] + k3f[q]) + k4f[q])
+
+
+@njit(cache=True, error_model="numpy")
+def _step_frictional_rows(
+    rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path, tableau, c
+):  # pragma: no cover - compiled
+    """One sampling step of each frictional row, one variant at a time."""
+    mode, direction, hold, stopped = state
+    dist, dist_map, _ = forces
+    (xo, xo_new, xo_mid, uo), scratch = one_path
+    one = scratch[9]
+    rk_a, rk_b = tableau
+    for b in range(n_free, nb):
+        if stopped[b]:
+            continue
+        v = vid[b]
+        _load_one(b, x, u, pw, xo, uo, one)
+        step_with_friction(
+            rhs, t, dt, xo, xo_new, xo_mid, uo, dist[_row(dist.shape[0], v), kd], c, dist_map,
+            fw[b], mode[b], direction[b], hold[b], rk_a, rk_b, scratch,
+        )  # fmt: skip
+        for i in range(x.shape[1]):
+            x_new[b, i] = xo_new[i]
+
+
+@njit(cache=True, error_model="numpy")
+def _accept_states(k, nb, vid, x, x_new, bw, stopped, outcome):  # pragma: no cover - compiled
+    """x_{k+1} for every active row; a row whose state is non-finite or past its bound stops.
+    Returns the number of rows stopped."""
+    status, n_valid, fail_index = outcome
+    n = x.shape[1]
+    n_stop = 0
+    for b in range(nb):
+        if stopped[b]:
+            continue
+        v = vid[b]
+        bad = -1
+        code = STATUS_OK
+        for i in range(n):
+            x[b, i] = x_new[b, i]
+            if bad >= 0:
+                continue
+            if not np.isfinite(x[b, i]):
+                bad = i
+                code = STATUS_NONFINITE
+            elif abs(x[b, i]) > bw[b, i]:
+                bad = i
+                code = STATUS_BOUND
+        if bad >= 0:
+            status[v] = code
+            fail_index[v] = bad
+            n_valid[v] = k + 1
+            stopped[b] = True
+            n_stop += 1
+    return n_stop
+
+
+@njit(cache=True, error_model="numpy")
+def _compact(nb, n_free, vid, rows, fw, state):  # pragma: no cover - compiled
+    """Move the stopped variants behind the active ones, keeping the frictionless rows in
+    front: a stopped frictionless row trades places with the last frictionless row, which
+    then trades with the last active row. Returns the new (nb, n_free)."""
+    x, pw, cpw, cs, log, bw = rows
+    mode, direction, hold, stopped = state
+    b = 0
+    while b < nb:
+        if not stopped[b]:
+            b += 1
+            continue
+        if b < n_free:
+            _swap_variants(b, n_free - 1, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode)
+            _swap_variants(n_free - 1, nb - 1, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode)
+            n_free -= 1
+        else:
+            _swap_variants(b, nb - 1, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode)
+        nb -= 1
+    return nb, n_free
+
+
+@njit(cache=True, error_model="numpy")
+def _free_views(n_free, x, x_new, xs, u, pw, stages):  # pragma: no cover - compiled
+    """Views on the frictionless rows (stepped together), remade only when a variant leaves."""
+    k1, k2, k3, k4 = stages
+    return (
+        x[:n_free], x_new[:n_free], xs[:n_free], u[:n_free], pw[:n_free],
+        k1[:n_free], k2[:n_free], k3[:n_free], k4[:n_free],
+    )  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def _init_outcome(n_steps, outcome):  # pragma: no cover - compiled
+    """Every variant ok until it stops."""
+    status, n_valid, fail_index = outcome
+    for v in range(status.shape[0]):
+        status[v] = STATUS_OK
+        fail_index[v] = -1
+        n_valid[v] = n_steps + 1
+
+
+@njit(cache=True, error_model="numpy")
+def _no_friction_recorded(k, nb, vid, stopped, FRICTION):  # pragma: no cover - compiled
+    """Zero friction force at t_k for every active row of a batch without friction."""
+    for b in range(nb):
+        if stopped[b]:
+            continue
+        for j in range(FRICTION.shape[2]):
+            FRICTION[vid[b], k, j] = 0.0
+
+
+@njit(SIMULATE_SIG, cache=True, error_model="numpy")
+def simulate(
+    rhs, controller, callbacks, element_fns, tableau, plant, control, elements, forces, dt, records, outcome
+):  # pragma: no cover - compiled
+    """Integrate a batch of closed loops in lock step with an explicit Runge-Kutta method.
+
+    At every sampling instant t_k = k dt each variant measures y_k = C x_k, its SENSOR
+    elements act on y_k, its controller sets u_k, its ACTUATOR elements act on u_k, and u_k
+    is held (zero-order hold) while the plant is integrated to t_{k+1} with the tableau
+    (rk_a, rk_b); stage i is evaluated at t_k + c_i dt, c_i = sum_j rk_a[i, j], with the
+    derivative terms (disturbances) sampled there. Friction (Appendix A) acts on the axis
+    of each input (:mod:`nlcx.kernel.friction`). A variant whose state becomes non-finite
+    or leaves its bounds stops: its status is set, the remaining samples are left untouched
+    and it leaves the batch (the active variants are kept in the leading rows of the
+    working arrays; ``vid`` maps a row to its variant).
+    """
+    rk_a, rk_b = tableau
+    x0, p, C, _ = plant
+    ref = control[2]
+    X, U, LOG, _ = records
+    dist, dist_map, friction = forces
+    n_batch, n = x0.shape
+    n_u, n_steps = U.shape[2], X.shape[1] - 1
+    c = _stage_nodes(rk_a)
+    classic = _is_classic_rk4(rk_a, rk_b)
+    picked = _output_picks(C)
+    vid, n_free = _row_order(friction, n_batch)
+    x, pw, cpw, cs, fw, bw = _working_rows(vid, plant, control, friction, n_u)
+    y, r, u = np.empty((n_batch, C.shape[0])), np.empty((n_batch, ref.shape[2])), np.empty((n_batch, n_u))
+    log = np.full((n_batch, LOG.shape[2]), np.nan)
+    x_new, xs = np.empty((n_batch, n)), np.empty((n_batch, n))
+    stages = (np.empty((n_batch, n)), np.empty((n_batch, n)), np.empty((n_batch, n)), np.empty((n_batch, n)))
+    state = (np.zeros((n_batch, n_u), dtype=np.int64), np.zeros((n_batch, n_u)), np.zeros((n_batch, n_u)),
+             np.zeros(n_batch, dtype=np.bool_))  # fmt: skip
+    for b in range(n_batch):
+        initial_modes(fw[b], x[b], state[0][b], state[1][b], state[2][b])
+    _init_outcome(n_steps, outcome)
+    one_path = _friction_scratch(n, n_u, p.shape[1], rk_b.shape[0], dist.shape[3])
+    els = (elements[0], elements[1], elements[2].copy(), elements[3])
+    stopped = state[3]
+    nb = n_batch
+    yv, rv, uv, xv, cpv, csv, logv = y, r, u, x, cpw, cs, log
+    free = _free_views(n_free, x, x_new, xs, u, pw, stages)
+    size = n_batch * n
+    flat = (x.reshape(size), xs.reshape(size), x_new.reshape(size), stages[0].reshape(size),
+            stages[1].reshape(size), stages[2].reshape(size), stages[3].reshape(size))  # fmt: skip
+    for k in range(n_steps + 1):
+        t = k * dt
+        _sample(k, nb, vid, x, C, picked, y, ref, r, u, X)
+        _apply_elements(SENSOR, t, dt, k, yv, vid, element_fns, els)
+        controller(t, dt, xv, yv, rv, cpv, csv, uv, logv, callbacks)
+        _apply_elements(ACTUATOR, t, dt, k, uv, vid, element_fns, els)
+        n_stop = _record_inputs(k, nb, n, vid, u, log, stopped, records, outcome)
+        if nb > n_free:
+            _friction_at_sample(rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records)
+        elif records[3].shape[1] > 1:
+            _no_friction_recorded(k, nb, vid, stopped, records[3])
+        if k < n_steps and nb > n_stop:
+            kd = _row(dist.shape[1], k)
+            if n_free > 0 and classic:
+                _rk4_free_rows(rhs, t, dt, n_free, free, flat, dist, vid, kd, dist_map)
+            elif n_free > 0:
+                xr, xnr, xsr, ur, pr, k1r, k2r, k3r, k4r = free
+                _rk_step_batch(rhs, t, dt, xr, xnr, ur, pr, dist, vid, kd, dist_map, rk_a, rk_b, c,
+                               (k1r, k2r, k3r, k4r), xsr)  # fmt: skip
+            if nb > n_free:
+                _step_frictional_rows(rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces,
+                                      one_path, tableau, c)  # fmt: skip
+            n_stop += _accept_states(k, nb, vid, x, x_new, bw, stopped, outcome)
+        if n_stop > 0:
+            nb, n_free = _compact(nb, n_free, vid, (x, pw, cpw, cs, log, bw), fw, state)
+            if nb == 0:
+                break
+            yv, rv, uv, xv, cpv, csv, logv = y[:nb], r[:nb], u[:nb], x[:nb], cpw[:nb], cs[:nb], log[:nb]
+            free = _free_views(n_free, x, x_new, xs, u, pw, stages)
