@@ -108,57 +108,6 @@ class PIDConfig(ControllerConfig):
     setpoint_weight: float = 1.0
 
 
-@njit(cache=True, error_model="numpy")
-def _loop_gains(t, e, d, cp, row, h, callbacks):  # pragma: no cover - compiled
-    """(k_p, k_i, k_d) of the loop whose block starts at cp[row, h], from its schedule."""
-    off = int(cp[row, h + L.schedule_offset])
-    direct = int(cp[row, h + L.direct_schedule])
-    if direct == DIRECT_ERROR_AGS:
-        return error_ags_gains(t, e, d, cp, row, off)
-    if direct == DIRECT_TIME_AGS:
-        return time_ags_gains(t, e, d, cp, row, off)
-    if direct == DIRECT_CONSTANT:
-        return constant_gains(t, e, d, cp, row, off)
-    return callbacks[int(cp[row, h + L.schedule_slot])](t, e, d, cp, row, off)
-
-
-@njit(cache=True, error_model="numpy")
-def _loop_output(t, dt, y, r, cp, cs, log, row, i, h, callbacks):  # pragma: no cover - compiled
-    """One loop's signed contribution sign (k_p (b r - y) + k_i I + k_d D) at t; updates the
-    loop's state (I, previous e and y, filtered D) and logs its gains and output."""
-    c = len(S) * i
-    y_i = y[row, int(cp[row, h + L.y_index])]
-    r_i = r[row, int(cp[row, h + L.r_index])]
-    e = r_i - y_i
-    if cs[row, c + S.started] == 0.0:
-        cs[row, c + S.e_prev] = e
-        cs[row, c + S.y_prev] = y_i
-        cs[row, c + S.started] = 1.0
-    on_measurement = cp[row, h + L.on_measurement] != 0.0
-    dv = (cs[row, c + S.y_prev] - y_i) if on_measurement else (e - cs[row, c + S.e_prev])
-    if cp[row, h + L.filtered] != 0.0:
-        d = (cs[row, c + S.d_filtered] + cp[row, h + L.N] * dv) / (1.0 + cp[row, h + L.N] * dt)
-        cs[row, c + S.d_filtered] = d
-    else:
-        d = dv / dt
-    kp, ki, kd = _loop_gains(t, e, d, cp, row, h, callbacks)
-    if cp[row, h + L.gain_inside] != 0.0:
-        cs[row, c + S.integral] += ki * e * dt
-        integral_term = cs[row, c + S.integral]
-    else:
-        cs[row, c + S.integral] += e * dt
-        integral_term = ki * cs[row, c + S.integral]
-    out = cp[row, h + L.sign] * (kp * (cp[row, h + L.setpoint_weight] * r_i - y_i) + integral_term + kd * d)
-    g = len(G) * i
-    log[row, g + G.kp] = kp
-    log[row, g + G.ki] = ki
-    log[row, g + G.kd] = kd
-    log[row, g + G.u] = out
-    cs[row, c + S.e_prev] = e
-    cs[row, c + S.y_prev] = y_i
-    return out
-
-
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
 def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """Multi-loop PID with pluggable gain schedules, one sample (zero-order hold), every row.
@@ -174,7 +123,47 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
         base = len(H) + n_u
         for i in range(int(cp[row, H.n_loops])):
             h = base + len(L) * i
-            u[row, int(cp[row, h + L.u_index])] += _loop_output(t, dt, y, r, cp, cs, log, row, i, h, callbacks)
+            c = len(S) * i
+            y_i = y[row, int(cp[row, h + L.y_index])]
+            r_i = r[row, int(cp[row, h + L.r_index])]
+            e = r_i - y_i
+            if cs[row, c + S.started] == 0.0:
+                cs[row, c + S.e_prev] = e
+                cs[row, c + S.y_prev] = y_i
+                cs[row, c + S.started] = 1.0
+            on_measurement = cp[row, h + L.on_measurement] != 0.0
+            dv = (cs[row, c + S.y_prev] - y_i) if on_measurement else (e - cs[row, c + S.e_prev])
+            if cp[row, h + L.filtered] != 0.0:
+                N = cp[row, h + L.N]
+                d = (cs[row, c + S.d_filtered] + N * dv) / (1.0 + N * dt)
+                cs[row, c + S.d_filtered] = d
+            else:
+                d = dv / dt
+            off = int(cp[row, h + L.schedule_offset])
+            direct = int(cp[row, h + L.direct_schedule])
+            if direct == DIRECT_ERROR_AGS:
+                kp, ki, kd = error_ags_gains(t, e, d, cp, row, off)
+            elif direct == DIRECT_TIME_AGS:
+                kp, ki, kd = time_ags_gains(t, e, d, cp, row, off)
+            elif direct == DIRECT_CONSTANT:
+                kp, ki, kd = constant_gains(t, e, d, cp, row, off)
+            else:
+                kp, ki, kd = callbacks[int(cp[row, h + L.schedule_slot])](t, e, d, cp, row, off)
+            if cp[row, h + L.gain_inside] != 0.0:
+                cs[row, c + S.integral] += ki * e * dt
+                integral_term = cs[row, c + S.integral]
+            else:
+                cs[row, c + S.integral] += e * dt
+                integral_term = ki * cs[row, c + S.integral]
+            out = cp[row, h + L.sign] * (kp * (cp[row, h + L.setpoint_weight] * r_i - y_i) + integral_term + kd * d)
+            g = len(G) * i
+            log[row, g + G.kp] = kp
+            log[row, g + G.ki] = ki
+            log[row, g + G.kd] = kd
+            log[row, g + G.u] = out
+            u[row, int(cp[row, h + L.u_index])] += out
+            cs[row, c + S.e_prev] = e
+            cs[row, c + S.y_prev] = y_i
 
 
 class MultiLoopPID(ControllerModel):

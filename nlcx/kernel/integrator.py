@@ -86,7 +86,7 @@ def _row(arr_len: int, b: int) -> int:
     return b if arr_len > 1 else 0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _add_disturbances(dx, dist, vid, kd, stage, dist_map):  # pragma: no cover - compiled
     """dx[b] += dist_map @ dist[variant of b, kd, stage] for every active row."""
     n_d = dist.shape[3]
@@ -249,10 +249,9 @@ def _friction_scratch(n, n_u, n_p, n_stage, n_d):  # pragma: no cover - compiled
     return (np.empty(n), np.empty(n), np.empty(n), np.empty(n_u)), scratch
 
 
-@njit(cache=True, error_model="numpy")
-def _apply_elements(hook, t, dt, k, signal, vid, fns, elements):  # pragma: no cover - compiled
+@njit(cache=True, inline="always", error_model="numpy")
+def _apply_elements(hook, t, dt, k, signal, vid, fns, table, ep, es, data):  # pragma: no cover - compiled
     """Every loop element at ``hook`` acts on ``signal`` (the active rows), in table order."""
-    table, ep, es, data = elements
     for e in range(table.shape[0]):
         if int(table[e, EE.hook]) == hook:
             fn = fns[int(table[e, EE.slot])]
@@ -263,6 +262,19 @@ def _apply_elements(hook, t, dt, k, signal, vid, fns, elements):  # pragma: no c
 
 
 @njit(cache=True, error_model="numpy")
+def _hook_counts(table):  # pragma: no cover - compiled
+    """(number of sensor elements, number of actuator elements) in the element table."""
+    n_sensor = 0
+    n_actuator = 0
+    for e in range(table.shape[0]):
+        if int(table[e, EE.hook]) == SENSOR:
+            n_sensor += 1
+        elif int(table[e, EE.hook]) == ACTUATOR:
+            n_actuator += 1
+    return n_sensor, n_actuator
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _sample(k, nb, vid, x, C, picked, y, ref, r, u, X):  # pragma: no cover - compiled
     """At t_k, for every active row: record x_k, measure y_k = C x_k, read r_k, clear u."""
     n = x.shape[1]
@@ -286,12 +298,10 @@ def _sample(k, nb, vid, x, C, picked, y, ref, r, u, X):  # pragma: no cover - co
             u[b, j] = 0.0
 
 
-@njit(cache=True, error_model="numpy")
-def _record_inputs(k, nb, n, vid, u, log, stopped, records, outcome):  # pragma: no cover - compiled
+@njit(cache=True, inline="always", error_model="numpy")
+def _record_inputs(k, nb, n, vid, u, log, stopped, U, LOG, status, n_valid, fail_index):  # pragma: no cover
     """Record the logs and the applied input u_k of every active row; a row whose input is not
     finite stops (status, failing input). Returns the number of rows stopped."""
-    _, U, LOG, _ = records
-    status, n_valid, fail_index = outcome
     record = LOG.shape[1] > 1
     n_stop = 0
     for b in range(nb):
@@ -313,7 +323,7 @@ def _record_inputs(k, nb, n, vid, u, log, stopped, records, outcome):  # pragma:
     return n_stop
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _friction_at_sample(
     rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records
 ):  # pragma: no cover - compiled
@@ -348,7 +358,7 @@ def _friction_at_sample(
                 FRICTION[v, k, j] = f[j]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _load_one(b, x, u, pw, xo, uo, one):  # pragma: no cover - compiled
     """Copy row b's state, input and plant parameters into the one-variant work space."""
     for i in range(x.shape[1]):
@@ -359,14 +369,12 @@ def _load_one(b, x, u, pw, xo, uo, one):  # pragma: no cover - compiled
         one[2][0, i] = pw[b, i]
 
 
-@njit(cache=True, error_model="numpy")
-def _rk4_free_rows(rhs, t, dt, n_free, free, flat, dist, vid, kd, dist_map):  # pragma: no cover - compiled
-    """The classic RK4 step of the frictionless rows, written out (the common case); the
-    stage sums run flat over the rows (vectorisable)."""
-    xr, _, _, ur, pr, k1r, k2r, k3r, k4r = free
-    xf, xsf, xnf, k1f, k2f, k3f, k4f = flat
-    xsr = free[2]
-    m = n_free * xr.shape[1]
+@njit(cache=True, inline="always", error_model="numpy")
+def _rk4_free_rows(
+    rhs, t, dt, m, xr, xsr, ur, pr, k1r, k2r, k3r, k4r, xf, xsf, xnf, k1f, k2f, k3f, k4f, dist, vid, kd, dist_map
+):  # pragma: no cover - compiled
+    """The classic RK4 step of the frictionless rows (the common case), written out; the
+    stage sums run flat over the first m = n_free * n entries (vectorisable)."""
     rhs(t, xr, ur, pr, k1r)
     _add_disturbances(k1r, dist, vid, kd, 0, dist_map)
     for q in range(m):
@@ -385,7 +393,7 @@ def _rk4_free_rows(rhs, t, dt, n_free, free, flat, dist, vid, kd, dist_map):  # 
         xnf[q] = xf[q] + dt / 6.0 * (k1f[q] + 2.0 * (k2f[q] + k3f[q]) + k4f[q])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _step_frictional_rows(
     rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path, tableau, c
 ):  # pragma: no cover - compiled
@@ -408,11 +416,10 @@ def _step_frictional_rows(
             x_new[b, i] = xo_new[i]
 
 
-@njit(cache=True, error_model="numpy")
-def _accept_states(k, nb, vid, x, x_new, bw, stopped, outcome):  # pragma: no cover - compiled
+@njit(cache=True, inline="always", error_model="numpy")
+def _accept_states(k, nb, vid, x, x_new, bw, stopped, status, n_valid, fail_index):  # pragma: no cover - compiled
     """x_{k+1} for every active row; a row whose state is non-finite or past its bound stops.
     Returns the number of rows stopped."""
-    status, n_valid, fail_index = outcome
     n = x.shape[1]
     n_stop = 0
     for b in range(nb):
@@ -462,7 +469,7 @@ def _compact(nb, n_free, vid, rows, fw, state):  # pragma: no cover - compiled
     return nb, n_free
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _free_views(n_free, x, x_new, xs, u, pw, stages):  # pragma: no cover - compiled
     """Views on the frictionless rows (stepped together), remade only when a variant leaves."""
     k1, k2, k3, k4 = stages
@@ -482,7 +489,7 @@ def _init_outcome(n_steps, outcome):  # pragma: no cover - compiled
         n_valid[v] = n_steps + 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _no_friction_recorded(k, nb, vid, stopped, FRICTION):  # pragma: no cover - compiled
     """Zero friction force at t_k for every active row of a batch without friction."""
     for b in range(nb):
@@ -530,40 +537,46 @@ def simulate(
         initial_modes(fw[b], x[b], state[0][b], state[1][b], state[2][b])
     _init_outcome(n_steps, outcome)
     one_path = _friction_scratch(n, n_u, p.shape[1], rk_b.shape[0], dist.shape[3])
-    els = (elements[0], elements[1], elements[2].copy(), elements[3])
+    table, ep, es, data = elements[0], elements[1], elements[2].copy(), elements[3]
+    n_sensor, n_actuator = _hook_counts(table)
+    status, n_valid, fail_index = outcome
+    FRICTION = records[3]
     stopped = state[3]
     nb = n_batch
     yv, rv, uv, xv, cpv, csv, logv = y, r, u, x, cpw, cs, log
-    free = _free_views(n_free, x, x_new, xs, u, pw, stages)
+    xr, xnr, xsr, ur, pr, k1r, k2r, k3r, k4r = _free_views(n_free, x, x_new, xs, u, pw, stages)
     size = n_batch * n
-    flat = (x.reshape(size), xs.reshape(size), x_new.reshape(size), stages[0].reshape(size),
-            stages[1].reshape(size), stages[2].reshape(size), stages[3].reshape(size))  # fmt: skip
+    xf, xsf, xnf = x.reshape(size), xs.reshape(size), x_new.reshape(size)
+    k1f, k2f, k3f, k4f = (stages[0].reshape(size), stages[1].reshape(size), stages[2].reshape(size),
+                          stages[3].reshape(size))  # fmt: skip
     for k in range(n_steps + 1):
         t = k * dt
         _sample(k, nb, vid, x, C, picked, y, ref, r, u, X)
-        _apply_elements(SENSOR, t, dt, k, yv, vid, element_fns, els)
+        if n_sensor > 0:  # (a call handing over the function table costs even when it does nothing)
+            _apply_elements(SENSOR, t, dt, k, yv, vid, element_fns, table, ep, es, data)
         controller(t, dt, xv, yv, rv, cpv, csv, uv, logv, callbacks)
-        _apply_elements(ACTUATOR, t, dt, k, uv, vid, element_fns, els)
-        n_stop = _record_inputs(k, nb, n, vid, u, log, stopped, records, outcome)
+        if n_actuator > 0:
+            _apply_elements(ACTUATOR, t, dt, k, uv, vid, element_fns, table, ep, es, data)
+        n_stop = _record_inputs(k, nb, n, vid, u, log, stopped, U, LOG, status, n_valid, fail_index)
         if nb > n_free:
             _friction_at_sample(rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records)
-        elif records[3].shape[1] > 1:
-            _no_friction_recorded(k, nb, vid, stopped, records[3])
+        elif FRICTION.shape[1] > 1:
+            _no_friction_recorded(k, nb, vid, stopped, FRICTION)
         if k < n_steps and nb > n_stop:
             kd = _row(dist.shape[1], k)
             if n_free > 0 and classic:
-                _rk4_free_rows(rhs, t, dt, n_free, free, flat, dist, vid, kd, dist_map)
+                _rk4_free_rows(rhs, t, dt, n_free * n, xr, xsr, ur, pr, k1r, k2r, k3r, k4r,
+                               xf, xsf, xnf, k1f, k2f, k3f, k4f, dist, vid, kd, dist_map)  # fmt: skip
             elif n_free > 0:
-                xr, xnr, xsr, ur, pr, k1r, k2r, k3r, k4r = free
                 _rk_step_batch(rhs, t, dt, xr, xnr, ur, pr, dist, vid, kd, dist_map, rk_a, rk_b, c,
                                (k1r, k2r, k3r, k4r), xsr)  # fmt: skip
             if nb > n_free:
                 _step_frictional_rows(rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces,
                                       one_path, tableau, c)  # fmt: skip
-            n_stop += _accept_states(k, nb, vid, x, x_new, bw, stopped, outcome)
+            n_stop += _accept_states(k, nb, vid, x, x_new, bw, stopped, status, n_valid, fail_index)
         if n_stop > 0:
             nb, n_free = _compact(nb, n_free, vid, (x, pw, cpw, cs, log, bw), fw, state)
             if nb == 0:
                 break
             yv, rv, uv, xv, cpv, csv, logv = y[:nb], r[:nb], u[:nb], x[:nb], cpw[:nb], cs[:nb], log[:nb]
-            free = _free_views(n_free, x, x_new, xs, u, pw, stages)
+            xr, xnr, xsr, ur, pr, k1r, k2r, k3r, k4r = _free_views(n_free, x, x_new, xs, u, pw, stages)
