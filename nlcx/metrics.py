@@ -19,6 +19,7 @@ See ``docs/metrics.md`` for the definitions and their relation to python-control
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -147,13 +148,14 @@ def _trapz(t: FloatArray, y: FloatArray) -> FloatArray:
     return np.sum(s, axis=-1)
 
 
-def _first_crossing(tau: FloatArray, sy: FloatArray, s_level: FloatArray) -> FloatArray:
+def _first_crossing(tau: FloatArray, sy: FloatArray, s_level: FloatArray) -> tuple[FloatArray, NDArray[np.intp]]:
     """First time each row of ``sy`` reaches ``s_level`` (i.e. ``sy >= s_level``), interpolated.
 
     ``sy`` is ``s * y`` and ``s_level`` is ``s * level``, so the condition is
     ``s * (y - level) >= 0``.  If the first sample already satisfies it the result is
     ``tau[0]``; otherwise the crossing is interpolated linearly between the last sample
-    before and the first sample that satisfies it.  NaN if it is never reached.
+    before and the first sample that satisfies it.  NaN if it is never reached.  Also
+    returns the index of that first sample (meaningless where the time is NaN).
     """
     rows = np.arange(sy.shape[0])
     cond = sy >= s_level[:, np.newaxis]
@@ -167,7 +169,7 @@ def _first_crossing(tau: FloatArray, sy: FloatArray, s_level: FloatArray) -> Flo
         frac = np.where(idx > 0, num / den, 0.0)
     frac = np.clip(frac, 0.0, 1.0)
     t_cross = tau[prev] + frac * (tau[idx] - tau[prev])
-    return np.where(found, t_cross, np.nan)
+    return np.where(found, t_cross, np.nan), idx
 
 
 def _last_exit(tau: FloatArray, y: FloatArray, center: FloatArray, band_abs: FloatArray) -> FloatArray:
@@ -227,6 +229,88 @@ def _check_band(band: float) -> float:
     return b
 
 
+def _check_rise_limits(rise_limits: tuple[float, float]) -> tuple[float, float]:
+    lo, hi = (float(v) for v in rise_limits)
+    if not lo < hi:
+        raise ValueError(f"rise_limits must satisfy lo < hi, got {rise_limits!r}")
+    return lo, hi
+
+
+class _StepGrid(NamedTuple):
+    """Where a step at ``t_step`` falls on the grid ``t``."""
+
+    i0: int  # first considered sample: t[i0] >= t_step
+    t_c: FloatArray  # t[i0:]
+    tau: FloatArray  # t[i0:] - t_step
+    j: int  # t[j] <= t_step < t[j+1]
+    on_grid: bool  # t_step == t[j] (or j < 0, when y(t_step) is not needed)
+    a: float  # weight of sample j+1 in y(t_step) when t_step is between samples
+
+
+def _step_grid(t: FloatArray, t_step: float, need_initial: bool) -> _StepGrid:
+    """Locate ``t_step`` on ``t``; ``need_initial``: y(t_step) will be interpolated from ``y``."""
+    ts = float(t_step)
+    i0 = int(np.searchsorted(t, ts, side="left"))
+    if t.size - i0 < 2:
+        raise ValueError(f"need at least two samples at or after t_step = {ts}")
+    if need_initial and ts < t[0]:
+        raise ValueError("t_step is before t[0]; pass initial explicitly")
+    t_c = t[i0:]
+    j = int(np.searchsorted(t, ts, side="right")) - 1
+    on_grid = j < 0 or t[j] == ts  # j < 0 only if the initial value was given (not used then)
+    a = 0.0 if on_grid else (ts - t[j]) / (t[j + 1] - t[j])
+    return _StepGrid(i0, t_c, t_c - ts, j, on_grid, a)
+
+
+def _value_at_step(y: FloatArray, g: _StepGrid) -> FloatArray:
+    """y(t_step) of each row, linearly interpolated between the samples around it."""
+    j = g.j
+    return y[:, j] if g.on_grid else y[:, j] + g.a * (y[:, j + 1] - y[:, j])
+
+
+class _StepCore(NamedTuple):
+    """The metrics both step functions share, and what the rest of each is computed from."""
+
+    metrics: MetricDict  # rise_time, settling_time, overshoot, undershoot (NaN where delta == 0)
+    sy: FloatArray  # s * y, s = sign(final - initial)
+    valid: NDArray[np.bool_]  # delta != 0
+    risen: NDArray[np.bool_]  # the upper rise level is reached (and delta != 0)
+    hi_index: NDArray[np.intp]  # first sample at or past the upper rise level (where risen)
+
+
+def _step_core(
+    tau: FloatArray,
+    yc: FloatArray,
+    initial: FloatArray,
+    final: FloatArray,
+    limits: tuple[float, float],
+    band: float,
+) -> _StepCore:
+    """Rise time, settling time, overshoot and undershoot of rows ``yc`` stepping initial -> final."""
+    lo, hi = limits
+    delta = final - initial
+    s = np.sign(delta)
+    mag = np.abs(delta)
+    valid = delta != 0
+    sy = s[:, np.newaxis] * yc
+    t_lo, _ = _first_crossing(tau, sy, s * (initial + lo * delta))
+    t_hi, hi_index = _first_crossing(tau, sy, s * (initial + hi * delta))
+    settling = _last_exit(tau, yc, final, band * mag)
+    over = np.max(sy - (s * final)[:, np.newaxis], axis=1)
+    under = np.max((s * initial)[:, np.newaxis] - sy, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        overshoot = 100.0 * np.maximum(over, 0.0) / mag
+        undershoot = 100.0 * np.maximum(under, 0.0) / mag
+    nan = np.nan
+    metrics = {
+        "rise_time": np.where(valid, t_hi - t_lo, nan),
+        "settling_time": np.where(valid, settling, nan),
+        "overshoot": np.where(valid, overshoot, nan),
+        "undershoot": np.where(valid, undershoot, nan),
+    }
+    return _StepCore(metrics, sy, valid, valid & ~np.isnan(t_hi), hi_index)
+
+
 # ----------------------------------------------------------------------------- metrics
 
 
@@ -269,56 +353,25 @@ def step_response_metrics(
     """
     t_arr, y2, squeeze = _prepare(t, y, "y")
     n_rows = y2.shape[0]
-    ts = float(t_step)
-    lo, hi = (float(v) for v in rise_limits)
-    if not lo < hi:
-        raise ValueError(f"rise_limits must satisfy lo < hi, got {rise_limits!r}")
+    limits = _check_rise_limits(rise_limits)
     b = _check_band(band)
     w = _check_window(ss_window)
-    i0 = int(np.searchsorted(t_arr, ts, side="left"))
-    if t_arr.size - i0 < 2:
-        raise ValueError(f"need at least two samples at or after t_step = {ts}")
-    if initial is None and ts < t_arr[0]:
-        raise ValueError("t_step is before t[0]; pass initial explicitly")
-    t_c = t_arr[i0:]
-    tau = t_c - ts
-    final_rows = _per_row(final, n_rows, "final")
-    params: dict[str, FloatArray] = {"final": final_rows}
+    g = _step_grid(t_arr, t_step, need_initial=initial is None)
+    params: dict[str, FloatArray] = {"final": _per_row(final, n_rows, "final")}
     if initial is not None:
         params["initial"] = _per_row(initial, n_rows, "initial")
-    # Index/weight of y(t_step) for the default initial value.
-    j = int(np.searchsorted(t_arr, ts, side="right")) - 1  # t[j] <= t_step < t[j+1]
-    on_grid = j < 0 or t_arr[j] == ts  # j < 0 only if initial was given (not used then)
-    a = 0.0 if on_grid else (ts - t_arr[j]) / (t_arr[j + 1] - t_arr[j])
 
     def block(yb: FloatArray, final: FloatArray, initial: FloatArray | None = None) -> MetricDict:
         if initial is None:
-            initial = yb[:, j] if on_grid else yb[:, j] + a * (yb[:, j + 1] - yb[:, j])
-        yc = yb[:, i0:]
-        rows = np.arange(yc.shape[0])
-        delta = final - initial
-        s = np.sign(delta)
-        mag = np.abs(delta)
-        valid = delta != 0
-        sy = s[:, np.newaxis] * yc
-        t_lo = _first_crossing(tau, sy, s * (initial + lo * delta))
-        t_hi = _first_crossing(tau, sy, s * (initial + hi * delta))
-        settling = _last_exit(tau, yc, final, b * mag)
-        over = np.max(sy - (s * final)[:, np.newaxis], axis=1)
-        under = np.max((s * initial)[:, np.newaxis] - sy, axis=1)
-        ipk = np.argmax(sy, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            overshoot = 100.0 * np.maximum(over, 0.0) / mag
-            undershoot = 100.0 * np.maximum(under, 0.0) / mag
-        nan = np.nan
+            initial = _value_at_step(yb, g)
+        yc = yb[:, g.i0 :]
+        core = _step_core(g.tau, yc, initial, final, limits, b)
+        ipk = np.argmax(core.sy, axis=1)
         return {
-            "rise_time": np.where(valid, t_hi - t_lo, nan),
-            "settling_time": np.where(valid, settling, nan),
-            "overshoot": np.where(valid, overshoot, nan),
-            "undershoot": np.where(valid, undershoot, nan),
-            "peak": np.where(valid, yc[rows, ipk], nan),
-            "peak_time": np.where(valid, tau[ipk], nan),
-            "steady_state_error": final - _window_mean(t_c, yc, w),
+            **core.metrics,
+            "peak": np.where(core.valid, yc[np.arange(yc.shape[0]), ipk], np.nan),
+            "peak_time": np.where(core.valid, g.tau[ipk], np.nan),
+            "steady_state_error": final - _window_mean(g.t_c, yc, w),
         }
 
     return _run_batched(block, y2, STEP_METRICS, squeeze, params)
