@@ -388,7 +388,7 @@ def _read_step_data(file: Path, time_column: str, signals: list[str], t_step: fl
 @one_line_errors
 def metrics_command(
     file: Annotated[Path, typer.Argument(help="CSV file with a header row.", show_default=False)],
-    time_column: Annotated[str, typer.Option("--time", help="Time column [s].")] = "t",
+    time_column: Annotated[str, typer.Option("--time", help="Time column, in seconds.")] = "t",
     signals: Annotated[
         list[str] | None, typer.Option("--signal", help="Column to measure; repeat for several.", show_default=False)
     ] = None,
@@ -396,15 +396,14 @@ def metrics_command(
         float | None,
         typer.Option("--reference", help="Target value (default: each signal's last sample).", show_default=False),
     ] = None,
-    t_step: Annotated[float, typer.Option("--t-step", help="Time of the step [s]; earlier samples are ignored.")] = 0.0,
+    t_step: Annotated[float, typer.Option("--t-step", help="Step time in s; earlier samples are ignored.")] = 0.0,
     out: Annotated[
         Path | None, typer.Option("--out", help="Write signal, metric, value, unit to this CSV.", show_default=False)
     ] = None,
 ) -> None:
     """Step-response metrics of CSV columns (e.g. logged on a rig): rise and settling time, overshoot, ...
 
-    Measured by nlcx.metrics.step_info against each signal's last sample (or --reference), from
-    its value at --t-step; see docs/metrics.md."""
+    Measured by nlcx.metrics.step_info from each signal's value at --t-step to its last sample (or --reference)."""
     import pandas as pd
 
     from nlcx.metrics import STEP_INFO_METRICS, STEP_INFO_UNITS, step_info
