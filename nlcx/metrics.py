@@ -1,12 +1,13 @@
-"""Time-domain performance metrics of simulated responses (pure numpy, batched).
+"""Time-domain performance metrics of simulated or measured responses (pure numpy, batched).
 
 Every function takes a strictly increasing, not necessarily uniform, time grid ``t`` of
 shape ``(T,)`` and a signal of shape ``(T,)`` or ``(B, T)``.  It returns a
 ``dict[str, np.ndarray]`` whose values have shape ``()`` for a 1-D signal and ``(B,)`` for
-a 2-D one.  Nothing loops over the time axis; the batch axis is processed in blocks of
-rows (about ``_CHUNK_ELEMENTS`` samples each) so that temporaries stay bounded when
-``B * T`` is large.  Each row is computed by the same row-wise operations whatever the
-block it falls in, so a batched call equals the corresponding 1-D calls exactly.
+a 2-D one (:func:`step_info` returns floats for a 1-D signal).  Nothing loops over the
+time axis; the batch axis is processed in blocks of rows (about ``_CHUNK_ELEMENTS``
+samples each) so that temporaries stay bounded when ``B * T`` is large.  Each row is
+computed by the same row-wise operations whatever the block it falls in, so a batched
+call equals the corresponding 1-D calls exactly.
 
 Crossing times are interpolated linearly between samples (the signal is treated as
 piecewise linear), so they are not quantised to the grid.  Peaks are sample values.
@@ -19,20 +20,25 @@ See ``docs/metrics.md`` for the definitions and their relation to python-control
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "METRIC_UNITS",
+    "STEP_INFO_UNITS",
     "error_integrals",
     "input_metrics",
     "regulation_metrics",
+    "step_info",
     "step_response_metrics",
 ]
 
 FloatArray = NDArray[np.float64]
 MetricDict = dict[str, FloatArray]
+#: What :func:`step_info` returns: floats for a 1-D signal, ``(B,)`` arrays for a batch.
+StepInfo = dict[str, float] | dict[str, FloatArray]
 
 #: Unit of every metric.  "signal" and "input" stand for the unit of the measured signal
 #: (or error) and of the control input; the caller substitutes them (e.g. "rad", "N").
@@ -74,6 +80,29 @@ REGULATION_METRICS: tuple[str, ...] = (
     "settling_time",
     "steady_state_error",
 )
+STEP_INFO_METRICS: tuple[str, ...] = (
+    "rise_time",
+    "settling_time",
+    "overshoot",
+    "undershoot",
+    "peak",
+    "peak_time",
+    "steady_state_value",
+    "settling_min",
+    "settling_max",
+)
+#: Unit of every :func:`step_info` value ("signal": the unit of the measured signal).
+STEP_INFO_UNITS: dict[str, str] = {
+    "rise_time": "s",
+    "settling_time": "s",
+    "overshoot": "%",
+    "undershoot": "%",
+    "peak": "signal",
+    "peak_time": "s",
+    "steady_state_value": "signal",
+    "settling_min": "signal",
+    "settling_max": "signal",
+}
 ERROR_METRICS: tuple[str, ...] = ("ise", "iae", "itae", "max_abs_error", "rms_error")
 INPUT_METRICS: tuple[str, ...] = ("control_effort", "peak_input", "total_variation")
 
@@ -147,13 +176,14 @@ def _trapz(t: FloatArray, y: FloatArray) -> FloatArray:
     return np.sum(s, axis=-1)
 
 
-def _first_crossing(tau: FloatArray, sy: FloatArray, s_level: FloatArray) -> FloatArray:
+def _first_crossing(tau: FloatArray, sy: FloatArray, s_level: FloatArray) -> tuple[FloatArray, NDArray[np.intp]]:
     """First time each row of ``sy`` reaches ``s_level`` (i.e. ``sy >= s_level``), interpolated.
 
     ``sy`` is ``s * y`` and ``s_level`` is ``s * level``, so the condition is
     ``s * (y - level) >= 0``.  If the first sample already satisfies it the result is
     ``tau[0]``; otherwise the crossing is interpolated linearly between the last sample
-    before and the first sample that satisfies it.  NaN if it is never reached.
+    before and the first sample that satisfies it.  NaN if it is never reached.  Also
+    returns the index of that first sample (meaningless where the time is NaN).
     """
     rows = np.arange(sy.shape[0])
     cond = sy >= s_level[:, np.newaxis]
@@ -167,7 +197,7 @@ def _first_crossing(tau: FloatArray, sy: FloatArray, s_level: FloatArray) -> Flo
         frac = np.where(idx > 0, num / den, 0.0)
     frac = np.clip(frac, 0.0, 1.0)
     t_cross = tau[prev] + frac * (tau[idx] - tau[prev])
-    return np.where(found, t_cross, np.nan)
+    return np.where(found, t_cross, np.nan), idx
 
 
 def _last_exit(tau: FloatArray, y: FloatArray, center: FloatArray, band_abs: FloatArray) -> FloatArray:
@@ -227,6 +257,104 @@ def _check_band(band: float) -> float:
     return b
 
 
+def _check_rise_limits(rise_limits: tuple[float, float]) -> tuple[float, float]:
+    lo, hi = (float(v) for v in rise_limits)
+    if not lo < hi:
+        raise ValueError(f"rise_limits must satisfy lo < hi, got {rise_limits!r}")
+    return lo, hi
+
+
+class _StepGrid(NamedTuple):
+    """Where a step at ``t_step`` falls on the grid ``t``."""
+
+    i0: int  # first considered sample: t[i0] >= t_step
+    t_c: FloatArray  # t[i0:]
+    tau: FloatArray  # t[i0:] - t_step
+    j: int  # t[j] <= t_step < t[j+1]
+    on_grid: bool  # t_step == t[j] (or j < 0, when y(t_step) is not needed)
+    a: float  # weight of sample j+1 in y(t_step) when t_step is between samples
+
+
+def _step_grid(t: FloatArray, t_step: float, need_initial: bool, initial_name: str = "initial") -> _StepGrid:
+    """Locate ``t_step`` on ``t``; ``need_initial``: y(t_step) will be interpolated from ``y``."""
+    ts = float(t_step)
+    i0 = int(np.searchsorted(t, ts, side="left"))
+    if t.size - i0 < 2:
+        raise ValueError(f"need at least two samples at or after t_step = {ts}")
+    if need_initial and ts < t[0]:
+        raise ValueError(f"t_step is before t[0]; pass {initial_name} explicitly")
+    t_c = t[i0:]
+    j = int(np.searchsorted(t, ts, side="right")) - 1
+    on_grid = j < 0 or t[j] == ts  # j < 0 only if the initial value was given (not used then)
+    a = 0.0 if on_grid else (ts - t[j]) / (t[j + 1] - t[j])
+    return _StepGrid(i0, t_c, t_c - ts, j, on_grid, a)
+
+
+def _value_at_step(y: FloatArray, g: _StepGrid) -> FloatArray:
+    """y(t_step) of each row, linearly interpolated between the samples around it."""
+    j = g.j
+    return y[:, j] if g.on_grid else y[:, j] + g.a * (y[:, j + 1] - y[:, j])
+
+
+class _StepCore(NamedTuple):
+    """The metrics both step functions share, and what the rest of each is computed from."""
+
+    metrics: MetricDict  # rise_time, settling_time, overshoot, undershoot (NaN where delta == 0)
+    sy: FloatArray  # s * y, s = sign(final - initial)
+    valid: NDArray[np.bool_]  # delta != 0
+    risen: NDArray[np.bool_]  # the upper rise level is reached (and delta != 0)
+    hi_index: NDArray[np.intp]  # first sample at or past the upper rise level (where risen)
+
+
+def _step_core(
+    tau: FloatArray,
+    yc: FloatArray,
+    initial: FloatArray,
+    final: FloatArray,
+    limits: tuple[float, float],
+    band: float,
+) -> _StepCore:
+    """Rise time, settling time, overshoot and undershoot of rows ``yc`` stepping initial -> final."""
+    lo, hi = limits
+    delta = final - initial
+    s = np.sign(delta)
+    mag = np.abs(delta)
+    valid = delta != 0
+    sy = s[:, np.newaxis] * yc
+    t_lo, _ = _first_crossing(tau, sy, s * (initial + lo * delta))
+    t_hi, hi_index = _first_crossing(tau, sy, s * (initial + hi * delta))
+    settling = _last_exit(tau, yc, final, band * mag)
+    over = np.max(sy - (s * final)[:, np.newaxis], axis=1)
+    under = np.max((s * initial)[:, np.newaxis] - sy, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        overshoot = 100.0 * np.maximum(over, 0.0) / mag
+        undershoot = 100.0 * np.maximum(under, 0.0) / mag
+    nan = np.nan
+    metrics = {
+        "rise_time": np.where(valid, t_hi - t_lo, nan),
+        "settling_time": np.where(valid, settling, nan),
+        "overshoot": np.where(valid, overshoot, nan),
+        "undershoot": np.where(valid, undershoot, nan),
+    }
+    return _StepCore(metrics, sy, valid, valid & ~np.isnan(t_hi), hi_index)
+
+
+def _abs_peak(tau: FloatArray, yc: FloatArray) -> MetricDict:
+    """python-control's ``Peak``: the largest ``|y|``, and the time of its first sample."""
+    absy = np.abs(yc)
+    ipk = np.argmax(absy, axis=1)
+    return {"peak": absy[np.arange(yc.shape[0]), ipk], "peak_time": tau[ipk]}
+
+
+def _settling_range(yc: FloatArray, final: FloatArray, core: _StepCore) -> MetricDict:
+    """python-control's ``SettlingMin``/``SettlingMax``: the extremes of ``y`` from the first
+    sample at or past the upper rise level on, and of the steady-state value."""
+    after = np.arange(yc.shape[1]) >= core.hi_index[:, np.newaxis]
+    y_min = np.minimum(np.min(np.where(after, yc, np.inf), axis=1), final)
+    y_max = np.maximum(np.max(np.where(after, yc, -np.inf), axis=1), final)
+    return {"settling_min": np.where(core.risen, y_min, np.nan), "settling_max": np.where(core.risen, y_max, np.nan)}
+
+
 # ----------------------------------------------------------------------------- metrics
 
 
@@ -269,59 +397,109 @@ def step_response_metrics(
     """
     t_arr, y2, squeeze = _prepare(t, y, "y")
     n_rows = y2.shape[0]
-    ts = float(t_step)
-    lo, hi = (float(v) for v in rise_limits)
-    if not lo < hi:
-        raise ValueError(f"rise_limits must satisfy lo < hi, got {rise_limits!r}")
+    limits = _check_rise_limits(rise_limits)
     b = _check_band(band)
     w = _check_window(ss_window)
-    i0 = int(np.searchsorted(t_arr, ts, side="left"))
-    if t_arr.size - i0 < 2:
-        raise ValueError(f"need at least two samples at or after t_step = {ts}")
-    if initial is None and ts < t_arr[0]:
-        raise ValueError("t_step is before t[0]; pass initial explicitly")
-    t_c = t_arr[i0:]
-    tau = t_c - ts
-    final_rows = _per_row(final, n_rows, "final")
-    params: dict[str, FloatArray] = {"final": final_rows}
+    g = _step_grid(t_arr, t_step, need_initial=initial is None)
+    params: dict[str, FloatArray] = {"final": _per_row(final, n_rows, "final")}
     if initial is not None:
         params["initial"] = _per_row(initial, n_rows, "initial")
-    # Index/weight of y(t_step) for the default initial value.
-    j = int(np.searchsorted(t_arr, ts, side="right")) - 1  # t[j] <= t_step < t[j+1]
-    on_grid = j < 0 or t_arr[j] == ts  # j < 0 only if initial was given (not used then)
-    a = 0.0 if on_grid else (ts - t_arr[j]) / (t_arr[j + 1] - t_arr[j])
 
     def block(yb: FloatArray, final: FloatArray, initial: FloatArray | None = None) -> MetricDict:
         if initial is None:
-            initial = yb[:, j] if on_grid else yb[:, j] + a * (yb[:, j + 1] - yb[:, j])
-        yc = yb[:, i0:]
-        rows = np.arange(yc.shape[0])
-        delta = final - initial
-        s = np.sign(delta)
-        mag = np.abs(delta)
-        valid = delta != 0
-        sy = s[:, np.newaxis] * yc
-        t_lo = _first_crossing(tau, sy, s * (initial + lo * delta))
-        t_hi = _first_crossing(tau, sy, s * (initial + hi * delta))
-        settling = _last_exit(tau, yc, final, b * mag)
-        over = np.max(sy - (s * final)[:, np.newaxis], axis=1)
-        under = np.max((s * initial)[:, np.newaxis] - sy, axis=1)
-        ipk = np.argmax(sy, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            overshoot = 100.0 * np.maximum(over, 0.0) / mag
-            undershoot = 100.0 * np.maximum(under, 0.0) / mag
-        nan = np.nan
+            initial = _value_at_step(yb, g)
+        yc = yb[:, g.i0 :]
+        core = _step_core(g.tau, yc, initial, final, limits, b)
+        ipk = np.argmax(core.sy, axis=1)
         return {
-            "rise_time": np.where(valid, t_hi - t_lo, nan),
-            "settling_time": np.where(valid, settling, nan),
-            "overshoot": np.where(valid, overshoot, nan),
-            "undershoot": np.where(valid, undershoot, nan),
-            "peak": np.where(valid, yc[rows, ipk], nan),
-            "peak_time": np.where(valid, tau[ipk], nan),
-            "steady_state_error": final - _window_mean(t_c, yc, w),
+            **core.metrics,
+            "peak": np.where(core.valid, yc[np.arange(yc.shape[0]), ipk], np.nan),
+            "peak_time": np.where(core.valid, g.tau[ipk], np.nan),
+            "steady_state_error": final - _window_mean(g.t_c, yc, w),
         }
 
     return _run_batched(block, y2, STEP_METRICS, squeeze, params)
+
+
+def step_info(
+    t: ArrayLike,
+    y: ArrayLike,
+    *,
+    reference: ArrayLike | None = None,
+    t_step: float = 0.0,
+    y_initial: ArrayLike | None = None,
+    settling_band: float = 0.02,
+    rise_limits: tuple[float, float] = (0.1, 0.9),
+) -> StepInfo:
+    """Step-response characteristics of ``y`` measured against its own final value.
+
+    The counterpart of MATLAB's ``stepinfo(y, t, yfinal, yinit)`` and python-control's
+    ``step_info(y, t, yfinal)`` for measured or simulated data, with interpolated crossings.
+
+    Parameters
+    ----------
+    t : array_like, shape (T,)
+        Strictly increasing (not necessarily uniform) sample times [s].
+    y : array_like, shape (T,) or (B, T)
+        The response, or B responses on the same grid.
+    reference : float or array_like of shape (B,), optional
+        Target value y_final; default: the last sample ``y[..., -1]`` (as ``stepinfo(y, t)``).
+    t_step : float
+        Time of the step; samples before it are ignored and times are measured from it.
+    y_initial : float or array_like of shape (B,), optional
+        Value y_init the step starts from; default y(t_step), interpolated.  MATLAB and
+        python-control take 0: pass ``y_initial=0.0`` for their numbers on offset data.
+    settling_band : float
+        Half-width of the settling band as a fraction of ``|y_final - y_init|``.
+    rise_limits : (float, float)
+        Rise-time levels as fractions of the way from y_init to y_final.
+
+    Returns
+    -------
+    dict
+        Floats for 1-D ``y``, arrays of shape (B,) for 2-D ``y``.  With D = y_final - y_init,
+        s = sign(D), tau = t - t_step and ``(lo, hi) = rise_limits``:
+
+        - ``rise_time`` [s]: t_hi - t_lo, the first times s*(y - y_init - lo*D) >= 0 and
+          s*(y - y_init - hi*D) >= 0, each interpolated linearly between the sample before and
+          the first sample satisfying it; NaN if the upper level is never reached.
+        - ``settling_time`` [s]: last exit from |y - y_final| <= settling_band*|D|,
+          interpolated to the band edge; 0 if y never leaves it, NaN if not settled at the end.
+        - ``overshoot`` [%]: 100 * max(0, max s*(y - y_final)) / |D|.
+        - ``undershoot`` [%]: 100 * max(0, max -s*(y - y_init)) / |D|.
+        - ``peak``: max |y|, python-control's and MATLAB's ``Peak``; ``peak_time`` [s]: tau of
+          its first sample (not interpolated).
+        - ``steady_state_value``: y_final.
+        - ``settling_min``, ``settling_max``: min and max of y over the samples from the first
+          one satisfying the upper rise condition, and of y_final (as python-control).
+
+        All but ``peak``, ``peak_time`` and ``steady_state_value`` are NaN where D == 0.
+
+    Notes
+    -----
+    python-control reports the sample at or after each crossing, so its rise and settling
+    times are within one sample interval of these; the other values are the same samples.
+    See ``docs/metrics.md``.
+    """
+    t_arr, y2, squeeze = _prepare(t, y, "y")
+    n_rows = y2.shape[0]
+    limits = _check_rise_limits(rise_limits)
+    b = _check_band(settling_band)
+    g = _step_grid(t_arr, t_step, need_initial=y_initial is None, initial_name="y_initial")
+    params: dict[str, FloatArray] = {}
+    if reference is not None:
+        params["reference"] = _per_row(reference, n_rows, "reference")
+    if y_initial is not None:
+        params["initial"] = _per_row(y_initial, n_rows, "y_initial")
+
+    def block(yb: FloatArray, reference: FloatArray | None = None, initial: FloatArray | None = None) -> MetricDict:
+        final = yb[:, -1] if reference is None else reference
+        yc = yb[:, g.i0 :]
+        core = _step_core(g.tau, yc, _value_at_step(yb, g) if initial is None else initial, final, limits, b)
+        return {**core.metrics, **_abs_peak(g.tau, yc), "steady_state_value": final, **_settling_range(yc, final, core)}
+
+    result = _run_batched(block, y2, STEP_INFO_METRICS, squeeze, params)
+    return {k: float(v) for k, v in result.items()} if squeeze else result
 
 
 def regulation_metrics(
