@@ -153,17 +153,26 @@ def fuzzy_universes() -> pd.DataFrame:
 
 @cache
 def gain_ranges() -> pd.DataFrame:
-    """Tables 2.2, 3.1, 3.6, 4.1."""
+    """Tables 2.2, 3.1, 3.6, 4.1: min and max of k_p, k_i, k_d of every AGS loop."""
     with (DATA / "ags_gain_ranges.csv").open(newline="", encoding="utf-8") as fh:
         return pd.read_csv(fh, dtype={"table": str})
 
 
+@cache
+def ags_rates() -> pd.DataFrame:
+    """Section 2.3: the rates k of the AGS schedules (blank where the thesis prints none)."""
+    with (DATA / "ags_rates.csv").open(newline="", encoding="utf-8") as fh:
+        return pd.read_csv(fh)
+
+
 def figure_config(root: Path, figure: str) -> Path:
+    """The experiment config of a chapter-2-4 result figure, e.g. ``ch2/fig_2_04.yaml``."""
     chapter, number = figure.split(".")
     return root / f"ch{chapter}" / f"fig_{chapter}_{int(number):02d}.yaml"
 
 
-def _figure_number(plant: str, ags: str, mode: str, uncertainty: str) -> str:
+def figure_number(plant: str, ags: str, mode: str, uncertainty: str) -> str:
+    """The thesis figure showing one pendulum, schedule, mode and uncertainty (figures.csv)."""
     for row in _read("figures.csv"):
         if (row["plant"], row["ags"], row["mode"], row["uncertainty"]) == (plant, ags, mode, uncertainty):
             return row["figure"]
@@ -198,7 +207,7 @@ def figures(root: Path) -> list[FigureSpec]:
             kind = "response"
         else:
             configs = tuple(
-                figure_config(root, _figure_number(plant, ags, "stabilization", "none")) for ags in ("time", "error")
+                figure_config(root, figure_number(plant, ags, "stabilization", "none")) for ags in ("time", "error")
             )
             kind = "lyapunov"
         specs.append(
@@ -222,7 +231,7 @@ def tables(root: Path) -> list[TableSpec]:
     meta = thesis_metrics()[["table", "plant", "ags", "scenario"]].drop_duplicates()
     for row in meta.itertuples(index=False):
         uncertainty = "none" if row.scenario == "nominal" else row.scenario
-        figure = _figure_number(row.plant, row.ags, "stabilization", uncertainty)
+        figure = figure_number(row.plant, row.ags, "stabilization", uncertainty)
         specs.append(TableSpec(str(row.table), "metrics", row.plant, (figure_config(root, figure),)))
     for table, (kind, file, variable) in CSTR_TABLES.items():
         configs = (
@@ -233,7 +242,7 @@ def tables(root: Path) -> list[TableSpec]:
         specs.append(TableSpec(table, kind, "cstr", configs, variable))
     for table, (kind, plant) in PARAMETER_TABLES.items():
         configs = tuple(
-            figure_config(root, _figure_number(plant, ags, "stabilization", "none")) for ags in ("time", "error")
+            figure_config(root, figure_number(plant, ags, "stabilization", "none")) for ags in ("time", "error")
         )
         specs.append(TableSpec(table, kind, plant, configs))
     return sorted(specs, key=lambda s: tuple(int(p) for p in s.table.split(".")))

@@ -29,8 +29,9 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from nlcx.report import new_figure
-from nlcx.thesis import catalog
+from nlcx.thesis import catalog, cstr
 from nlcx.thesis.catalog import FigureSpec
+from nlcx.thesis.tables import thesis_value
 
 POSITIONS = {"x": ("x",), "xy": ("x", "y"), "xz": ("x", "z"), "xyz": ("x", "y", "z")}
 ANGLES = {"x": ("theta",), "xy": ("theta", "phi"), "xz": ("theta",), "xyz": ("theta", "phi")}
@@ -44,18 +45,20 @@ Check = Callable[["Context"], tuple[bool, str]]
 
 @dataclass
 class Context:
+    """The runs the checks of one pendulum look at."""
+
     records: dict[Path, Any]
     root: Path
     plant: str
 
     def record(self, ags: str, mode: str, uncertainty: str) -> Any:
-        number = catalog._figure_number(self.plant, ags, mode, uncertainty)
+        """The run of this pendulum's figure with this schedule, mode and uncertainty."""
+        number = catalog.figure_number(self.plant, ags, mode, uncertainty)
         return self.records[catalog.figure_config(self.root, number)]
 
 
 def _metric(record: Any, controller: str, signal: str, metric: str) -> float:
-    from nlcx.thesis.reproduce import thesis_value
-
+    """A table metric (M_p, t_r, t_s, e_ss as the thesis defines them) or any other metric of a run."""
     if metric in ("Mp", "tr", "ts", "ess"):
         return thesis_value(record.metrics, controller, signal, metric)
     for table in (record.metrics, record.extras):
@@ -96,6 +99,8 @@ def compare(ags: str, unc: str, metric: str, signals: str, better: bool = True, 
 
 
 def zero_ess(ags: str, unc: str, controllers: tuple[str, ...] = ("conventional", "proposed")) -> Check:
+    """Each controller's stabilisation run reaches |e_ss| <= 0.01 on every position."""
+
     def check(ctx: Context) -> tuple[bool, str]:
         rec = ctx.record(ags, "stabilization", unc)
         oks, parts = [], []
@@ -113,6 +118,8 @@ def zero_ess(ags: str, unc: str, controllers: tuple[str, ...] = ("conventional",
 
 
 def less_chattering(ags: str, mode: str) -> Check:
+    """With noise, proposed forces vary less (total variation) than conventional ones."""
+
     def check(ctx: Context) -> tuple[bool, str]:
         rec = ctx.record(ags, mode, "noise")
         oks, parts = [], []
@@ -127,6 +134,7 @@ def less_chattering(ags: str, mode: str) -> Check:
 
 
 def _bounded(rec: Any, controller: str, plant: str) -> tuple[bool, str]:
+    """Neither diverged nor a position beyond +-10 m."""
     if rec.status[controller] != "ok":
         t_end = _metric(rec, controller, "all", "t_fail")
         return False, f"{controller} diverged (t = {_fmt(t_end)} s)"
@@ -135,6 +143,8 @@ def _bounded(rec: Any, controller: str, plant: str) -> tuple[bool, str]:
 
 
 def unbounded(ags: str, mode: str, unc: str, controller: str) -> Check:
+    """The controller's run diverged or a position left +-10 m."""
+
     def check(ctx: Context) -> tuple[bool, str]:
         ok, text = _bounded(ctx.record(ags, mode, unc), controller, ctx.plant)
         return not ok, text
@@ -143,6 +153,8 @@ def unbounded(ags: str, mode: str, unc: str, controller: str) -> Check:
 
 
 def bounded(ags: str, mode: str, unc: str, controller: str) -> Check:
+    """The controller's run neither diverged nor left +-10 m."""
+
     def check(ctx: Context) -> tuple[bool, str]:
         return _bounded(ctx.record(ags, mode, unc), controller, ctx.plant)
 
@@ -150,6 +162,8 @@ def bounded(ags: str, mode: str, unc: str, controller: str) -> Check:
 
 
 def oscillatory(ags: str, unc: str, controller: str, expected: bool = True) -> Check:
+    """A position still moves more than 0.02 m peak to peak over the last 5 s (or, not expected, none does)."""
+
     def check(ctx: Context) -> tuple[bool, str]:
         rec = ctx.record(ags, "stabilization", unc)
         if rec.status[controller] != "ok":
@@ -162,6 +176,8 @@ def oscillatory(ags: str, unc: str, controller: str, expected: bool = True) -> C
 
 
 def tracks(ags: str, unc: str, controller: str, expected: bool = True) -> Check:
+    """RMS tracking error over the last 5 s <= 10 % of the sine amplitude (or, not expected, above)."""
+
     def check(ctx: Context) -> tuple[bool, str]:
         rec = ctx.record(ags, "tracking", unc)
         if rec.status[controller] != "ok":
@@ -175,6 +191,8 @@ def tracks(ags: str, unc: str, controller: str, expected: bool = True) -> Check:
 
 
 def better_tracking(ags: str, unc: str) -> Check:
+    """Proposed tracks with a lower RMS error over the last 5 s than conventional."""
+
     def check(ctx: Context) -> tuple[bool, str]:
         rec = ctx.record(ags, "tracking", unc)
         vals = {}
@@ -191,6 +209,8 @@ def better_tracking(ags: str, unc: str) -> Check:
 
 
 def lyapunov(ags: str) -> Check:
+    """Theorems 2.1-4.1: V-dot = sum F v along the proposed run, and V-dot tends to zero."""
+
     def check(ctx: Context) -> tuple[bool, str]:
         rec = ctx.record(ags, "stabilization", "none")
         if "proposed" not in rec.lyapunov:
@@ -223,242 +243,6 @@ def ags_vs_ags(metric: str, signals: str, lower: str) -> Check:
     return check
 
 
-@dataclass(frozen=True)
-class Claim:
-    key: str
-    source: str
-    text: str
-    checks: tuple[Check, ...]
-
-
-def _common(plant: str, fig: Callable[[str, str, str], str]) -> list[Claim]:
-    """Claims the thesis makes, in the same words, for every pendulum."""
-    out = []
-    for ags, name in (("time", "Time"), ("error", "Error")):
-        out += [
-            Claim(
-                f"{ags}-noise-stab",
-                f"Fig. {fig(ags, 'stabilization', 'noise')}",
-                f"With noise in the controllers, {name}-AGS PID shows less chattering than conventional PID",
-                (less_chattering(ags, "stabilization"),),
-            ),
-            Claim(
-                f"{ags}-simple-friction-stab",
-                f"Fig. {fig(ags, 'stabilization', 'simple_friction')}",
-                f"With simple friction, conventional PID is unbounded while {name}-AGS PID stays bounded",
-                (
-                    unbounded(ags, "stabilization", "simple_friction", "conventional"),
-                    bounded(ags, "stabilization", "simple_friction", "proposed"),
-                ),
-            ),
-            Claim(
-                f"{ags}-exp-friction-stab",
-                f"Fig. {fig(ags, 'stabilization', 'exponential_friction')}",
-                f"With exponential friction, conventional PID oscillates while {name}-AGS PID reaches zero e_ss",
-                (
-                    oscillatory(ags, "exponential_friction", "conventional"),
-                    oscillatory(ags, "exponential_friction", "proposed", expected=False),
-                    zero_ess(ags, "exponential_friction", ("proposed",)),
-                ),
-            ),
-            Claim(
-                f"{ags}-tracking-nominal",
-                f"Figs. {fig(ags, 'tracking', 'none')}, {fig(ags, 'tracking', 'disturbance')}",
-                f"Without uncertainties and with disturbance, conventional and {name}-AGS PID both track well",
-                (
-                    tracks(ags, "none", "conventional"),
-                    tracks(ags, "none", "proposed"),
-                    tracks(ags, "disturbance", "conventional"),
-                    tracks(ags, "disturbance", "proposed"),
-                ),
-            ),
-            Claim(
-                f"{ags}-tracking-noise",
-                f"Fig. {fig(ags, 'tracking', 'noise')}",
-                f"Tracking with noise: {name}-AGS PID chatters less than conventional PID",
-                (less_chattering(ags, "tracking"),),
-            ),
-            Claim(
-                f"{ags}-tracking-simple-friction",
-                f"Fig. {fig(ags, 'tracking', 'simple_friction')}",
-                f"Tracking with simple friction: conventional PID fails, {name}-AGS PID performs satisfactorily",
-                (
-                    tracks(ags, "simple_friction", "conventional", expected=False),
-                    tracks(ags, "simple_friction", "proposed"),
-                ),
-            ),
-            Claim(
-                f"{ags}-tracking-exp-friction",
-                f"Fig. {fig(ags, 'tracking', 'exponential_friction')}",
-                f"Tracking with exponential friction: {name}-AGS PID tracks (almost perfectly), conventional does not",
-                (
-                    tracks(ags, "exponential_friction", "proposed"),
-                    better_tracking(ags, "exponential_friction"),
-                ),
-            ),
-            Claim(
-                f"{ags}-nominal-ess",
-                f"Table of Fig. {fig(ags, 'stabilization', 'none')}",
-                "Both controllers reach zero steady-state error without uncertainties",
-                (zero_ess(ags, "none"),),
-            ),
-            Claim(
-                f"{ags}-lyapunov",
-                f"Theorem and V̇ figure of the {plant} pendulum",
-                f"V̇ = sum F v along the closed loop, and V̇ tends to zero with {name}-AGS PID",
-                (lyapunov(ags),),
-            ),
-        ]
-    out += [
-        Claim(
-            "error-tracking-uncertain",
-            f"Figs. {fig('error', 'tracking', 'disturbance')}-{fig('error', 'tracking', 'exponential_friction')}",
-            "Error-AGS PID tracks better than conventional PID, especially with uncertainties",
-            tuple(
-                better_tracking("error", u) for u in ("disturbance", "noise", "simple_friction", "exponential_friction")
-            ),
-        ),
-        Claim(
-            "error-vs-time-position",
-            "Conclusion of the chapter",
-            "Position M_p and t_s are lower with error-AGS than with time-AGS; t_r is lower with time-AGS",
-            (
-                ags_vs_ags("Mp", "positions", "error"),
-                ags_vs_ags("ts", "positions", "error"),
-                ags_vs_ags("tr", "positions", "time"),
-            ),
-        ),
-        Claim(
-            "error-vs-time-angle",
-            "Conclusion of the chapter",
-            "Angle M_p is lower with time-AGS; angle t_s is lower with error-AGS",
-            (ags_vs_ags("Mp", "angles", "time"), ags_vs_ags("ts", "angles", "error")),
-        ),
-    ]
-    return out
-
-
-def _table_claims(plant: str, tables: dict[tuple[str, str], str]) -> list[Claim]:
-    """Claims read off the thesis's quantitative tables, as its text states them."""
-    t = tables
-    out: list[Claim] = []
-    if plant in ("x", "xy"):
-        out += [
-            Claim(
-                "time-nominal-Mp",
-                f"Table {t['time', 'none']}",
-                "Time-AGS PID lowers M_p of positions and angles",
-                (compare("time", "none", "Mp", "positions"), compare("time", "none", "Mp", "angles")),
-            ),
-            Claim(
-                "time-nominal-tr",
-                f"Table {t['time', 'none']}",
-                "Time-AGS PID raises the rise time slightly",
-                (compare("time", "none", "tr", "positions", better=False),),
-            ),
-            Claim(
-                "time-disturbance",
-                f"Table {t['time', 'disturbance']}",
-                "With disturbance, time-AGS PID lowers M_p a lot, at a small cost in t_r",
-                (
-                    compare("time", "disturbance", "Mp", "positions"),
-                    compare("time", "disturbance", "Mp", "angles"),
-                    compare("time", "disturbance", "tr", "positions", better=False),
-                ),
-            ),
-            Claim(
-                "error-nominal",
-                f"Table {t['error', 'none']}",
-                "Error-AGS PID lowers M_p of positions and angles and shortens t_s",
-                (
-                    compare("error", "none", "Mp", "positions"),
-                    compare("error", "none", "Mp", "angles"),
-                    compare("error", "none", "ts", "positions"),
-                    compare("error", "none", "ts", "angles"),
-                ),
-            ),
-            Claim(
-                "error-disturbance",
-                f"Table {t['error', 'disturbance']}",
-                "With disturbance, error-AGS PID improves M_p and t_s a lot",
-                (
-                    compare("error", "disturbance", "Mp", "positions"),
-                    compare("error", "disturbance", "ts", "positions"),
-                    compare("error", "disturbance", "ts", "angles"),
-                ),
-            ),
-        ]
-        if plant == "x":
-            out.append(
-                Claim(
-                    "time-nominal-ts",
-                    f"Table {t['time', 'none']}",
-                    "Time-AGS PID improves t_s slightly",
-                    (compare("time", "none", "ts", "positions"), compare("time", "none", "ts", "angles")),
-                )
-            )
-    else:
-        out += [
-            Claim(
-                "time-nominal-x",
-                f"Table {t['time', 'none']}",
-                "Time-AGS PID improves M_p, t_r and t_s of the horizontal positions",
-                tuple(compare("time", "none", m, "horizontal") for m in ("Mp", "tr", "ts")),
-            ),
-            Claim(
-                "time-nominal-z",
-                f"Table {t['time', 'none']}",
-                "Time-AGS PID brings the z overshoot to zero with a longer z rise time",
-                (z_check("time", "none", "Mp", zero=True), z_check("time", "none", "tr", lower=False)),
-            ),
-            Claim(
-                "time-nominal-angle",
-                f"Table {t['time', 'none']}",
-                "Time-AGS PID lowers the angle M_p a lot",
-                (compare("time", "none", "Mp", "angles"),),
-            ),
-            Claim(
-                "time-disturbance",
-                f"Table {t['time', 'disturbance']}",
-                "With disturbance, time-AGS PID lowers M_p of x and θ and brings z overshoot to zero",
-                (
-                    compare("time", "disturbance", "Mp", "horizontal"),
-                    compare("time", "disturbance", "Mp", "angles"),
-                    z_check("time", "disturbance", "Mp", zero=True),
-                ),
-            ),
-            Claim(
-                "error-nominal",
-                f"Table {t['error', 'none']}",
-                "Error-AGS PID lowers x M_p a lot and improves x t_r and t_s",
-                tuple(compare("error", "none", m, "horizontal") for m in ("Mp", "tr", "ts")),
-            ),
-            Claim(
-                "error-disturbance",
-                f"Table {t['error', 'disturbance']}",
-                "With disturbance, error-AGS PID lowers x M_p, brings z overshoot to zero and shortens θ t_s",
-                (
-                    compare("error", "disturbance", "Mp", "horizontal"),
-                    z_check("error", "disturbance", "Mp", zero=True),
-                    compare("error", "disturbance", "ts", "angles"),
-                ),
-            ),
-        ]
-        if plant == "xyz":
-            out.append(
-                Claim(
-                    "time-inverse-response",
-                    f"Table {t['time', 'none']} and section 4.5.1.1",
-                    "AGS PID reduces the inverse response (undershoot) of the horizontal positions",
-                    (
-                        compare("time", "none", "undershoot", "horizontal"),
-                        compare("error", "none", "undershoot", "horizontal"),
-                    ),
-                )
-            )
-    return out
-
-
 def z_check(ags: str, unc: str, metric: str, zero: bool = False, lower: bool = True) -> Check:
     """z-loop checks: proposed M_p (about) zero, or proposed lower/higher than conventional."""
 
@@ -471,10 +255,309 @@ def z_check(ags: str, unc: str, metric: str, zero: bool = False, lower: bool = T
     return check
 
 
+@dataclass(frozen=True)
+class Claim:
+    """One statement of the thesis about one pendulum, and the checks that decide it."""
+
+    key: str
+    source: str
+    text: str
+    checks: tuple[Check, ...]
+
+
+@dataclass(frozen=True)
+class TableClaim:
+    """A claim read off a quantitative table of the ``plants`` named.
+
+    ``tables`` are the (schedule, uncertainty) of the pendulum's metrics tables cited; their
+    numbers fill ``source`` ({0}, {1}, ...).
+    """
+
+    key: str
+    plants: tuple[str, ...]
+    tables: tuple[tuple[str, str], ...]
+    source: str
+    text: str
+    checks: tuple[Check, ...]
+
+
+@dataclass(frozen=True)
+class ScheduleClaim:
+    """A claim the thesis makes in the same words for both AGS schedules and every pendulum.
+
+    ``figures`` are the (mode, uncertainty) of the figures cited; their numbers fill
+    ``source`` ({0}, {1}; {plant} is the pendulum). ``{name}`` in ``text`` is "Time" or
+    "Error"; ``checks`` makes the checks for a schedule, "time" or "error".
+    """
+
+    key: str
+    figures: tuple[tuple[str, str], ...]
+    source: str
+    text: str
+    checks: Callable[[str], tuple[Check, ...]]
+
+
+@dataclass(frozen=True)
+class ConclusionClaim:
+    """A claim of a chapter's conclusion, for every pendulum; the numbers of the ``figures``
+    cited, each (schedule, mode, uncertainty), fill ``source``."""
+
+    key: str
+    figures: tuple[tuple[str, str, str], ...]
+    source: str
+    text: str
+    checks: tuple[Check, ...]
+
+
+PLANAR = ("x", "xy")
+WITH_Z = ("xz", "xyz")
+#: Tables 2.3-2.6 and 3.2-3.5 (x, x-y), 3.7-3.10 and 4.2-4.5 (x-z, x-y-z), as the text reads them.
+TABLE_CLAIMS = (
+    TableClaim(
+        "time-nominal-Mp",
+        PLANAR,
+        (("time", "none"),),
+        "Table {0}",
+        "Time-AGS PID lowers M_p of positions and angles",
+        (compare("time", "none", "Mp", "positions"), compare("time", "none", "Mp", "angles")),
+    ),
+    TableClaim(
+        "time-nominal-tr",
+        PLANAR,
+        (("time", "none"),),
+        "Table {0}",
+        "Time-AGS PID raises the rise time slightly",
+        (compare("time", "none", "tr", "positions", better=False),),
+    ),
+    TableClaim(
+        "time-disturbance",
+        PLANAR,
+        (("time", "disturbance"),),
+        "Table {0}",
+        "With disturbance, time-AGS PID lowers M_p a lot, at a small cost in t_r",
+        (
+            compare("time", "disturbance", "Mp", "positions"),
+            compare("time", "disturbance", "Mp", "angles"),
+            compare("time", "disturbance", "tr", "positions", better=False),
+        ),
+    ),
+    TableClaim(
+        "error-nominal",
+        PLANAR,
+        (("error", "none"),),
+        "Table {0}",
+        "Error-AGS PID lowers M_p of positions and angles and shortens t_s",
+        (
+            compare("error", "none", "Mp", "positions"),
+            compare("error", "none", "Mp", "angles"),
+            compare("error", "none", "ts", "positions"),
+            compare("error", "none", "ts", "angles"),
+        ),
+    ),
+    TableClaim(
+        "error-disturbance",
+        PLANAR,
+        (("error", "disturbance"),),
+        "Table {0}",
+        "With disturbance, error-AGS PID improves M_p and t_s a lot",
+        (
+            compare("error", "disturbance", "Mp", "positions"),
+            compare("error", "disturbance", "ts", "positions"),
+            compare("error", "disturbance", "ts", "angles"),
+        ),
+    ),
+    TableClaim(
+        "time-nominal-ts",
+        ("x",),
+        (("time", "none"),),
+        "Table {0}",
+        "Time-AGS PID improves t_s slightly",
+        (compare("time", "none", "ts", "positions"), compare("time", "none", "ts", "angles")),
+    ),
+    TableClaim(
+        "time-nominal-x",
+        WITH_Z,
+        (("time", "none"),),
+        "Table {0}",
+        "Time-AGS PID improves M_p, t_r and t_s of the horizontal positions",
+        tuple(compare("time", "none", m, "horizontal") for m in ("Mp", "tr", "ts")),
+    ),
+    TableClaim(
+        "time-nominal-z",
+        WITH_Z,
+        (("time", "none"),),
+        "Table {0}",
+        "Time-AGS PID brings the z overshoot to zero with a longer z rise time",
+        (z_check("time", "none", "Mp", zero=True), z_check("time", "none", "tr", lower=False)),
+    ),
+    TableClaim(
+        "time-nominal-angle",
+        WITH_Z,
+        (("time", "none"),),
+        "Table {0}",
+        "Time-AGS PID lowers the angle M_p a lot",
+        (compare("time", "none", "Mp", "angles"),),
+    ),
+    TableClaim(
+        "time-disturbance",
+        WITH_Z,
+        (("time", "disturbance"),),
+        "Table {0}",
+        "With disturbance, time-AGS PID lowers M_p of x and θ and brings z overshoot to zero",
+        (
+            compare("time", "disturbance", "Mp", "horizontal"),
+            compare("time", "disturbance", "Mp", "angles"),
+            z_check("time", "disturbance", "Mp", zero=True),
+        ),
+    ),
+    TableClaim(
+        "error-nominal",
+        WITH_Z,
+        (("error", "none"),),
+        "Table {0}",
+        "Error-AGS PID lowers x M_p a lot and improves x t_r and t_s",
+        tuple(compare("error", "none", m, "horizontal") for m in ("Mp", "tr", "ts")),
+    ),
+    TableClaim(
+        "error-disturbance",
+        WITH_Z,
+        (("error", "disturbance"),),
+        "Table {0}",
+        "With disturbance, error-AGS PID lowers x M_p, brings z overshoot to zero and shortens θ t_s",
+        (
+            compare("error", "disturbance", "Mp", "horizontal"),
+            z_check("error", "disturbance", "Mp", zero=True),
+            compare("error", "disturbance", "ts", "angles"),
+        ),
+    ),
+    TableClaim(
+        "time-inverse-response",
+        ("xyz",),
+        (("time", "none"),),
+        "Table {0} and section 4.5.1.1",
+        "AGS PID reduces the inverse response (undershoot) of the horizontal positions",
+        (
+            compare("time", "none", "undershoot", "horizontal"),
+            compare("error", "none", "undershoot", "horizontal"),
+        ),
+    ),
+)
+#: The schedules, as the claims name them.
+SCHEDULES = (("time", "Time"), ("error", "Error"))
+#: Claims made for each schedule: the uncertainty and tracking figures, the tables' e_ss, the theorems.
+SCHEDULE_CLAIMS = (
+    ScheduleClaim(
+        "noise-stab",
+        (("stabilization", "noise"),),
+        "Fig. {0}",
+        "With noise in the controllers, {name}-AGS PID shows less chattering than conventional PID",
+        lambda ags: (less_chattering(ags, "stabilization"),),
+    ),
+    ScheduleClaim(
+        "simple-friction-stab",
+        (("stabilization", "simple_friction"),),
+        "Fig. {0}",
+        "With simple friction, conventional PID is unbounded while {name}-AGS PID stays bounded",
+        lambda ags: (
+            unbounded(ags, "stabilization", "simple_friction", "conventional"),
+            bounded(ags, "stabilization", "simple_friction", "proposed"),
+        ),
+    ),
+    ScheduleClaim(
+        "exp-friction-stab",
+        (("stabilization", "exponential_friction"),),
+        "Fig. {0}",
+        "With exponential friction, conventional PID oscillates while {name}-AGS PID reaches zero e_ss",
+        lambda ags: (
+            oscillatory(ags, "exponential_friction", "conventional"),
+            oscillatory(ags, "exponential_friction", "proposed", expected=False),
+            zero_ess(ags, "exponential_friction", ("proposed",)),
+        ),
+    ),
+    ScheduleClaim(
+        "tracking-nominal",
+        (("tracking", "none"), ("tracking", "disturbance")),
+        "Figs. {0}, {1}",
+        "Without uncertainties and with disturbance, conventional and {name}-AGS PID both track well",
+        lambda ags: (
+            tracks(ags, "none", "conventional"),
+            tracks(ags, "none", "proposed"),
+            tracks(ags, "disturbance", "conventional"),
+            tracks(ags, "disturbance", "proposed"),
+        ),
+    ),
+    ScheduleClaim(
+        "tracking-noise",
+        (("tracking", "noise"),),
+        "Fig. {0}",
+        "Tracking with noise: {name}-AGS PID chatters less than conventional PID",
+        lambda ags: (less_chattering(ags, "tracking"),),
+    ),
+    ScheduleClaim(
+        "tracking-simple-friction",
+        (("tracking", "simple_friction"),),
+        "Fig. {0}",
+        "Tracking with simple friction: conventional PID fails, {name}-AGS PID performs satisfactorily",
+        lambda ags: (
+            tracks(ags, "simple_friction", "conventional", expected=False),
+            tracks(ags, "simple_friction", "proposed"),
+        ),
+    ),
+    ScheduleClaim(
+        "tracking-exp-friction",
+        (("tracking", "exponential_friction"),),
+        "Fig. {0}",
+        "Tracking with exponential friction: {name}-AGS PID tracks (almost perfectly), conventional does not",
+        lambda ags: (tracks(ags, "exponential_friction", "proposed"), better_tracking(ags, "exponential_friction")),
+    ),
+    ScheduleClaim(
+        "nominal-ess",
+        (("stabilization", "none"),),
+        "Table of Fig. {0}",
+        "Both controllers reach zero steady-state error without uncertainties",
+        lambda ags: (zero_ess(ags, "none"),),
+    ),
+    ScheduleClaim(
+        "lyapunov",
+        (),
+        "Theorem and V̇ figure of the {plant} pendulum",
+        "V̇ = sum F v along the closed loop, and V̇ tends to zero with {name}-AGS PID",
+        lambda ags: (lyapunov(ags),),
+    ),
+)
+#: The chapters' conclusions on error- against time-AGS PID.
+CONCLUSION_CLAIMS = (
+    ConclusionClaim(
+        "error-tracking-uncertain",
+        (("error", "tracking", "disturbance"), ("error", "tracking", "exponential_friction")),
+        "Figs. {0}-{1}",
+        "Error-AGS PID tracks better than conventional PID, especially with uncertainties",
+        tuple(better_tracking("error", u) for u in ("disturbance", "noise", "simple_friction", "exponential_friction")),
+    ),
+    ConclusionClaim(
+        "error-vs-time-position",
+        (),
+        "Conclusion of the chapter",
+        "Position M_p and t_s are lower with error-AGS than with time-AGS; t_r is lower with time-AGS",
+        (
+            ags_vs_ags("Mp", "positions", "error"),
+            ags_vs_ags("ts", "positions", "error"),
+            ags_vs_ags("tr", "positions", "time"),
+        ),
+    ),
+    ConclusionClaim(
+        "error-vs-time-angle",
+        (),
+        "Conclusion of the chapter",
+        "Angle M_p is lower with time-AGS; angle t_s is lower with error-AGS",
+        (ags_vs_ags("Mp", "angles", "time"), ags_vs_ags("ts", "angles", "error")),
+    ),
+)
 CHAPTER_PLANTS = {2: ("x",), 3: ("xy", "xz"), 4: ("xyz",)}
 
 
 def _tables_of(plant: str) -> dict[tuple[str, str], str]:
+    """The metrics tables of a pendulum: (schedule, uncertainty) -> table number."""
     meta = catalog.thesis_metrics()[["table", "plant", "ags", "scenario"]].drop_duplicates()
     meta = meta[meta.plant == plant]
     return {
@@ -482,11 +565,38 @@ def _tables_of(plant: str) -> dict[tuple[str, str], str]:
     }
 
 
-def claims_for(plant: str) -> list[Claim]:
-    def fig(ags: str, mode: str, unc: str) -> str:
-        return catalog._figure_number(plant, ags, mode, unc)
+def _table_claims(plant: str) -> list[Claim]:
+    """The claims of TABLE_CLAIMS about this pendulum, citing its table numbers."""
+    numbers = _tables_of(plant)
+    return [
+        Claim(c.key, c.source.format(*(numbers[t] for t in c.tables)), c.text, c.checks)
+        for c in TABLE_CLAIMS
+        if plant in c.plants
+    ]
 
-    return _table_claims(plant, _tables_of(plant)) + _common(plant, fig)
+
+def _schedule_claims(plant: str) -> list[Claim]:
+    """SCHEDULE_CLAIMS for time-AGS, then for error-AGS, citing this pendulum's figures."""
+    out = []
+    for ags, name in SCHEDULES:
+        for c in SCHEDULE_CLAIMS:
+            figures = (catalog.figure_number(plant, ags, mode, unc) for mode, unc in c.figures)
+            source = c.source.format(*figures, plant=plant)
+            out.append(Claim(f"{ags}-{c.key}", source, c.text.format(name=name), c.checks(ags)))
+    return out
+
+
+def _conclusion_claims(plant: str) -> list[Claim]:
+    """CONCLUSION_CLAIMS, citing this pendulum's figures."""
+    return [
+        Claim(c.key, c.source.format(*(catalog.figure_number(plant, *f) for f in c.figures)), c.text, c.checks)
+        for c in CONCLUSION_CLAIMS
+    ]
+
+
+def claims_for(plant: str) -> list[Claim]:
+    """Every claim about one pendulum: its tables', then each schedule's, then the conclusion's."""
+    return _table_claims(plant) + _schedule_claims(plant) + _conclusion_claims(plant)
 
 
 def configs_for(root: Path, chapters: set[int]) -> list[Path]:
@@ -499,8 +609,6 @@ def configs_for(root: Path, chapters: set[int]) -> list[Path]:
 
 def evaluate(root: Path, records: dict[Path, Any], chapters: set[int]) -> pd.DataFrame:
     """claims.csv: chapter, pendulum, id, source, claim, reproduced, evidence."""
-    from nlcx.thesis import cstr
-
     rows = []
     for chapter in sorted(chapters):
         if chapter == 5:

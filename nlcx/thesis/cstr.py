@@ -7,6 +7,8 @@ M_p (%), e_ss and the inverse-response magnitude (our undershoot, %) of sections
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,18 +27,22 @@ CSTR_METRICS = {
 }
 
 
-def _value(record: Any, controller: str, metric: str) -> float:
-    rows = record.metrics[(record.metrics.controller == controller) & (record.metrics.metric == metric)]
-    rows = rows[rows.signal == "C_B"]
+#: Our Table 5.8: method -> column -> value.
+MethodValues = dict[str, dict[str, float]]
+
+
+def _value(metrics: pd.DataFrame, controller: str, metric: str, signal: str = "C_B") -> float:
+    """One metric of one controller's run on one signal (default the output C_B); NaN if absent."""
+    rows = metrics[(metrics.controller == controller) & (metrics.metric == metric) & (metrics.signal == signal)]
     return float(rows.value.iloc[0]) if not rows.empty else math.nan
 
 
-def method_values(records: dict[Path, Any], root: Path) -> dict[str, dict[str, float]]:
+def method_values(records: dict[Path, Any], root: Path) -> MethodValues:
     """Our Table 5.8 numbers: method -> thesis column -> value."""
     out = {}
     for method, (file, label) in catalog.CSTR_METHODS.items():
         record = records[root / "ch5" / file]
-        out[method] = {col: _value(record, label, metric) for col, (metric, _) in CSTR_METRICS.items()}
+        out[method] = {col: _value(record.metrics, label, metric) for col, (metric, _) in CSTR_METRICS.items()}
     return out
 
 
@@ -83,7 +89,7 @@ def table_5_1(record: Any) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _fuzzy_schedule(record: Any) -> dict[str, Any]:
+def fuzzy_schedule(record: Any) -> dict[str, Any]:
     """The fuzzy schedule as run (after the ZN tuner filled in its gain ranges)."""
     loops = record.built["fuzzy"]["loops"]
     return next(iter(loops.values()))["schedule"]
@@ -91,7 +97,7 @@ def _fuzzy_schedule(record: Any) -> dict[str, Any]:
 
 def table_5_2(record: Any) -> pd.DataFrame:
     """Universes of discourse actually used, beside Table 5.2."""
-    sched = _fuzzy_schedule(record)
+    sched = fuzzy_schedule(record)
     printed = catalog.fuzzy_universes().set_index("name")
     rows = []
     for name in ("e", "de_dt"):
@@ -121,7 +127,7 @@ def table_5_2(record: Any) -> pd.DataFrame:
 
 def table_sets(record: Any, variable: str) -> pd.DataFrame:
     """The fuzzy sets of one variable actually used, beside Tables 5.3-5.7."""
-    sched = _fuzzy_schedule(record)
+    sched = fuzzy_schedule(record)
     printed = catalog.fuzzy_sets()
     printed = printed[printed.variable == variable].set_index("set")
     rows = []
@@ -154,7 +160,7 @@ def zn_variants(root: Path, out_dir: Path) -> pd.DataFrame:
         )
         result = engine.run_experiment(exp)
         label = exp.controllers[0].label
-        values = {col: _value_of(result.metrics, label, metric) for col, (metric, _) in CSTR_METRICS.items()}
+        values = {col: _value(result.metrics, label, metric) for col, (metric, _) in CSTR_METRICS.items()}
         distance = math.sqrt(sum(
             ((values[c] - float(printed[c])) / max(abs(float(printed[c])), 1.0)) ** 2
             for c in ("tr_s", "ts_s", "Mp_percent", "inverse_response_percent")
@@ -172,117 +178,127 @@ def zn_variants(root: Path, out_dir: Path) -> pd.DataFrame:
     return table
 
 
-def _value_of(metrics: pd.DataFrame, controller: str, metric: str) -> float:
-    rows = metrics[(metrics.controller == controller) & (metrics.metric == metric) & (metrics.signal == "C_B")]
-    return float(rows.value.iloc[0]) if not rows.empty else math.nan
+def _best(v: MethodValues, col: str) -> str:
+    """The method with the smallest value in a Table 5.8 column (NaN counts as worst)."""
+    return min(v, key=lambda m: v[m][col] if not math.isnan(v[m][col]) else math.inf)
+
+
+def _listing(v: MethodValues, col: str) -> str:
+    """Every method's value in a Table 5.8 column, e.g. ``ZN 1.2; Fuzzy 1.5; ...``."""
+    return "; ".join(f"{m} {v[m][col]:.3g}" for m in v)
+
+
+@dataclass(frozen=True)
+class CstrClaim:
+    """A claim of section 5.4 or the conclusion 5.6 about Table 5.8: ``holds`` decides it and
+    ``evidence`` quotes the numbers, both from our Table 5.8 values (method -> column -> value)."""
+
+    key: str
+    source: str
+    text: str
+    holds: Callable[[MethodValues], bool]
+    evidence: Callable[[MethodValues], str]
+
+
+TABLE_5_8_CLAIMS = (
+    CstrClaim(
+        "zn-fastest-rise",
+        "Table 5.8, 5.6",
+        "ZN gives the shortest rise time",
+        lambda v: _best(v, "tr_s") == "ZN",
+        lambda v: "t_r: " + _listing(v, "tr_s"),
+    ),
+    CstrClaim(
+        "anfis-best-ts",
+        "Table 5.8, 5.6",
+        "ANFIS gives the best settling time",
+        lambda v: _best(v, "ts_s") == "ANFIS",
+        lambda v: "t_s: " + _listing(v, "ts_s"),
+    ),
+    CstrClaim(
+        "anfis-best-mp",
+        "Table 5.8, 5.6",
+        "ANFIS gives the smallest overshoot of the methods with overshoot (GA has none)",
+        lambda v: min([m for m in v if m != "GA"], key=lambda m: v[m]["Mp_percent"]) == "ANFIS",
+        lambda v: "M_p %: " + _listing(v, "Mp_percent"),
+    ),
+    CstrClaim(
+        "hybrids-lower-mp",
+        "Table 5.8",
+        "Every hybrid method lowers M_p below ZN's",
+        lambda v: all(v[m]["Mp_percent"] < v["ZN"]["Mp_percent"] for m in v if m != "ZN"),
+        lambda v: "M_p %: " + _listing(v, "Mp_percent"),
+    ),
+    CstrClaim(
+        "anfis-less-inverse",
+        "5.4.3, 5.6",
+        "ANFIS's inverse response is smaller than ZN's and fuzzy's",
+        lambda v: (
+            v["ANFIS"]["inverse_response_percent"]
+            < min(v["ZN"]["inverse_response_percent"], v["Fuzzy"]["inverse_response_percent"])
+        ),
+        lambda v: "inverse response %: " + _listing(v, "inverse_response_percent"),
+    ),
+    CstrClaim(
+        "ann-smallest-inverse",
+        "5.4.2, 5.6",
+        "The ANN PID reduces the inverse response the most and lowers M_p",
+        lambda v: _best(v, "inverse_response_percent") == "ANN" and v["ANN"]["Mp_percent"] < v["ZN"]["Mp_percent"],
+        lambda v: "inverse response %: " + _listing(v, "inverse_response_percent"),
+    ),
+    CstrClaim(
+        "ga-sluggish-no-overshoot",
+        "5.4.4",
+        "GA tuning is sluggish (longest t_r) with zero overshoot",
+        lambda v: max(v, key=lambda m: v[m]["tr_s"]) == "GA" and v["GA"]["Mp_percent"] <= 0.5,
+        lambda v: f"t_r: {_listing(v, 'tr_s')} | M_p GA {v['GA']['Mp_percent']:.3g} %",
+    ),
+    CstrClaim(
+        "zero-ess",
+        "Table 5.8",
+        "Every method reaches zero steady-state error",
+        lambda v: all(abs(v[m]["ess"]) <= 0.01 for m in v),
+        lambda v: "e_ss: " + _listing(v, "ess"),
+    ),
+    CstrClaim(
+        "rhp-zero-inverse",
+        "5.2, 5.3.1",
+        "The RHP zero gives the ZN loop an inverse response (44.46 %)",
+        lambda v: v["ZN"]["inverse_response_percent"] > 10,
+        lambda v: f"ZN inverse response {v['ZN']['inverse_response_percent']:.3g} %",
+    ),
+)
+
+
+def _preview_claims(preview: Any) -> list[tuple[str, str, str, bool, str]]:
+    """Section 5.5 and 5.6 on Fig. 5.19: H∞ preview control tracks better, with less effort, than H2."""
+    ise_h2, ise_inf = (_value(preview.metrics, label, "ise") for label in ("h2", "hinf"))
+    eff_h2, eff_inf = (_value(preview.metrics, label, "control_effort", signal="u") for label in ("h2", "hinf"))
+    return [
+        (
+            "hinf-better-tracking",
+            "5.5, 5.6",
+            "H∞ preview control tracks better (lower ISE) than H2",
+            ise_inf < ise_h2,
+            f"ISE: H2 {ise_h2:.4g}, H∞ {ise_inf:.4g}",
+        ),
+        (
+            "hinf-less-effort",
+            "5.5, 5.6",
+            "H∞ preview control needs less control effort than H2",
+            eff_inf < eff_h2,
+            f"∫u² dt: H2 {eff_h2:.4g}, H∞ {eff_inf:.4g}",
+        ),
+    ]
 
 
 def claims(records: dict[Path, Any], root: Path) -> list[dict[str, Any]]:
     """The claims of chapter 5 (section 5.4 and the conclusion 5.6), checked on our runs."""
     v = method_values(records, root)
-    methods = list(v)
-    hybrids = [m for m in methods if m != "ZN"]
-
-    def best(col: str) -> str:
-        return min(methods, key=lambda m: v[m][col] if not math.isnan(v[m][col]) else math.inf)
-
-    def fmt(col: str) -> str:
-        return "; ".join(f"{m} {v[m][col]:.3g}" for m in methods)
-
-    rows: list[tuple[str, str, str, bool | None, str]] = [
-        (
-            "zn-fastest-rise",
-            "Table 5.8, 5.6",
-            "ZN gives the shortest rise time",
-            best("tr_s") == "ZN",
-            "t_r: " + fmt("tr_s"),
-        ),
-        (
-            "anfis-best-ts",
-            "Table 5.8, 5.6",
-            "ANFIS gives the best settling time",
-            best("ts_s") == "ANFIS",
-            "t_s: " + fmt("ts_s"),
-        ),
-        (
-            "anfis-best-mp",
-            "Table 5.8, 5.6",
-            "ANFIS gives the smallest overshoot of the methods with overshoot (GA has none)",
-            min([m for m in methods if m != "GA"], key=lambda m: v[m]["Mp_percent"]) == "ANFIS",
-            "M_p %: " + fmt("Mp_percent"),
-        ),
-        (
-            "hybrids-lower-mp",
-            "Table 5.8",
-            "Every hybrid method lowers M_p below ZN's",
-            all(v[m]["Mp_percent"] < v["ZN"]["Mp_percent"] for m in hybrids),
-            "M_p %: " + fmt("Mp_percent"),
-        ),
-        (
-            "anfis-less-inverse",
-            "5.4.3, 5.6",
-            "ANFIS's inverse response is smaller than ZN's and fuzzy's",
-            v["ANFIS"]["inverse_response_percent"]
-            < min(v["ZN"]["inverse_response_percent"], v["Fuzzy"]["inverse_response_percent"]),
-            "inverse response %: " + fmt("inverse_response_percent"),
-        ),
-        (
-            "ann-smallest-inverse",
-            "5.4.2, 5.6",
-            "The ANN PID reduces the inverse response the most and lowers M_p",
-            best("inverse_response_percent") == "ANN" and v["ANN"]["Mp_percent"] < v["ZN"]["Mp_percent"],
-            "inverse response %: " + fmt("inverse_response_percent"),
-        ),
-        (
-            "ga-sluggish-no-overshoot",
-            "5.4.4",
-            "GA tuning is sluggish (longest t_r) with zero overshoot",
-            max(methods, key=lambda m: v[m]["tr_s"]) == "GA" and v["GA"]["Mp_percent"] <= 0.5,
-            f"t_r: {fmt('tr_s')} | M_p GA {v['GA']['Mp_percent']:.3g} %",
-        ),
-        (
-            "zero-ess",
-            "Table 5.8",
-            "Every method reaches zero steady-state error",
-            all(abs(v[m]["ess"]) <= 0.01 for m in methods),
-            "e_ss: " + fmt("ess"),
-        ),
-        (
-            "rhp-zero-inverse",
-            "5.2, 5.3.1",
-            "The RHP zero gives the ZN loop an inverse response (44.46 %)",
-            v["ZN"]["inverse_response_percent"] > 10,
-            f"ZN inverse response {v['ZN']['inverse_response_percent']:.3g} %",
-        ),
-    ]
+    rows = [(c.key, c.source, c.text, c.holds(v), c.evidence(v)) for c in TABLE_5_8_CLAIMS]
     preview = records.get(root / "ch5" / "fig_5_19.yaml")
     if preview is not None:
-
-        def pv(label: str, signal: str, metric: str) -> float:
-            m = preview.metrics
-            r = m[(m.controller == label) & (m.signal == signal) & (m.metric == metric)]
-            return float(r.value.iloc[0]) if not r.empty else math.nan
-
-        ise_h2, ise_inf = pv("h2", "C_B", "ise"), pv("hinf", "C_B", "ise")
-        eff_h2, eff_inf = pv("h2", "u", "control_effort"), pv("hinf", "u", "control_effort")
-        rows.append(
-            (
-                "hinf-better-tracking",
-                "5.5, 5.6",
-                "H∞ preview control tracks better (lower ISE) than H2",
-                ise_inf < ise_h2,
-                f"ISE: H2 {ise_h2:.4g}, H∞ {ise_inf:.4g}",
-            )
-        )
-        rows.append(
-            (
-                "hinf-less-effort",
-                "5.5, 5.6",
-                "H∞ preview control needs less control effort than H2",
-                eff_inf < eff_h2,
-                f"∫u² dt: H2 {eff_h2:.4g}, H∞ {eff_inf:.4g}",
-            )
-        )
+        rows += _preview_claims(preview)
     return [
         {
             "chapter": 5,

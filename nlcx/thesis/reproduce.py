@@ -12,7 +12,6 @@ Writes into the output directory (default ``results/thesis``):
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor
@@ -25,20 +24,8 @@ import pandas as pd
 
 from nlcx.config import load as load_config
 from nlcx.errors import ConfigError, NlcxError
-from nlcx.thesis import catalog, cstr
+from nlcx.thesis import catalog, cstr, tables
 from nlcx.thesis.catalog import FigureSpec, TableSpec
-
-ANGLES = ("theta", "phi")
-#: The rates k of section 2.3 (data/ags_rates.csv): angle loops, position loops; z: not printed.
-PRINTED_RATES = {
-    "theta": {"kp": 0.1, "ki": 0.1, "kd": 0.05},
-    "phi": {"kp": 0.1, "ki": 0.1, "kd": 0.05},
-    "x": {"kp": 0.1, "ki": 0.1, "kd": 0.25},
-    "y": {"kp": 0.1, "ki": 0.1, "kd": 0.25},
-}
-#: Thesis metric -> nlcx metric for position signals (unit step) and angles (regulated to 0).
-POSITION_METRICS = {"Mp": "overshoot", "tr": "rise_time", "ts": "settling_time", "ess": "steady_state_error"}
-ANGLE_METRICS = {"Mp": "peak_deviation", "ts": "settling_time", "ess": "steady_state_error"}
 
 
 @dataclass
@@ -56,26 +43,6 @@ class Record:
     #: Each controller's configuration as built (after its tuners).
     built: dict[str, dict[str, Any]] = field(default_factory=dict)
     wall: float = 0.0
-
-
-def thesis_value(metrics: pd.DataFrame, controller: str, signal: str, metric: str) -> float:
-    """Our number for a thesis (signal, metric): M_p of a position is overshoot/100."""
-    mapping = ANGLE_METRICS if signal in ANGLES else POSITION_METRICS
-    name = mapping.get(metric)
-    if name is None:
-        return math.nan
-    rows = metrics[(metrics.controller == controller) & (metrics.signal == signal) & (metrics.metric == name)]
-    if rows.empty:
-        return math.nan
-    value = float(rows.value.iloc[0])
-    return value / 100.0 if name == "overshoot" else value
-
-
-def improvement(conventional: float, proposed: float) -> float:
-    """The thesis's % improvement: (conventional - proposed) / proposed x 100."""
-    if proposed == 0 or math.isnan(proposed) or math.isnan(conventional):
-        return math.nan
-    return (conventional - proposed) / proposed * 100.0
 
 
 def _extras(result: Any) -> pd.DataFrame:
@@ -133,74 +100,6 @@ def run_config(config: Path, out_dir: Path, figure: tuple[str, str] | None, over
     )
 
 
-def _metrics_table(spec: TableSpec, record: Record) -> pd.DataFrame:
-    thesis = catalog.thesis_metrics()
-    rows = thesis[thesis.table == spec.table]
-    out = []
-    for r in rows.itertuples(index=False):
-        ours = thesis_value(record.metrics, r.controller, r.signal, r.metric)
-        unit = "rad" if r.signal in ANGLES and r.metric == "Mp" else ("s" if r.metric in ("tr", "ts") else "")
-        out.append(
-            {
-                "signal": r.signal,
-                "metric": r.metric,
-                "controller": r.controller,
-                "thesis": float(r.value),
-                "nlcx": ours,
-                "delta": ours - float(r.value),
-                "unit": unit,
-                "nlcx_status": record.status.get(r.controller, "missing"),
-            }
-        )
-    table = pd.DataFrame(out)
-    imp_thesis, imp_ours = [], []
-    for row in table.itertuples(index=False):
-        other = table[(table.signal == row.signal) & (table.metric == row.metric)].set_index("controller")
-        if row.controller != "proposed" or "conventional" not in other.index or row.metric == "ess":
-            imp_thesis.append(math.nan)
-            imp_ours.append(math.nan)
-            continue
-        imp_thesis.append(improvement(other.loc["conventional", "thesis"], other.loc["proposed", "thesis"]))
-        imp_ours.append(improvement(other.loc["conventional", "nlcx"], other.loc["proposed", "nlcx"]))
-    table["improvement_thesis_pct"] = imp_thesis
-    table["improvement_nlcx_pct"] = imp_ours
-    return table
-
-
-def _plant_table(records: list[Record]) -> pd.DataFrame:
-    params = records[0].resolved["plant"]["params"]
-    printed = {"M": 1.0, "m": 0.1, "l": 0.3, "g": 9.8}
-    units = {"M": "kg", "m": "kg", "l": "m", "g": "m/s^2"}
-    return pd.DataFrame([{"parameter": k, "nlcx": params[k], "thesis": printed[k], "unit": units[k]} for k in printed])
-
-
-def _ags_table(spec: TableSpec, records: list[Record]) -> pd.DataFrame:
-    """The AGS ranges and rates of the proposed controllers actually run, beside Table X."""
-    printed = catalog.gain_ranges()
-    printed = printed[printed.table == spec.table].set_index("signal")
-    rows = []
-    for record in records:
-        proposed = record.resolved["controllers"]["proposed"]
-        for signal, loop in proposed["loops"].items():
-            sched = loop["schedule"]
-            pid = printed.loc[signal, "loop"] if signal in printed.index else ""
-            for gain in ("kp", "ki", "kd"):
-                for end in ("min", "max"):
-                    thesis = printed.loc[signal, f"{gain}_{end}"] if signal in printed.index else math.nan
-                    rows.append([sched["kind"], pid, signal, f"{gain}_{end}", sched[gain][end], thesis])
-                rows.append(
-                    [
-                        sched["kind"],
-                        pid,
-                        signal,
-                        f"rate_{gain}",
-                        sched["rate"][gain],
-                        PRINTED_RATES.get(signal, {}).get(gain, math.nan),
-                    ]
-                )
-    return pd.DataFrame(rows, columns=["schedule", "loop", "signal", "parameter", "nlcx", "thesis"])
-
-
 def select(
     figs: list[FigureSpec], tabs: list[TableSpec], chapters: Iterable[int] | None, only: Iterable[str] | None
 ) -> tuple[list[FigureSpec], list[TableSpec]]:
@@ -220,6 +119,85 @@ def select(
     return figs, tabs
 
 
+def _chapters(figs: list[FigureSpec], tabs: list[TableSpec]) -> set[int]:
+    """The chapters the selected figures and tables belong to."""
+    return {f.chapter for f in figs} | {t.chapter for t in tabs}
+
+
+def _needed_configs(root: Path, figs: list[FigureSpec], tabs: list[TableSpec], with_claims: bool) -> list[Path]:
+    """Every config the figures and tables (and, ``with_claims``, their chapters' claims) need."""
+    from nlcx.thesis import claims
+
+    needed = dict.fromkeys([c for f in figs for c in f.configs] + [c for t in tabs for c in t.configs])
+    if with_claims:
+        needed.update(dict.fromkeys(claims.configs_for(root, _chapters(figs, tabs))))
+    return list(needed)
+
+
+def _check_configs(configs: list[Path], overrides: tuple[str, ...]) -> None:
+    """Fail fast, in this process, on a missing or bad config."""
+    missing = [str(c) for c in configs if not c.is_file()]
+    if missing:
+        raise NlcxError(f"missing experiment config(s): {', '.join(missing[:3])}")
+    for config in configs:
+        try:
+            load_config(config, list(overrides))
+        except ConfigError as exc:
+            raise NlcxError(f"{config}: {exc}") from None
+
+
+def _run_all(
+    configs: list[Path],
+    out_dir: Path,
+    titles: dict[Path, tuple[str, str]],
+    overrides: tuple[str, ...],
+    jobs: int,
+    progress: Any,
+) -> dict[Path, Record]:
+    """Run every config in a process pool, in order, drawing the response figures named in ``titles``."""
+    records: dict[Path, Record] = {}
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures = {c: pool.submit(run_config, c, out_dir, titles.get(c), overrides) for c in configs}
+        for config, future in futures.items():
+            records[config] = future.result()
+            if progress is not None:
+                progress(records[config])
+    return records
+
+
+def _write_figure(spec: FigureSpec, records: dict[Path, Record], out_dir: Path) -> None:
+    """A figure drawn from finished runs: V-dot of Theorems 2.1-4.1, or Figs. 5.4-5.8's membership functions."""
+    from nlcx import report
+    from nlcx.thesis import claims
+
+    if spec.kind == "lyapunov":
+        fig = claims.lyapunov_figure(spec, [records[c] for c in spec.configs])
+    else:
+        from nlcx.controllers.fuzzy import membership_figure
+
+        fig = membership_figure(cstr.fuzzy_schedule(records[spec.configs[0]]), spec.variable)
+        fig.axes[0].set_title(spec.title, fontsize=10)
+    report.write_figure(out_dir / "figures" / spec.filename, fig)
+
+
+def _table(spec: TableSpec, records: dict[Path, Record], root: Path) -> pd.DataFrame:
+    """One thesis table, ours beside theirs, from the runs it needs."""
+    recs = [records[c] for c in spec.configs]
+    if spec.kind == "metrics":
+        return tables.metrics_table(spec.table, recs[0].metrics, recs[0].status)
+    if spec.kind == "plant":
+        return tables.plant_table(recs[0].resolved["plant"]["params"])
+    if spec.kind == "ags":
+        return tables.ags_table(spec.table, [r.resolved for r in recs])
+    if spec.kind == "cstr_metrics":
+        return cstr.table_5_8(records, root)
+    if spec.kind == "zn_rules":
+        return cstr.table_5_1(recs[0])
+    if spec.kind == "fuzzy_universes":
+        return cstr.table_5_2(recs[0])
+    return cstr.table_sets(recs[0], spec.variable)
+
+
 def reproduce(
     root: Path,
     out_dir: Path,
@@ -234,63 +212,23 @@ def reproduce(
     from nlcx.thesis import claims
 
     figs, tabs = select(catalog.figures(root), catalog.tables(root), chapters, only)
-    response_titles = {f.configs[0]: (f.filename, f.title) for f in figs if f.kind == "response"}
-    needed = dict.fromkeys([c for f in figs for c in f.configs] + [c for t in tabs for c in t.configs])
-    if claims_needed := not only:
-        needed.update(dict.fromkeys(claims.configs_for(root, {f.chapter for f in figs} | {t.chapter for t in tabs})))
-    missing = [str(c) for c in needed if not c.is_file()]
-    if missing:
-        raise NlcxError(f"missing experiment config(s): {', '.join(missing[:3])}")
-    for config in needed:  # fail fast, in this process, on a bad config
-        try:
-            load_config(config, list(overrides))
-        except ConfigError as exc:
-            raise NlcxError(f"{config}: {exc}") from None
-    jobs = jobs or os.cpu_count() or 1
-    records: dict[Path, Record] = {}
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = {c: pool.submit(run_config, c, out_dir, response_titles.get(c), overrides) for c in needed}
-        for config, future in futures.items():
-            records[config] = future.result()
-            if progress is not None:
-                progress(records[config])
+    claims_needed = not only
+    needed = _needed_configs(root, figs, tabs, claims_needed)
+    _check_configs(needed, overrides)
+    titles = {f.configs[0]: (f.filename, f.title) for f in figs if f.kind == "response"}
+    records = _run_all(needed, out_dir, titles, overrides, jobs or os.cpu_count() or 1, progress)
     for spec in figs:
-        if spec.kind == "lyapunov":
-            report.write_figure(
-                out_dir / "figures" / spec.filename,
-                claims.lyapunov_figure(spec, [records[c] for c in spec.configs]),
-            )
-        elif spec.kind == "membership":
-            from nlcx.controllers.fuzzy import membership_figure
-
-            schedule = cstr._fuzzy_schedule(records[spec.configs[0]])
-            fig = membership_figure(schedule, spec.variable)
-            fig.axes[0].set_title(spec.title, fontsize=10)
-            report.write_figure(out_dir / "figures" / spec.filename, fig)
+        if spec.kind in ("lyapunov", "membership"):
+            _write_figure(spec, records, out_dir)
     written_tables = {}
     for spec in tabs:
-        recs = [records[c] for c in spec.configs]
-        if spec.kind == "metrics":
-            table = _metrics_table(spec, recs[0])
-        elif spec.kind == "plant":
-            table = _plant_table(recs)
-        elif spec.kind == "ags":
-            table = _ags_table(spec, recs)
-        elif spec.kind == "cstr_metrics":
-            table = cstr.table_5_8(records, root)
-        elif spec.kind == "zn_rules":
-            table = cstr.table_5_1(recs[0])
-        elif spec.kind == "fuzzy_universes":
-            table = cstr.table_5_2(recs[0])
-        else:
-            table = cstr.table_sets(recs[0], spec.variable)
-        report.write_csv(out_dir / "tables" / spec.filename, table)
-        written_tables[spec.table] = table
+        written_tables[spec.table] = _table(spec, records, root)
+        report.write_csv(out_dir / "tables" / spec.filename, written_tables[spec.table])
     summary: dict[str, Any] = {"figures": [f.figure for f in figs], "tables": sorted(written_tables)}
     if not only and 5 in {f.chapter for f in figs}:
         summary["zn_variants"] = cstr.zn_variants(root, out_dir)
     if claims_needed:
-        claim_table = claims.evaluate(root, records, {f.chapter for f in figs} | {t.chapter for t in tabs})
+        claim_table = claims.evaluate(root, records, _chapters(figs, tabs))
         report.write_csv(out_dir / "claims.csv", claim_table)
         summary["claims"] = claim_table
     summary["tables_data"] = written_tables

@@ -37,7 +37,7 @@ from nlcx import config as cfg
 from nlcx import engine
 from nlcx.errors import ConfigError
 from nlcx.thesis import catalog
-from nlcx.thesis.reproduce import thesis_value
+from nlcx.thesis.tables import thesis_value
 from nlcx.tuning.optimise import GASettings, evolve
 from nlcx.validation import validate_model
 
