@@ -1,0 +1,136 @@
+"""The package's structure rules (issue 9): no import cycles, small functions, named offsets.
+
+These read the source with :mod:`ast`; they do not import the package.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "nlcx"
+MAX_FUNCTION_LINES = 80
+#: Packed parameter and state blocks: read through named offsets (nlcx.layout), never ``o + 6``.
+PACKED_ARRAYS = {"p", "cp", "cs", "sp", "ep", "es"}
+
+
+def _modules() -> dict[str, Path]:
+    mods = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        mods[".".join(parts)] = path
+    return mods
+
+
+def _generated(path: Path) -> bool:
+    return "generated" in path.relative_to(PACKAGE).parts
+
+
+def _imports(name: str, path: Path, known: set[str]) -> set[str]:
+    """Every nlcx module ``name`` imports, at module level or inside a function."""
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parent = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(parent + ([node.module] if node.module else []))
+            found.add(base)
+            found.update(f"{base}.{alias.name}" for alias in node.names)
+    return {m for m in found if m in known and m != name}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_cycle_finder_finds_a_cycle() -> None:
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_import_cycles_counting_imports_inside_functions() -> None:
+    mods = _modules()
+    graph = {name: _imports(name, path, set(mods)) for name, path in mods.items()}
+    assert graph["nlcx.engine"], "the import graph must see nlcx's own imports"
+    assert _cycles(graph) == []
+
+
+def test_no_function_longer_than_80_lines() -> None:
+    long = []
+    for path in _modules().values():
+        if _generated(path):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                length = node.end_lineno - node.lineno + 1
+                if length > MAX_FUNCTION_LINES:
+                    long.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno} {node.name} ({length} lines)")
+    assert long == []
+
+
+def _numeric_literals(node: ast.AST) -> list[ast.Constant]:
+    """Numeric constants in ``node``, except inside ``a.shape[...]`` (a size, not an offset)."""
+    if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Attribute) and node.value.attr == "shape":
+        return []
+    if isinstance(node, ast.Constant):
+        return [node] if type(node.value) in (int, float) else []
+    return [hit for child in ast.iter_child_nodes(node) for hit in _numeric_literals(child)]
+
+
+def _bare_offsets(source: str) -> list[str]:
+    """Subscripts of a packed array whose index holds a numeric literal (``cp[row, h + 12]``)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id in PACKED_ARRAYS:
+            if _numeric_literals(node.slice):
+                found.append(f"{node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+def test_offset_checker_flags_a_literal() -> None:
+    source = "v = cp[row, o + 6]\nw = cp[row, o + L.kp]\nz = p[_row(p.shape[0], v)]\n"
+    assert _bare_offsets(source) == ["1: cp[row, o + 6]"]
+
+
+def test_no_bare_numeric_offsets_into_packed_arrays() -> None:
+    found = []
+    for path in _modules().values():
+        if not _generated(path):
+            found += [f"{path.relative_to(PACKAGE.parent)}:{hit}" for hit in _bare_offsets(path.read_text())]
+    assert found == []
