@@ -117,9 +117,9 @@ def _bare_offsets(source: str) -> list[str]:
     """Subscripts of a packed array whose index holds a numeric literal (``cp[row, h + 12]``)."""
     found = []
     for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id in PACKED_ARRAYS:
-            if _numeric_literals(node.slice):
-                found.append(f"{node.lineno}: {ast.unparse(node)}")
+        packed = isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id in PACKED_ARRAYS
+        if packed and _numeric_literals(node.slice):
+            found.append(f"{node.lineno}: {ast.unparse(node)}")
     return found
 
 
