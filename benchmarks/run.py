@@ -84,9 +84,9 @@ def bench_a() -> dict[str, float]:
     start = time.perf_counter()
     exp = config.load(ROOT / "configs" / "xyz_error_ags.yaml")
     prepared = engine.prepare(exp)
-    engine.simulate_runs(prepared)
+    engine.evaluate([prepared], measure=False)
     warmup = time.perf_counter() - start
-    sim = best(lambda: engine.simulate_runs(prepared), 5)
+    sim = best(lambda: engine.evaluate([prepared], measure=False), 5)
     out = Path(tempfile.mkdtemp())
     cmd = [*NLCX, "run", "configs/xyz_error_ags.yaml", "--out", str(out / "a"), "-q"]
     subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True)
@@ -142,9 +142,9 @@ def bench_d() -> dict[str, float]:
     plant = prepared.plant
     proposed = next(c for c in prepared.controllers if c.label == "proposed")
     prepared.controllers = [proposed]
-    engine.simulate_runs(prepared)
-    ours_s = best(lambda: engine.simulate_runs(prepared), 20)
-    (ours,) = engine.simulate_runs(prepared)
+    engine.evaluate([prepared], measure=False)
+    ours_s = best(lambda: engine.evaluate([prepared], measure=False), 20)
+    (ours,) = engine.evaluate([prepared], measure=False)[0].runs
 
     # the same closed loop as a continuous ODE: plant states + one integrator per loop
     loops = exp.controllers[1].config.loops

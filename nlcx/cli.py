@@ -269,8 +269,8 @@ def calibrate(
     write: Annotated[bool, typer.Option("--write", help="Write the fitted values into the spec's write.file.")] = False,
 ) -> None:
     """Fit unprinted numbers (e.g. the conventional gains) to a thesis table with the seeded GA."""
-    from nlcx.tuning.calibrate import calibrate as run_calibration
-    from nlcx.tuning.calibrate import load_spec, write_back
+    from nlcx.thesis.calibrate import calibrate as run_calibration
+    from nlcx.thesis.calibrate import load_spec, write_back
 
     _imported()
 

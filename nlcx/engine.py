@@ -1,16 +1,21 @@
-"""From a validated experiment to closed-loop trajectories and metrics.
+"""From validated experiments to closed-loop trajectories and metrics: the one pipeline.
 
-The engine assembles the numeric arrays the compiled kernel (:mod:`nlcx.kernel`) reads,
-runs every controller of the experiment through it (controllers sharing a step function go
-through one batched call) and measures the results (:mod:`nlcx.metrics`).
+:func:`evaluate` takes experiments (or prepared ones) through prepare -> simulate ->
+measure. It assembles the numeric arrays the compiled kernel (:mod:`nlcx.kernel`) reads,
+runs every closed loop of every experiment on one time grid through it (loops sharing
+their equations and controller step go through one batched call) and measures all runs
+together (:mod:`nlcx.metrics`). ``nlcx run``, sweeps, the calibration, the reproduction and
+the tuners (through :class:`LoopSimulator`) all use it.
 """
 
 from __future__ import annotations
 
+import copy
 import functools
 import json
 import math
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,7 +24,7 @@ import pandas as pd
 
 from nlcx import metrics as m
 from nlcx import registry
-from nlcx.config import Experiment, MetricsSection, controller_section
+from nlcx.config import Experiment, MetricsSection, build, controller_section
 from nlcx.controllers.base import ControllerInstance
 from nlcx.errors import ConfigError
 from nlcx.kernel.abi import ELEMENT_ENTRY, HOOKS, STATUS_BOUND, STATUS_NONFINITE, callback_slots, element_slots
@@ -132,6 +137,21 @@ def _reference_models(exp: Experiment, plant: Plant) -> dict[str, tuple[Any, Any
     return refs
 
 
+def _tuned_section(exp: Experiment, c: Any, plant: Plant, rows: list[dict[str, Any]]) -> Any:
+    """The controller section of ``c`` after its tuners (in order) filled in its numbers."""
+    if not c.tuners:
+        return c
+    path = f"controllers.{c.label}"
+    ctx = TuneContext(
+        plant=plant, label=c.label, path=path, dt=exp.section.simulation.dt, simulate=LoopSimulator(exp.raw)
+    )
+    data = c.config.model_dump()
+    for tuner in c.tuners:
+        data = tuner.model.tune(data, tuner.config, ctx)
+    rows += ctx.rows
+    return controller_section(c.label, data, path)
+
+
 def prepare(exp: Experiment) -> Prepared:
     """Build the plant, controllers, references and perturbations of ``exp``."""
     sec = exp.section
@@ -140,16 +160,8 @@ def prepare(exp: Experiment) -> Prepared:
     tuning: list[dict[str, Any]] = []
     controllers = []
     for c in exp.controllers:
-        path = f"controllers.{c.label}"
-        section = c
-        if c.tuners:
-            ctx = TuneContext(experiment=exp, plant=plant, label=c.label, path=path)
-            data = c.config.model_dump()
-            for tuner in c.tuners:
-                data = tuner.model.tune(data, tuner.config, ctx)
-            section = controller_section(c.label, data, path)
-            tuning += ctx.rows
-        controllers.append(section.model.build(c.label, section.config, plant, path, dt=sim.dt))
+        section = _tuned_section(exp, c, plant, tuning)
+        controllers.append(section.model.build(c.label, section.config, plant, f"controllers.{c.label}", dt=sim.dt))
     grid = time_grid(sim.t_end, sim.dt, sim.integrator)
     seed_sequence = np.random.SeedSequence(sec.seed)
     children = seed_sequence.spawn(max(1, len(exp.uncertainties)))
@@ -368,11 +380,6 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_lo
     return [r for r in runs if r is not None]
 
 
-def simulate_runs(prepared: Prepared) -> list[Run]:
-    """Integrate every controller of the experiment (one kernel call per controller kind)."""
-    return simulate_items(items_of(prepared), prepared.grid, prepared.experiment.section.simulation.integrator)
-
-
 METRIC_COLUMNS = ["controller", "signal", "metric", "value", "unit", "status", "note"]
 
 
@@ -426,13 +433,6 @@ def _outputs(xs: list[np.ndarray], c_row: np.ndarray) -> np.ndarray:
     return np.stack([x @ c_row for x in xs])
 
 
-def measure(prepared: Prepared, runs: list[Run]) -> pd.DataFrame:
-    """Long-form metrics of every run of one experiment (columns METRIC_COLUMNS)."""
-    plans = {s: model.metric_plan(cfg) for s, (model, cfg) in prepared.references.items()}
-    table = measure_runs(prepared.plant, runs, [plans] * len(runs), prepared.experiment.section.metrics)
-    return table.drop(columns="run")
-
-
 def measure_runs(
     plant: Plant, runs: list[Run], plans: list[dict[str, MetricPlan]], cfg: MetricsSection
 ) -> pd.DataFrame:
@@ -482,26 +482,117 @@ def measure_runs(
     return pd.DataFrame(rows, columns=["run", *METRIC_COLUMNS])
 
 
-def run_experiment(exp: Experiment) -> Result:
-    """Prepare, simulate and measure ``exp``; timings in seconds."""
-    timings: dict[str, float] = {}
-    start = time.perf_counter()
-    prepared = prepare(exp)
-    timings["prepare"] = time.perf_counter() - start
-    start = time.perf_counter()
-    runs = simulate_runs(prepared)
-    timings["simulate"] = time.perf_counter() - start
-    for run in runs:
-        c = run.controller
-        prepared.tuning += [
-            {"controller": c.label, "tuner": "controller", "parameter": k, "value": v} for k, v in c.records.items()
-        ]
-        prepared.tuning += [
+def _controller_records(run: Run) -> list[dict[str, Any]]:
+    """tuning.csv rows a controller reports itself: its records and its logs' final values."""
+    c = run.controller
+    rows = [{"controller": c.label, "tuner": "controller", "parameter": k, "value": v} for k, v in c.records.items()]
+    if run.log is not None:
+        rows += [
             {"controller": c.label, "tuner": "controller", "parameter": f"{name}.final",
              "value": float(run.log[-1, c.log_names.index(name)])}
             for name in c.final_logs
         ]  # fmt: skip
+    return rows
+
+
+def _metric_plans(prepared: Prepared) -> dict[str, MetricPlan]:
+    return {s: model.metric_plan(cfg) for s, (model, cfg) in prepared.references.items()}
+
+
+def _measure_all(prepared: list[Prepared], runs: list[list[Run]]) -> list[pd.DataFrame]:
+    """Metrics of every experiment's runs; experiments with the same plant signals and metric
+    definitions are measured together (vectorised over all their runs)."""
+    groups: dict[tuple[Any, ...], list[int]] = {}
+    for e, p in enumerate(prepared):
+        plant = p.plant
+        key = (
+            plant.name,
+            tuple(plant.output_names),
+            tuple(plant.input_names),
+            p.experiment.section.metrics.model_dump_json(),
+        )
+        groups.setdefault(key, []).append(e)
+    tables: list[pd.DataFrame] = [pd.DataFrame(columns=METRIC_COLUMNS)] * len(prepared)
+    for members in groups.values():
+        owner = [e for e in members for _ in runs[e]]
+        flat = [r for e in members for r in runs[e]]
+        plans = [_metric_plans(prepared[e]) for e in owner]
+        first = prepared[members[0]]
+        table = measure_runs(first.plant, flat, plans, first.experiment.section.metrics)
+        of = np.asarray(owner)[table["run"].to_numpy(dtype=int)] if len(table) else np.zeros(0, dtype=int)
+        for e in members:
+            tables[e] = table[of == e].drop(columns="run").reset_index(drop=True)
+    return tables
+
+
+def evaluate(
+    experiments: Sequence[Experiment | Prepared], record_logs: bool = True, measure: bool = True
+) -> list[Result]:
+    """The pipeline: experiments (or prepared ones) to trajectories and metrics, batched.
+
+    Every closed loop of every experiment on the same time grid goes through the kernel
+    together (:func:`simulate_items`), and the runs are measured together (:func:`measure_runs`).
+    ``nlcx run``, sweeps, tuners (through :class:`LoopSimulator`), the calibration and the
+    thesis reproduction all come through here. ``record_logs=False`` skips controller logs and
+    friction forces; ``measure=False`` leaves the metrics empty (a tuner scoring runs itself).
+    Timings are per experiment; a shared kernel call is split evenly between its experiments.
+    """
+    prepared, timings = [], []
+    for exp in experiments:
+        start = time.perf_counter()
+        prepared.append(exp if isinstance(exp, Prepared) else prepare(exp))
+        timings.append({"prepare": time.perf_counter() - start})
+    runs: list[list[Run]] = [[] for _ in prepared]
+    grids: dict[tuple[Any, ...], list[int]] = {}
+    for e, p in enumerate(prepared):
+        sim = p.experiment.section.simulation
+        grids.setdefault((sim.dt, p.grid.n_steps, sim.integrator), []).append(e)
+    for (_, _, integrator), members in grids.items():
+        start = time.perf_counter()
+        items = [(e, item) for e in members for item in items_of(prepared[e])]
+        done = simulate_items([item for _, item in items], prepared[members[0]].grid, integrator, record_logs)
+        for (e, _), run in zip(items, done, strict=True):
+            runs[e].append(run)
+        for e in members:
+            timings[e]["simulate"] = (time.perf_counter() - start) / len(members)
     start = time.perf_counter()
-    table = measure(prepared, runs)
-    timings["metrics"] = time.perf_counter() - start
-    return Result(prepared=prepared, runs=runs, metrics=table, timings=timings)
+    tables = _measure_all(prepared, runs) if measure else [pd.DataFrame(columns=METRIC_COLUMNS)] * len(prepared)
+    results = []
+    for p, rs, table, timing in zip(prepared, runs, tables, timings, strict=True):
+        timing["metrics"] = (time.perf_counter() - start) / len(prepared)
+        p.tuning = [*p.tuning, *(row for run in rs for row in _controller_records(run))]
+        results.append(Result(prepared=p, runs=rs, metrics=table, timings=timing))
+    return results
+
+
+def run_experiment(exp: Experiment) -> Result:
+    """Prepare, simulate and measure one experiment (:func:`evaluate` of one); timings in seconds."""
+    return evaluate([exp])[0]
+
+
+@dataclass(frozen=True)
+class LoopSimulator:
+    """An experiment's plant, references and uncertainties under other controllers: what a
+    tuner simulates (:attr:`nlcx.tuning.base.TuneContext.simulate`). Picklable, so a tuner can
+    hand it to a process pool.
+
+    ``controllers`` maps labels to controller configurations (their ``tune`` lists are
+    dropped); ``simulation`` updates keys of the simulation section; ``uncertainty``, when
+    given, replaces the uncertainty section (``{}``: the nominal plant).
+    """
+
+    raw: dict[str, Any]
+
+    def __call__(
+        self,
+        controllers: Mapping[str, Mapping[str, Any]],
+        simulation: Mapping[str, Any] | None = None,
+        uncertainty: Mapping[str, Any] | None = None,
+        measure: bool = True,
+    ) -> Result:
+        raw = copy.deepcopy(self.raw)
+        raw["controllers"] = {label: {k: v for k, v in c.items() if k != "tune"} for label, c in controllers.items()}
+        raw.setdefault("simulation", {}).update(simulation or {})
+        if uncertainty is not None:
+            raw["uncertainty"] = dict(uncertainty)
+        return evaluate([build(raw)], measure=measure)[0]

@@ -244,44 +244,20 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
             row.update(status="failed", message=str(exc).splitlines()[0])
         row["wall_s"] = time.perf_counter() - start
         rows.append(row)
-    # variants on the same time grid go through the kernel together
-    grids: dict[tuple[Any, ...], list[int]] = {}
-    for pos, prepared in prepared_of.items():
-        sim = prepared.experiment.section.simulation
-        grids.setdefault((sim.dt, prepared.grid.n_steps, sim.integrator), []).append(pos)
+    # one pipeline call: variants on the same time grid go through the kernel together
+    members = list(prepared_of)
+    results = engine.evaluate([prepared_of[pos] for pos in members], record_logs=batch.timeseries)
     frames = []
-    for (_, _, integrator), members in grids.items():
-        start = time.perf_counter()
-        items, owner = [], []
-        for pos in members:
-            new = engine.items_of(prepared_of[pos])
-            items += new
-            owner += [pos] * len(new)
-        runs = engine.simulate_items(items, prepared_of[members[0]].grid, integrator, record_logs=batch.timeseries)
-        plants: dict[tuple[Any, ...], list[int]] = {}
-        for k, pos in enumerate(owner):
-            plant = prepared_of[pos].plant
-            plants.setdefault((plant.name, tuple(plant.output_names), tuple(plant.input_names)), []).append(k)
-        for ks in plants.values():
-            first = prepared_of[owner[ks[0]]]
-            plans = [
-                {s: model.metric_plan(c) for s, (model, c) in prepared_of[owner[k]].references.items()} for k in ks
-            ]
-            table = engine.measure_runs(first.plant, [runs[k] for k in ks], plans, first.experiment.section.metrics)
-            table.insert(0, "variant", [batch.variants[owner[ks[r]]].index for r in table["run"]])
-            frames.append(table.drop(columns="run"))
-        share = (time.perf_counter() - start) / len(members)
-        for k, pos in enumerate(owner):
-            row = rows[pos]
-            if runs[k].status != "ok" and row["status"] == "ok":
-                row.update(status="unstable", message=f"{runs[k].label}: {runs[k].reason}")
-        for pos in members:
-            rows[pos]["wall_s"] += share
-            if batch.timeseries:
-                mine = [runs[k] for k, o in enumerate(owner) if o == pos]
-                result = engine.Result(prepared_of[pos], mine, pd.DataFrame())
-                name = f"variant_{batch.variants[pos].index:06d}.csv"
-                report.write_csv(batch.out_dir / "timeseries" / name, report.timeseries_frame(result))
+    for pos, result in zip(members, results, strict=True):
+        row = rows[pos]
+        row["wall_s"] += result.timings["simulate"] + result.timings["metrics"]
+        unstable = [run for run in result.runs if run.status != "ok"]
+        if unstable:
+            row.update(status="unstable", message=f"{unstable[0].label}: {unstable[0].reason}")
+        frames.append(result.metrics.assign(variant=batch.variants[pos].index)[["variant", *engine.METRIC_COLUMNS]])
+        if batch.timeseries:
+            name = f"variant_{batch.variants[pos].index:06d}.csv"
+            report.write_csv(batch.out_dir / "timeseries" / name, report.timeseries_frame(result))
     columns = ["variant", *engine.METRIC_COLUMNS]
     metrics = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=columns)
     digest = hashlib.sha256("".join(batch.hashes).encode()).hexdigest()[:10]

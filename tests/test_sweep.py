@@ -89,14 +89,14 @@ def test_batch_equals_single_runs_bit_for_bit(tmp_path: Path) -> None:
     batched = engine.simulate_items(items, prepared[0].grid, "rk4")
     assert len(batched) == 2 * len(variants)
     for k, p in enumerate(prepared):
-        alone = engine.simulate_runs(p)
+        alone = engine.evaluate([p], measure=False)[0].runs
         for j, run in enumerate(alone):
             other = batched[2 * k + j]
             assert np.array_equal(run.x, other.x) and np.array_equal(run.u, other.u) and run.status == other.status
     # and the metrics a sweep batch computes (vectorised over variants) equal single runs'
     result = sweep.run_batch(sweep.Batch(base_raw, variants, hashes, tmp_path / "b", False))
     for k in (0, 7, 11):
-        single = engine.measure(prepared[k], engine.simulate_runs(prepared[k]))
+        single = engine.evaluate([prepared[k]])[0].metrics
         mine = result.metrics[result.metrics.variant == k].drop(columns="variant").reset_index(drop=True)
         assert list(mine.metric) == list(single.metric)
         assert np.array_equal(mine.value.to_numpy(), single.value.to_numpy(), equal_nan=True)

@@ -20,7 +20,7 @@ import numpy as np
 from pydantic import Field
 
 from nlcx.errors import ConfigError
-from nlcx.tuning.base import TuneContext, TunerConfig, TunerModel, simulate_alone, single_loop
+from nlcx.tuning.base import TuneContext, TunerConfig, TunerModel, single_loop
 
 
 class AnfisTunerConfig(TunerConfig):
@@ -51,7 +51,8 @@ class AnfisTuner(TunerModel):
         if zn is None:
             raise ConfigError(f"{ctx.path}.tune", "anfis", "needs a ziegler_nichols tuner before it in the tune list")
         zn_loop = {**loop, "schedule": {"kind": "constant", "kp": zn["kp"], "ki": zn["ki"], "kd": zn["kd"]}}
-        run, plant = simulate_alone(ctx.experiment, ctx.label, {**controller, "loops": {key: zn_loop}})
+        zn_run = ctx.simulate({ctx.label: {**controller, "loops": {key: zn_loop}}}, measure=False)
+        run, plant = zn_run.runs[0], zn_run.prepared.plant
         signal = loop.get("signal") or key
         y = run.x @ plant.C[plant.output_names.index(signal)]
         e = run.r[:, run.controller.reference_signals.index(signal)] - y

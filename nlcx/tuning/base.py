@@ -12,16 +12,23 @@ Each tuner receives the controller's configuration (a plain mapping), returns th
 mapping and the rows it wants recorded in the run's ``tuning.csv`` (controller, tuner,
 parameter, value). Tuners can leave results for the next tuner in ``TuneContext.shared``
 (the Ziegler-Nichols gains, for instance, that the fuzzy ranges and the ANFIS teacher use).
+
+A tuner that needs to simulate calls ``TuneContext.simulate`` (the engine's
+:class:`~nlcx.engine.LoopSimulator`): the experiment's plant, references and uncertainties
+under the controllers it passes, through the same batched pipeline as ``nlcx run``. Tuners
+import neither the engine nor the config loader.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol
 
 from pydantic import BaseModel, ConfigDict
 
 from nlcx.errors import ConfigError
+from nlcx.plants.base import Plant
 
 
 class TunerConfig(BaseModel):
@@ -29,14 +36,29 @@ class TunerConfig(BaseModel):
     kind: str
 
 
+class Simulate(Protocol):
+    """Simulate the experiment under ``controllers`` (label -> configuration); returns a result
+    with ``runs`` (one per controller, in order), ``prepared.plant`` and ``metrics``."""
+
+    def __call__(
+        self,
+        controllers: Mapping[str, Mapping[str, Any]],
+        simulation: Mapping[str, Any] | None = None,
+        uncertainty: Mapping[str, Any] | None = None,
+        measure: bool = True,
+    ) -> Any: ...
+
+
 @dataclass
 class TuneContext:
-    """What a tuner may use: the experiment, the built plant, and the results of earlier tuners."""
+    """What a tuner may use: the built plant, the simulation step, a way to simulate the
+    experiment under other controllers, and the results of earlier tuners."""
 
-    experiment: Any
-    plant: Any
+    plant: Plant
     label: str
     path: str
+    dt: float
+    simulate: Simulate
     shared: dict[str, Any] = field(default_factory=dict)
     rows: list[dict[str, Any]] = field(default_factory=list)
 
@@ -62,20 +84,3 @@ def single_loop(controller: dict[str, Any], ctx: TuneContext, tuner: str) -> tup
         raise ConfigError(f"{ctx.path}.loops", list(loops), f"the {tuner} tuner needs exactly one loop (a SISO PID)")
     key = next(iter(loops))
     return key, loops[key]
-
-
-def simulate_alone(experiment: Any, label: str, controller: dict[str, Any], **simulation: Any) -> tuple[Any, Any]:
-    """(run, plant): the experiment with only ``controller`` (no tuners), e.g. the ZN loop.
-
-    ``simulation`` overrides keys of the simulation section (t_end, ...).
-    """
-    import copy
-
-    from nlcx import config as cfg
-    from nlcx import engine
-
-    raw = copy.deepcopy(experiment.raw)
-    raw["controllers"] = {label: {k: v for k, v in controller.items() if k != "tune"}}
-    raw.setdefault("simulation", {}).update(simulation)
-    result = engine.run_experiment(cfg.build(raw))
-    return result.runs[0], result.prepared.plant

@@ -8,14 +8,13 @@ result serial or parallel.
 
 from __future__ import annotations
 
-import copy
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Literal
 
 import numpy as np
 from pydantic import Field, field_validator
 
-from nlcx.tuning.base import TuneContext, TunerConfig, TunerModel, single_loop
+from nlcx.tuning.base import Simulate, TuneContext, TunerConfig, TunerModel, single_loop
 from nlcx.tuning.optimise import GASettings, evolve
 
 PENALTY = 1e6
@@ -44,16 +43,13 @@ class GATunerConfig(TunerConfig):
 
 
 class ISEObjective:
-    """ISE of a batch of (k_p, k_i, k_d) candidates; picklable for a process pool."""
+    """ISE of a batch of (k_p, k_i, k_d) candidates, simulated together in one call of the
+    tuner's ``simulate`` (picklable when it is, as the engine's is, for a process pool)."""
 
-    def __init__(self, raw: dict[str, Any], label: str, key: str, controller: dict[str, Any]) -> None:
-        self.raw = copy.deepcopy(raw)
-        base = {k: v for k, v in controller.items() if k != "tune"}
-        self.raw["controllers"] = {label: base}
-        self.label = label
+    def __init__(self, simulate: Simulate, key: str, controller: dict[str, Any]) -> None:
+        self.simulate = simulate
         self.key = key
-        self.controller = base
-        self._prepared: Any = None
+        self.controller = {k: v for k, v in controller.items() if k != "tune"}
 
     def _candidate(self, x: np.ndarray) -> dict[str, Any]:
         loop = self.controller["loops"][self.key]
@@ -61,30 +57,17 @@ class ISEObjective:
         return {**self.controller, "loops": {self.key: {**loop, "schedule": schedule}}}
 
     def __call__(self, X: np.ndarray) -> np.ndarray:
-        from nlcx import config as cfg
-        from nlcx import engine
-
         X = np.atleast_2d(X)
-        if self._prepared is None:
-            raw = copy.deepcopy(self.raw)
-            raw["controllers"] = {self.label: self._candidate(X[0])}
-            self._prepared = engine.prepare(cfg.build(raw))
-        prepared = self._prepared
-        controllers = []
-        for i, x in enumerate(X):
-            section = cfg.controller_section(f"c{i}", self._candidate(x), f"controllers.{self.label}")
-            controllers.append(section.model.build(f"c{i}", section.config, prepared.plant, section.label))
-        batch = copy.copy(prepared)
-        batch.controllers = controllers
-        runs = engine.simulate_runs(batch)
-        signal = controllers[0].reference_signals.index(_signal(self.controller, self.key))
-        j = prepared.plant.output_names.index(_signal(self.controller, self.key))
+        result = self.simulate({f"c{i}": self._candidate(x) for i, x in enumerate(X)}, measure=False)
+        plant = result.prepared.plant
+        name = _signal(self.controller, self.key)
+        j = plant.output_names.index(name)
         out = np.empty(len(X))
-        for i, run in enumerate(runs):
+        for i, run in enumerate(result.runs):
             if run.status != "ok":
                 out[i] = PENALTY
                 continue
-            e = run.r[:, signal] - run.x @ prepared.plant.C[j]
+            e = run.r[:, run.controller.reference_signals.index(name)] - run.x @ plant.C[j]
             with np.errstate(over="ignore", invalid="ignore"):
                 ise = float(np.sum(0.5 * (e[1:] ** 2 + e[:-1] ** 2) * np.diff(run.t)))
             out[i] = ise if np.isfinite(ise) else PENALTY
@@ -102,7 +85,7 @@ class GATuner(TunerModel):
 
     def tune(self, controller: dict[str, Any], cfg: GATunerConfig, ctx: TuneContext) -> dict[str, Any]:
         key, loop = single_loop(controller, ctx, "ga")
-        objective = ISEObjective(ctx.experiment.raw, ctx.label, key, controller)
+        objective = ISEObjective(ctx.simulate, key, controller)
         lower = np.array([cfg.bounds[g][0] for g in ("kp", "ki", "kd")])
         upper = np.array([cfg.bounds[g][1] for g in ("kp", "ki", "kd")])
         if cfg.jobs > 1:

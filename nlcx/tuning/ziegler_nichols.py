@@ -72,24 +72,19 @@ def zn_gains(ku: float, tu: float, rule: str) -> tuple[float, float, float]:
     return kp, ki, kd
 
 
-def oscillation_at(experiment: Any, label: str, gain: float, periods: float, tu: float) -> tuple[float, float]:
-    """(period, amplitude ratio last/first) of the P loop at ``gain``, simulated."""
-    from nlcx import config as cfg
-    from nlcx import engine
+def p_loop(controller: dict[str, Any], key: str, gain: float) -> dict[str, Any]:
+    """The P-only loop at ``gain`` of a SISO PID (its feed-forward and bias kept)."""
+    loop = {**controller["loops"][key], "schedule": {"kind": "constant", "kp": gain}}
+    keep = {k: controller[k] for k in ("feedforward", "bias") if k in controller}
+    return {"kind": "pid", "loops": {key: loop}, **keep}
 
-    raw = cfg.deep_merge(experiment.raw, {})
-    controller = raw["controllers"][label]
-    key = next(iter(controller["loops"]))
-    raw["controllers"] = {
-        "p": {"kind": "pid", "loops": {key: {**controller["loops"][key], "schedule": {"kind": "constant", "kp": gain}}}}
-    }
-    for k in ("feedforward", "bias"):
-        if k in controller:
-            raw["controllers"]["p"][k] = controller[k]
-    raw["uncertainty"] = {}
-    dt = raw.get("simulation", {}).get("dt", 1e-3)
-    raw.setdefault("simulation", {})["t_end"] = round(periods * tu / dt) * dt
-    result = engine.run_experiment(cfg.build(raw))
+
+def oscillation_at(ctx: TuneContext, p_controller: dict[str, Any], periods: float, tu: float) -> tuple[float, float]:
+    """(period, amplitude ratio last/first) of the nominal P loop ``p_controller``, simulated
+    for ``periods`` periods T_u."""
+    result = ctx.simulate(
+        {"p": p_controller}, simulation={"t_end": round(periods * tu / ctx.dt) * ctx.dt}, uncertainty={}, measure=False
+    )
     (run,) = result.runs
     y = (run.x @ result.prepared.plant.C.T)[:, 0]
     settle = y - np.mean(y[run.t > run.t[-1] - 2 * tu])
@@ -115,7 +110,7 @@ class ZieglerNichols(TunerModel):
         for name, value in (("Ku", ku), ("Tu", tu), ("kp", kp), ("ki", ki), ("kd", kd)):
             ctx.record("ziegler_nichols", name, value)
         if cfg.verify:
-            period, ratio = oscillation_at(ctx.experiment, ctx.label, ku, cfg.verify_periods, tu)
+            period, ratio = oscillation_at(ctx, p_loop(controller, key, ku), cfg.verify_periods, tu)
             ctx.record("ziegler_nichols", "Tu_simulated", period)
             ctx.record("ziegler_nichols", "amplitude_ratio_at_Ku", ratio)
         schedule = dict(loop.get("schedule") or {"kind": "constant"})

@@ -20,7 +20,6 @@ generation is simulated in one batched kernel call.
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 import time
@@ -101,29 +100,22 @@ class Objective:
         self.spec = spec
         self.keys = list(spec.parameters)
         self.cells = target_cells(spec.target)
-        self._prepared: engine.Prepared | None = None
 
     def candidate_config(self, x: np.ndarray) -> dict[str, Any]:
         overrides = [f"{k}={float(v)!r}" for k, v in zip(self.keys, x, strict=True)]
         return cfg.interpolate(cfg.apply_overrides(self.base_raw, overrides))
 
+    def candidate_experiment(self, x: np.ndarray, label: str) -> cfg.Experiment:
+        """The candidate's experiment with only the fitted controller, labelled ``label``."""
+        raw = self.candidate_config(x)
+        raw["controllers"] = {label: raw["controllers"][self.spec.controller]}
+        return cfg.build(raw)
+
     def measure(self, X: np.ndarray) -> pd.DataFrame:
-        """Metrics of every candidate, labelled c0, c1, ..."""
-        controllers = []
-        prepared = None
-        for i, x in enumerate(np.atleast_2d(X)):
-            exp = cfg.build(self.candidate_config(x))
-            if prepared is None:
-                prepared = self._prepared or engine.prepare(exp)
-                self._prepared = prepared
-            section = next(c for c in exp.controllers if c.label == self.spec.controller)
-            controllers.append(section.model.build(f"c{i}", section.config, prepared.plant, section.label))
-        assert prepared is not None
-        batch = copy.copy(prepared)
-        batch.controllers = controllers
-        runs = engine.simulate_runs(batch)
-        table = engine.measure(batch, runs)
-        status = {run.label: run.status for run in runs}
+        """Metrics of every candidate, labelled c0, c1, ... (one batched pipeline call)."""
+        results = engine.evaluate([self.candidate_experiment(x, f"c{i}") for i, x in enumerate(np.atleast_2d(X))])
+        table = pd.concat([r.metrics for r in results], ignore_index=True)
+        status = {run.label: run.status for r in results for run in r.runs}
         table["run_status"] = table.controller.map(status)
         return table
 
