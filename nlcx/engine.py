@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from nlcx import metrics as m
-from nlcx import registry
+from nlcx import preflight, registry
 from nlcx.config import Experiment, MetricsSection, build, controller_section
 from nlcx.controllers.base import ControllerInstance
 from nlcx.errors import ConfigError
@@ -152,16 +152,38 @@ def _tuned_section(exp: Experiment, c: Any, plant: Plant, rows: list[dict[str, A
     return controller_section(c.label, data, path)
 
 
+def _check_memory(exp: Experiment, plant: Plant, channels: list[int], copies: int = 1) -> None:
+    """Stop before allocating when the run's arrays would not fit in memory (one line)."""
+    sim = exp.section.simulation
+    n_samples = preflight.samples(sim.t_end, sim.dt)
+    needed = preflight.run_bytes(n_samples, len(TABLEAUS[sim.integrator][1]), plant, channels, copies)
+    advice = f"{n_samples:.3g} samples of dt = {sim.dt} s: shorten simulation.t_end or raise simulation.dt"
+    preflight.check_memory(needed, "simulation.t_end", sim.t_end, advice)
+
+
+def check_sweep_memory(exp: Experiment, copies: int) -> None:
+    """The memory check of a sweep's ``copies`` concurrent variants of ``exp`` (no logs kept):
+    states, inputs and every output and input as a reference channel per controller."""
+    sec = exp.section
+    plant = exp.plant_model.build(sec.plant.name, exp.plant_params, sec.plant.x0, sec.simulation.bounds)
+    channels = [len(plant.outputs) + len(plant.inputs)] * len(exp.controllers)
+    _check_memory(exp, plant, channels, copies)
+
+
 def prepare(exp: Experiment) -> Prepared:
     """Build the plant, controllers, references and perturbations of ``exp``."""
     sec = exp.section
     sim = sec.simulation
     plant = exp.plant_model.build(sec.plant.name, exp.plant_params, sec.plant.x0, sim.bounds)
+    preflight.check_signal_names(plant)
+    references = _reference_models(exp, plant)
     tuning: list[dict[str, Any]] = []
     controllers = []
     for c in exp.controllers:
         section = _tuned_section(exp, c, plant, tuning)
         controllers.append(section.model.build(c.label, section.config, plant, f"controllers.{c.label}", dt=sim.dt))
+    preflight.check_references(exp.references, exp.references, plant, controllers)
+    _check_memory(exp, plant, [len(c.reference_signals) + len(c.log_names) for c in controllers])
     grid = time_grid(sim.t_end, sim.dt, sim.integrator)
     seed_sequence = np.random.SeedSequence(sec.seed)
     children = seed_sequence.spawn(max(1, len(exp.uncertainties)))
@@ -174,7 +196,7 @@ def prepare(exp: Experiment) -> Prepared:
         plant=plant,
         controllers=controllers,
         tuning=tuning,
-        references=_reference_models(exp, plant),
+        references=references,
         grid=grid,
         hooks=hooks,
         seed_sequence=seed_sequence,
@@ -433,52 +455,114 @@ def _outputs(xs: list[np.ndarray], c_row: np.ndarray) -> np.ndarray:
     return np.stack([x @ c_row for x in xs])
 
 
+def _measured_outputs(run: Run, plant: Plant) -> list[str]:
+    """Outputs of ``run`` that follow a reference (measured against it)."""
+    return [s for s in dict.fromkeys(run.controller.reference_signals) if s in plant.output_names]
+
+
+def _input_step(run: Run, plant: Plant, plans: dict[str, MetricPlan]) -> MetricPlan | None:
+    """The earliest step on an input the controller applies (an open-loop step test), if any."""
+    steps = [plans[s] for s in run.controller.reference_signals if s in plant.input_names and plans[s].kind == "step"]
+    return min(steps, key=lambda plan: plan.t_step) if steps else None
+
+
+def _tracking_values(
+    plant: Plant, runs: list[Run], plans: list[dict[str, MetricPlan]], ok: list[int], cfg: MetricsSection
+) -> dict[tuple[int, str], dict[str, float]]:
+    """Metrics of each output that follows a reference, batched over runs sharing its plan."""
+    groups: dict[tuple[str, MetricPlan, int], list[int]] = {}
+    for i in ok:
+        for s in _measured_outputs(runs[i], plant):
+            groups.setdefault((s, plans[i][s], runs[i].t.size), []).append(i)
+    values: dict[tuple[int, str], dict[str, float]] = {}
+    for (s, plan, _), members in groups.items():
+        j = plant.output_names.index(s)
+        y = _outputs([runs[i].x for i in members], plant.C[j])
+        r = np.stack([runs[i].r[:, runs[i].controller.reference_signals.index(s)] for i in members])
+        batch = _signal_metrics(runs[members[0]].t, y, r, plan, cfg)
+        values.update({(i, s): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)})
+    return values
+
+
+def _open_loop_values(
+    plant: Plant, runs: list[Run], plans: list[dict[str, MetricPlan]], ok: list[int], cfg: MetricsSection
+) -> dict[tuple[int, str], dict[str, float]]:
+    """Step characteristics (:func:`nlcx.metrics.step_info`, MATLAB's ``stepinfo``) of every
+    output not following a reference, after a step on an input, against its own final value."""
+    groups: dict[tuple[str, float, int], list[int]] = {}
+    for i in ok:
+        step = _input_step(runs[i], plant, plans[i])
+        if step is None:
+            continue
+        followed = _measured_outputs(runs[i], plant)
+        for s in plant.output_names:
+            if s not in followed:
+                groups.setdefault((s, step.t_step, runs[i].t.size), []).append(i)
+    values: dict[tuple[int, str], dict[str, float]] = {}
+    for (s, t_step, _), members in groups.items():
+        y = _outputs([runs[i].x for i in members], plant.C[plant.output_names.index(s)])
+        batch = m.step_info(
+            runs[members[0]].t, y, t_step=t_step, settling_band=cfg.settling_band, rise_limits=tuple(cfg.rise_limits)
+        )
+        values.update({(i, s): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)})
+    return values
+
+
+def _input_values(plant: Plant, runs: list[Run], ok: list[int]) -> dict[tuple[int, str], dict[str, float]]:
+    """Effort metrics of every input, batched over runs of the same length."""
+    by_length: dict[int, list[int]] = {}
+    for i in ok:
+        by_length.setdefault(runs[i].t.size, []).append(i)
+    values: dict[tuple[int, str], dict[str, float]] = {}
+    for members in by_length.values():
+        t = runs[members[0]].t
+        for j, name in enumerate(plant.input_names):
+            batch = m.input_metrics(t, np.stack([runs[i].u[:, j] for i in members]))
+            values.update(
+                {(i, name): {metric: float(v[k]) for metric, v in batch.items()} for k, i in enumerate(members)}
+            )
+    return values
+
+
+def _metric_unit(name: str, signal_unit: str) -> str:
+    return _unit(m.METRIC_UNITS.get(name) or m.STEP_INFO_UNITS.get(name, ""), signal_unit)
+
+
 def measure_runs(
     plant: Plant, runs: list[Run], plans: list[dict[str, MetricPlan]], cfg: MetricsSection
 ) -> pd.DataFrame:
     """Long-form metrics of runs on plants with ``plant``'s outputs and inputs.
 
-    The metrics of runs that completed are computed together, vectorised over the runs
-    that share a reference plan (a sweep measures thousands of runs in a few calls). The
-    first column, ``run``, is the position of the row's run in ``runs``.
+    Outputs that follow a reference get the step / regulation / tracking metrics of their
+    plan; with a step on an input the controller applies (``open_loop``), every other output
+    gets its step characteristics against its own final value; every input gets its effort.
+    The metrics of runs that completed are computed together, vectorised over the runs that
+    share a plan (a sweep measures thousands of runs in a few calls). The first column,
+    ``run``, is the position of the row's run in ``runs``.
     """
     ok = [i for i, r in enumerate(runs) if r.status == "ok"]
-    values: dict[tuple[int, str], dict[str, Any]] = {}
-    groups: dict[tuple[str, MetricPlan, int], list[int]] = {}
-    for i in ok:
-        for s in dict.fromkeys(runs[i].controller.reference_signals):
-            if s in plant.output_names:
-                groups.setdefault((s, plans[i][s], runs[i].t.size), []).append(i)
-    for (s, plan, _), members in groups.items():
-        j = plant.output_names.index(s)
-        t = runs[members[0]].t
-        y = _outputs([runs[i].x for i in members], plant.C[j])
-        r = np.stack([runs[i].r[:, runs[i].controller.reference_signals.index(s)] for i in members])
-        batch = _signal_metrics(t, y, r, plan, cfg)
-        for k, i in enumerate(members):
-            values[(i, s)] = {name: float(v[k]) for name, v in batch.items()}
-    by_length: dict[int, list[int]] = {}
-    for i in ok:
-        by_length.setdefault(runs[i].t.size, []).append(i)
-    for members in by_length.values():
-        t = runs[members[0]].t
-        for j, name in enumerate(plant.input_names):
-            batch = m.input_metrics(t, np.stack([runs[i].u[:, j] for i in members]))
-            for k, i in enumerate(members):
-                values[(i, name)] = {metric: float(v[k]) for metric, v in batch.items()}
+    values = {
+        **_tracking_values(plant, runs, plans, ok, cfg),
+        **_open_loop_values(plant, runs, plans, ok, cfg),
+        **_input_values(plant, runs, ok),
+    }
     rows: list[list[Any]] = []
     for i, run in enumerate(runs):
-        signals = [s for s in dict.fromkeys(run.controller.reference_signals) if s in plant.output_names]
         label = run.label
         if run.status != "ok":
             rows.append([i, label, "all", "t_fail", run.t_fail, "s", run.status, run.reason])
-            rows += [[i, label, s, "settling_time", math.nan, "s", run.status, run.reason] for s in signals]
+            rows += [
+                [i, label, s, "settling_time", math.nan, "s", run.status, run.reason]
+                for s in _measured_outputs(run, plant)
+            ]
             continue
-        for s in [*signals, *plant.input_names]:
+        followed = _measured_outputs(run, plant)
+        others = [s for s in plant.output_names if s not in followed]
+        for s in [*followed, *others, *plant.input_names]:
             unit = plant.unit_of(s)
-            for name, v in values[(i, s)].items():
+            for name, v in values.get((i, s), {}).items():
                 note = _NAN_NOTES.get(name, "undefined") if math.isnan(v) else ""
-                rows.append([i, label, s, name, v, _unit(m.METRIC_UNITS.get(name, ""), unit), "ok", note])
+                rows.append([i, label, s, name, v, _metric_unit(name, unit), "ok", note])
     return pd.DataFrame(rows, columns=["run", *METRIC_COLUMNS])
 
 

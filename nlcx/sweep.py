@@ -349,6 +349,10 @@ def run(
     base_raw, spec, base = load(path, overrides)
     out_dir = Path(out_dir or base.section.outputs.dir or Path("results") / base.name)
     variants, hashes = plan(base_raw, spec)
+    from nlcx import engine
+
+    workers = 1 if executor == "serial" else jobs
+    engine.check_sweep_memory(base, min(spec.batch_size, len(variants)) * workers)
     if force and (out_dir / "parts").exists():
         for part in (out_dir / "parts").iterdir():
             part.unlink()
