@@ -164,7 +164,7 @@ def bench_d() -> dict[str, float]:
             (
                 names.index(signal),
                 names.index(f"{signal}_dot"),
-                plant.input_names.index(plant.loop_inputs[signal]),
+                plant.input_names.index(plant.features.loop_inputs[signal]),
                 loop.sign,
                 sp,
                 prepared.references[signal][1],

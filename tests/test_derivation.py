@@ -163,3 +163,11 @@ def test_printed_lagrange_equations_hold_except_the_misprinted_ones() -> None:
     errata = load_script("errata")
     _, wrong = errata.check_lagrange()
     assert wrong == {"3.9", "3.10", "3.41", "4.11"}
+
+
+def test_generated_code_reads_the_parameters_in_the_layouts_order(derivations) -> None:
+    """The generated right-hand sides read p by position; the order is PARAMS's (pendulum.py)."""
+    from nlcx.plants.pendulum import PARAMS
+
+    for d in derivations.values():
+        assert tuple(s.name for s in d.params) == PARAMS.fields

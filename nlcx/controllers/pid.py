@@ -258,7 +258,7 @@ class MultiLoopPID(ControllerModel):
             if signal not in outputs:
                 where = join(path, "loops", key, "signal") if loop.signal else join(path, "loops", key)
                 raise ConfigError(where, signal, f"not an output of {plant.name}; allowed: {', '.join(outputs)}")
-            input_name = loop.input or plant.loop_inputs.get(signal)
+            input_name = loop.input or plant.features.loop_inputs.get(signal)
             if input_name is None and len(inputs) == 1:
                 input_name = inputs[0]
             if input_name not in inputs:

@@ -41,8 +41,32 @@ class Signal:
 
 
 @dataclass(frozen=True)
+class PlantFeatures:
+    """What some plants offer beyond their equations; a new feature adds a field here.
+
+    Every field has a neutral default, so a plant declares only what it has.
+    """
+
+    #: States whose derivative is an acceleration (default targets of a disturbance).
+    velocity_states: tuple[str, ...] = ()
+    #: Default input of a PID loop on each output.
+    loop_inputs: Mapping[str, str] = field(default_factory=dict)
+    #: Velocity state of the coordinate each input force drives (where friction acts).
+    input_axes: Mapping[str, str] = field(default_factory=dict)
+    #: Weight of the moving assembly, (M + m) g: the normal force of Appendix A's friction.
+    weight: float | None = None
+    #: Operating point (an equilibrium state) for feed-forward (gravity compensation) and
+    #: linearisation; None: every state 0.
+    x_op: np.ndarray | None = None
+    #: Total mechanical energy E(x) and the inputs' power P(x, u) (the Lyapunov figures).
+    energy: Callable[[np.ndarray], np.ndarray] | None = None
+    power: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+
+
+@dataclass(frozen=True)
 class Plant:
-    """A plant ready to simulate: equations, numeric parameters and metadata."""
+    """A plant ready to simulate: equations, numeric parameters and metadata; optional
+    capabilities (friction axes, operating point, energy, ...) in :attr:`features`."""
 
     name: str
     states: tuple[Signal, ...]
@@ -55,17 +79,7 @@ class Plant:
     params: dict[str, Any]
     param_units: dict[str, str]
     bounds: np.ndarray
-    velocity_states: tuple[str, ...] = ()
-    energy: Callable[[np.ndarray], np.ndarray] | None = None
-    power: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
-    #: Default input of a PID loop on each output.
-    loop_inputs: dict[str, str] = field(default_factory=dict)
-    #: Velocity state of the coordinate each input force drives (where friction acts).
-    input_axes: dict[str, str] = field(default_factory=dict)
-    #: Weight of the moving assembly, (M + m) g: the normal force of Appendix A's friction.
-    weight: float | None = None
-    #: Operating point (an equilibrium state) for feed-forward and linearisation.
-    x_op: np.ndarray | None = None
+    features: PlantFeatures = field(default_factory=PlantFeatures)
 
     @property
     def state_names(self) -> list[str]:
@@ -167,13 +181,15 @@ class PlantModel:
             params=params.model_dump(),
             param_units=param_units(type(params)),
             bounds=bound_vec,
-            velocity_states=self.velocity_states,
-            energy=self.energy(params),
-            power=self.power(params),
-            loop_inputs=dict(self.loop_inputs),
-            input_axes=dict(self.input_axes),
-            weight=self.weight(params),
-            x_op=x_op,
+            features=PlantFeatures(
+                velocity_states=self.velocity_states,
+                loop_inputs=dict(self.loop_inputs),
+                input_axes=dict(self.input_axes),
+                weight=self.weight(params),
+                x_op=x_op,
+                energy=self.energy(params),
+                power=self.power(params),
+            ),
         )
 
 
@@ -216,7 +232,7 @@ def equilibrium_input(plant: Plant, x_eq: np.ndarray | None = None, tol: float =
     """
     n, m = len(plant.states), len(plant.inputs)
     if x_eq is None:
-        x_eq = plant.x_op if plant.x_op is not None else np.zeros(n)
+        x_eq = plant.features.x_op if plant.features.x_op is not None else np.zeros(n)
     x = np.asarray(x_eq, dtype=float)
     f0 = plant.f(x, np.zeros(m))
     B = np.column_stack([plant.f(x, e) - f0 for e in np.eye(m)])
@@ -235,7 +251,8 @@ def linearize(
     Defaults: the operating point and the input that holds it (:func:`equilibrium_input`).
     """
     n, m = len(plant.states), len(plant.inputs)
-    x0 = (plant.x_op if plant.x_op is not None else np.zeros(n)) if x_op is None else np.asarray(x_op, float)
+    op = plant.features.x_op
+    x0 = (op if op is not None else np.zeros(n)) if x_op is None else np.asarray(x_op, float)
     u0 = equilibrium_input(plant, x0) if u_op is None else np.asarray(u_op, float)
 
     f = plant.f
@@ -272,7 +289,7 @@ def check_rows(plant: Plant) -> None:
     if key in _ROWS_CHECKED:
         return
     n, m = len(plant.states), len(plant.inputs)
-    base = plant.x_op if plant.x_op is not None else np.zeros(n)
+    base = plant.features.x_op if plant.features.x_op is not None else np.zeros(n)
     X = np.stack([base, base + 0.01 * (1 + np.arange(n))])
     U = np.stack([np.zeros(m), 0.5 + np.arange(m)])
     P = np.stack([plant.p, plant.p * 1.01])

@@ -20,6 +20,7 @@ from numba import njit
 from pydantic import Field
 
 from nlcx.kernel.abi import RHS_SIG
+from nlcx.layout import Layout
 from nlcx.plants.base import PlantModel, PlantParams, Signal
 
 
@@ -31,11 +32,16 @@ class CSTRParams(PlantParams):
     u_s: float = Field(4 / 7, gt=0, description="operating dilution rate F_s/V", json_schema_extra={"unit": "1/min"})
 
 
+#: The parameter vector p: the rate constants and the feed concentration (section 5.2).
+PARAMS = Layout("cstr", ("k1", "k2", "k3", "CAf"))
+K = PARAMS.at
+
+
 @njit(RHS_SIG, cache=True, error_model="numpy")
 def cstr_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-    """Eqs. 5.1-5.2 for every row b: p[b] = (k1, k2, k3, C_Af), u[b] = (F/V,)."""
+    """Eqs. 5.1-5.2 for every row b: p[b] a :data:`PARAMS` block, u[b] = (F/V,)."""
     for b in range(x.shape[0]):
-        k1, k2, k3, caf = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        k1, k2, k3, caf = p[b, K.k1], p[b, K.k2], p[b, K.k3], p[b, K.CAf]
         ca, cb = x[b, 0], x[b, 1]
         d = u[b, 0]
         dx[b, 0] = d * (caf - ca) - k1 * ca - k3 * ca * ca  # eq. 5.1
@@ -61,7 +67,7 @@ class CSTR(PlantModel):
     rhs = staticmethod(cstr_rhs)
 
     def parameter_vector(self, params: CSTRParams) -> np.ndarray:
-        return np.array([params.k1, params.k2, params.k3, params.CAf])
+        return PARAMS.pack(k1=params.k1, k2=params.k2, k3=params.k3, CAf=params.CAf)
 
     def operating_point(self, params: CSTRParams) -> dict[str, float]:
         ca, cb = steady_state(params)

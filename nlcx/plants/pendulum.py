@@ -22,6 +22,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 from pydantic import Field
 
+from nlcx.layout import Layout
 from nlcx.plants.base import PlantModel, PlantParams, Signal
 
 #: Symbols used in the labels of the generalised coordinates.
@@ -69,6 +70,11 @@ def force_signals(*axes: str) -> tuple[Signal, ...]:
     return tuple(Signal(f"F_{a}", "N", f"Force F_{a}") for a in axes)
 
 
+#: The parameter vector p of every pendulum (Tables 2.1, 3.1's setup): the printed right-hand
+#: sides read it by name; the generated ones (scripts/derive_pendulums.py) in this order.
+PARAMS = Layout("pendulum", ("M", "m", "l", "g"))
+
+
 class PendulumModel(PlantModel):
     """Base of the pendulum plants: parameters p = (M, m, l, g), energy, power, weight.
 
@@ -82,7 +88,7 @@ class PendulumModel(PlantModel):
     energy_function: ClassVar[Any] = None
 
     def parameter_vector(self, params: PendulumParams) -> np.ndarray:
-        return np.array([params.M, params.m, params.l, params.g])
+        return PARAMS.pack(M=params.M, m=params.m, l=params.l, g=params.g)
 
     def select_rhs(self, params: PendulumParams) -> Any:
         """The derived right-hand side, or the printed one if ``equations: printed``."""

@@ -21,11 +21,14 @@ from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import x_derived_rhs, x_energy
 from nlcx.plants.pendulum import (
     ANGLE_BOUND,
+    PARAMS,
     PendulumModel,
     PendulumParams,
     coordinate_signals,
     force_signals,
 )
+
+P = PARAMS.at
 
 
 class XPendulumParams(PendulumParams):
@@ -36,7 +39,7 @@ class XPendulumParams(PendulumParams):
 def x_pendulum_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 2.8-2.11 as printed, for every row b: p[b] = (M, m, l, g), u[b] = (F_x,)."""
     for b in range(x.shape[0]):
-        M, m, l, g = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        M, m, l, g = p[b, P.M], p[b, P.m], p[b, P.l], p[b, P.g]
         theta, theta_dot = x[b, 2], x[b, 3]
         F = u[b, 0]
         s = math.sin(theta)

@@ -19,13 +19,15 @@ from numba import njit
 
 from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import xy_derived_rhs, xy_energy
-from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
+from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
+
+P = PARAMS.at
 
 
 @njit(cache=True, error_model="numpy")
 def _xy_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 3.11-3.18 transcribed literally (typos included), p = (M, m, l, g), u = (F_x, F_y)."""
-    M, m, l, g = p[0], p[1], p[2], p[3]
+    M, m, l, g = p[P.M], p[P.m], p[P.l], p[P.g]
     F_x, F_y = u[0], u[1]
     x6, x8 = x[5], x[7]
     s5, c5 = math.sin(x[4]), math.cos(x[4])

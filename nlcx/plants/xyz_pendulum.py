@@ -20,7 +20,9 @@ from numba import njit
 
 from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import xyz_derived_rhs, xyz_energy
-from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
+from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
+
+P = PARAMS.at
 
 
 @njit(cache=True, error_model="numpy")
@@ -29,7 +31,7 @@ def _xyz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
 
     Eq. 4.21 writes sin(theta) for sin(x7); eq. 4.25 has x9^2 where x10^2 is expected.
     """
-    M, m, l, g = p[0], p[1], p[2], p[3]
+    M, m, l, g = p[P.M], p[P.m], p[P.l], p[P.g]
     F_x, F_y, F_z = u[0], u[1], u[2]
     x8, x9, x10 = x[7], x[8], x[9]
     s7, c7 = math.sin(x[6]), math.cos(x[6])

@@ -20,7 +20,9 @@ from numba import njit
 
 from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import xz_derived_rhs, xz_energy
-from nlcx.plants.pendulum import ANGLE_BOUND, PendulumModel, coordinate_signals, force_signals
+from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
+
+P = PARAMS.at
 
 
 @njit(cache=True, error_model="numpy")
@@ -29,7 +31,7 @@ def _xz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
 
     The printed equations write theta and theta_dot for x5 and x6.
     """
-    M, m, l, g = p[0], p[1], p[2], p[3]
+    M, m, l, g = p[P.M], p[P.m], p[P.l], p[P.g]
     F_x, F_z = u[0], u[1]
     theta, theta_dot = x[4], x[5]
     s, c = math.sin(theta), math.cos(theta)

@@ -21,16 +21,16 @@ def lyapunov_rate(plant: Plant, run: Run) -> tuple[np.ndarray, np.ndarray]:
     and is averaged onto the samples the same way as the difference, which makes the two
     agree to the integration error.
     """
-    if plant.energy is None or plant.power is None:
+    if plant.features.energy is None or plant.features.power is None:
         raise ValueError(f"{plant.name} defines no energy function")
-    V = plant.energy(run.x)
+    V = plant.features.energy(run.x)
     t = run.t
     dV = np.gradient(V, t)
     # power of the held force over each step [t_k, t_k+1]: F_k * (q_k+1 - q_k) / dt
     step_power = np.zeros(t.size - 1)
     names = plant.state_names
     for j, name in enumerate(plant.input_names):
-        axis = plant.input_axes.get(name)
+        axis = plant.features.input_axes.get(name)
         if axis is None:
             continue
         q = run.x[:, names.index(axis.removesuffix("_dot"))]

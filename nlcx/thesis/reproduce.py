@@ -81,7 +81,7 @@ def run_config(config: Path, out_dir: Path, figure: tuple[str, str] | None, over
         report.write_figure(out_dir / "figures" / filename, report.output_figure(result, title))
     lyap = {}
     plant = result.prepared.plant
-    if plant.energy is not None and not exp.uncertainties:
+    if plant.features.energy is not None and not exp.uncertainties:
         for run in result.runs:
             if run.status == "ok":
                 dV, power = lyapunov_rate(plant, run)

@@ -38,7 +38,7 @@ class Disturbance(UncertaintyModel):
     def apply(self, cfg: DisturbanceConfig, hooks: Hooks, path: str) -> None:
         plant = hooks.plant
         names = plant.state_names
-        targets = cfg.states if cfg.states is not None else list(plant.velocity_states)
+        targets = cfg.states if cfg.states is not None else list(plant.features.velocity_states)
         column = np.zeros(len(names))
         for i, name in enumerate(targets):
             if name not in names:

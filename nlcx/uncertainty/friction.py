@@ -67,15 +67,15 @@ class Friction(UncertaintyModel):
         plant = hooks.plant
         if hooks.friction is not None:
             raise ConfigError(path, cfg.kind, "only one friction model can act on a plant")
-        if not plant.input_axes:
+        if not plant.features.input_axes:
             raise ConfigError(join(path, "kind"), cfg.kind, f"{plant.name} has no mechanical axes for friction")
-        axes = cfg.axes if cfg.axes is not None else list(plant.input_axes)
+        axes = cfg.axes if cfg.axes is not None else list(plant.features.input_axes)
         if cfg.normal_force == "weight":
-            if plant.weight is None:
+            if plant.features.weight is None:
                 raise ConfigError(
                     join(path, "normal_force"), "weight", f"{plant.name} defines no weight; give a number"
                 )
-            f_n = plant.weight
+            f_n = plant.features.weight
         else:
             f_n = float(cfg.normal_force)
         if cfg.model == "none":
@@ -83,11 +83,11 @@ class Friction(UncertaintyModel):
         table = np.zeros((len(plant.inputs), FRICTION_AXIS.size))
         model = FRICTION_SIMPLE if cfg.model == "simple" else FRICTION_EXPONENTIAL
         for i, name in enumerate(axes):
-            if name not in plant.input_axes:
+            if name not in plant.features.input_axes:
                 raise ConfigError(
                     join(path, "axes", i),
                     name,
-                    f"allowed: {', '.join(plant.input_axes)} (inputs with an axis)",
+                    f"allowed: {', '.join(plant.features.input_axes)} (inputs with an axis)",
                 )
             normal = f_n
             if name == VERTICAL_INPUT and cfg.vertical != "same":
@@ -95,7 +95,7 @@ class Friction(UncertaintyModel):
                     continue
                 normal = 0.0
             row = plant.input_names.index(name)
-            velocity_name = plant.input_axes[name]
+            velocity_name = plant.features.input_axes[name]
             velocity = plant.state_names.index(velocity_name)
             position = plant.state_names.index(velocity_name.removesuffix("_dot"))
             table[row] = FRICTION_AXIS.pack(
