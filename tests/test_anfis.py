@@ -12,6 +12,7 @@ from nlcx.controllers.anfis import ANFIS, ANFISConfig, anfis_gains, anfis_surfac
 from nlcx.controllers.fuzzy import FuzzyConfig, fuzzy_surface
 from nlcx.errors import ConfigError
 from nlcx.tuning.anfis import (
+    MODEL,
     AnfisModel,
     anfis_schedule,
     fit_consequents,
@@ -88,9 +89,9 @@ def test_least_squares_step_reproduces_an_affine_target() -> None:
         model = initial_model(X, 3, mf)
         model.centres += rng.normal(0.0, 0.1, model.centres.shape) * np.array([[1.0], [6.0]])
         model.slopes += rng.uniform(0.0, 1.0, model.slopes.shape)
-        premise = model.to_vector()[: 6 + 6 * 3]
+        premise = model.to_vector()[: MODEL.size + 6 * 3]
         fit_consequents(model, X, y)
-        assert np.array_equal(model.to_vector()[: 6 + 6 * 3], premise)
+        assert np.array_equal(model.to_vector()[: MODEL.size + 6 * 3], premise)
         assert np.max(np.abs(model.predict(X) - y)) < 1e-10
         assert np.allclose(model.consequents, [0.7, -1.3, 0.25], rtol=0, atol=1e-8)  # unique: every rule
 

@@ -30,9 +30,25 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from nlcx.controllers.schedules import GainRange, ScheduleConfig, ScheduleModel
 from nlcx.kernel.abi import CALLBACK_SIG
-from nlcx.tuning.anfis import AnfisModel
+from nlcx.layout import Layout
+from nlcx.tuning.anfis import CONSEQUENT, MODEL, N_INPUTS, AnfisModel
 
 GAINS: tuple[str, ...] = ("kp", "ki", "kd")
+#: One gain's clipping: whether, and to [min, max] (the fuzzy teacher's range).
+CLIP = Layout("GainClip", ("clip", "min", "max"))
+#: Head of the schedule block: clip the inputs to the training ranges?, each gain's CLIP
+#: block, then where each gain's packed model starts (relative to the block).
+ANFIS_HEAD = Layout(
+    "AnfisHead",
+    ("clip_inputs", *(f"{g}_{f}" for g in GAINS for f in CLIP.fields), *(f"{g}_model" for g in GAINS)),
+)
+A = ANFIS_HEAD.at
+C = CLIP.at
+M = MODEL.at
+TS = CONSEQUENT.at
+MODEL_SIZE = MODEL.size
+CLIP_SIZE = CLIP.size
+CONSEQUENT_SIZE = CONSEQUENT.size
 
 
 class AnfisModelConfig(BaseModel):
@@ -104,15 +120,15 @@ def _mf(kind, x, c, a, b):  # pragma: no cover - compiled
 @njit(cache=True, error_model="numpy")
 def anfis_eval(sp, off, x1, x2, clip):  # pragma: no cover - compiled
     """The TS model packed at sp[off:] (:meth:`AnfisModel.to_vector` layout) at (x1, x2)."""
-    kind = sp[off]
-    n = int(sp[off + 1])
+    kind = sp[off + M.mf]
+    n = int(sp[off + M.n_mfs])
     if clip:
-        x1 = min(max(x1, sp[off + 2]), sp[off + 3])
-        x2 = min(max(x2, sp[off + 4]), sp[off + 5])
-    cb = off + 6
-    ab = cb + 2 * n
-    bb = ab + 2 * n
-    pb = bb + 2 * n
+        x1 = min(max(x1, sp[off + M.x1_min]), sp[off + M.x1_max])
+        x2 = min(max(x2, sp[off + M.x2_min]), sp[off + M.x2_max])
+    cb = off + MODEL_SIZE
+    ab = cb + N_INPUTS * n
+    bb = ab + N_INPUTS * n
+    pb = bb + N_INPUTS * n
     num = 0.0
     den = 0.0
     fsum = 0.0
@@ -121,8 +137,8 @@ def anfis_eval(sp, off, x1, x2, clip):  # pragma: no cover - compiled
         for j in range(n):
             m2 = _mf(kind, x2, sp[cb + n + j], sp[ab + n + j], sp[bb + n + j])
             w = m1 * m2
-            r = pb + 3 * (i * n + j)
-            f = sp[r] * x1 + sp[r + 1] * x2 + sp[r + 2]
+            r = pb + CONSEQUENT_SIZE * (i * n + j)
+            f = sp[r + TS.p] * x1 + sp[r + TS.q] * x2 + sp[r + TS.r]
             num += w * f
             den += w
             fsum += f
@@ -134,18 +150,19 @@ def anfis_eval(sp, off, x1, x2, clip):  # pragma: no cover - compiled
 @njit(cache=True, error_model="numpy")
 def _anfis_gain(p, o, which, e, edot, clip):  # pragma: no cover - compiled
     """Gain ``which`` (0 k_p, 1 k_i, 2 k_d) of the packed schedule at p[o:] (one row), clipped if set."""
-    g = anfis_eval(p, o + int(p[o + 10 + which]), e, edot, clip)
-    h = o + 1 + 3 * which
-    if p[h] != 0.0:
-        g = min(max(g, p[h + 1]), p[h + 2])
+    g = anfis_eval(p, o + int(p[o + A.kp_model + which]), e, edot, clip)
+    h = o + A.kp_clip + CLIP_SIZE * which
+    if p[h + C.clip] != 0.0:
+        g = min(max(g, p[h + C.min]), p[h + C.max])
     return g
 
 
 @njit(CALLBACK_SIG, cache=True, error_model="numpy")
 def anfis_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
-    """p[row, o:] = (clip inputs, 3 x (clip?, min, max), 3 model offsets, 3 packed models)."""
+    """Eq. 5.12-5.14's gains from three TS models: p[row, o:] = an :data:`ANFIS_HEAD` (its
+    model offsets relative to o), then the three packed models (:data:`MODEL` layout)."""
     sp = p[row]
-    clip = sp[o] != 0.0
+    clip = sp[o + A.clip_inputs] != 0.0
     kp = _anfis_gain(sp, o, 0, e, edot, clip)
     ki = _anfis_gain(sp, o, 1, e, edot, clip)
     kd = _anfis_gain(sp, o, 2, e, edot, clip)
@@ -164,13 +181,14 @@ class ANFIS(ScheduleModel):
     gains = staticmethod(anfis_gains)
 
     def pack(self, cfg: ANFISConfig) -> np.ndarray:
-        head = [1.0 if cfg.clip_inputs else 0.0]
-        for name in GAINS:
-            rng = cfg.clip.get(name)
-            head += [0.0, 0.0, 0.0] if rng is None else [1.0, rng.min, rng.max]
         vectors = [m.to_vector() for m in models(cfg).values()]
-        offsets = np.cumsum([13] + [v.size for v in vectors[:-1]])
-        return np.concatenate([np.array(head + list(offsets), dtype=float), *vectors])
+        offsets = np.cumsum([ANFIS_HEAD.size] + [v.size for v in vectors[:-1]])
+        head: dict[str, float] = {"clip_inputs": cfg.clip_inputs}
+        for name, offset in zip(GAINS, offsets, strict=True):
+            rng = cfg.clip.get(name)
+            head |= {f"{name}_clip": rng is not None, f"{name}_model": offset}
+            head |= {f"{name}_min": rng.min, f"{name}_max": rng.max} if rng else {f"{name}_min": 0, f"{name}_max": 0}
+        return np.concatenate([ANFIS_HEAD.pack(head), *vectors])
 
 
 def anfis_surface(cfg: ANFISConfig | dict[str, Any], e: Any, edot: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

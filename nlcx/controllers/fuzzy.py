@@ -44,6 +44,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, create_model,
 
 from nlcx.controllers.schedules import GainRange, ScheduleConfig, ScheduleModel, gain_ranges
 from nlcx.kernel.abi import CALLBACK_SIG
+from nlcx.layout import Layout
 
 #: Linguistic values, in order: negative big, negative small, zero, positive small, positive big.
 SET_NAMES: tuple[str, ...] = ("NB", "NS", "ZE", "PS", "PB")
@@ -349,41 +350,62 @@ def membership_figure(cfg: FuzzyConfig | dict[str, Any], variable: str, points: 
 
 # ----------------------------------------------------------------------- compiled schedule
 
-#: Layout of the schedule parameter vector sp.
-_N, _MODE, _UNIV = 0, 1, 2  # resolution; centroid (0 discrete, 1 piecewise linear); e min, max, de min, max
-_E_SETS = 6  # 5 x (lower, upper) for e, then for de/dt
-_DE_SETS = _E_SETS + 10
-_GAINS = _DE_SETS + 10  # kp min, max, ki min, max, kd min, max
-_RULES = _GAINS + 6  # 3 outputs x 25 rules (e row-major): output set index
-_GRID = _RULES + 75  # z_0..z_{n-1}, then 3 x 5 x n output memberships
+#: The head of the schedule block sp: output grid resolution n, centroid (0 discrete, 1
+#: piecewise linear) and the universes of e and de/dt (Table 5.2).
+FUZZY_HEAD = Layout("FuzzyHead", ("resolution", "piecewise", "e_min", "e_max", "de_min", "de_max"))
+#: One crisp range: a fuzzy set's (Tables 5.3-5.4) or an output gain's (eqs. 5.12-5.14).
+RANGE = Layout("Range", ("lower", "upper"))
+F = FUZZY_HEAD.at
+R = RANGE.at
+N_SETS = len(SET_NAMES)
+N_OUTPUTS = len(OUTPUTS)
+RANGE_SIZE = RANGE.size
+#: Where the tables of sp start: the ranges of the sets of e, then of de/dt, the gain ranges
+#: of k_p, k_i, k_d, the rule table (outputs x e sets x de/dt sets: the concluded set's
+#: index), the output grid z_0..z_{n-1} and its memberships (outputs x sets x n).
+E_RANGES = FUZZY_HEAD.size
+DE_RANGES = E_RANGES + N_SETS * RANGE_SIZE
+GAIN_RANGES = DE_RANGES + N_SETS * RANGE_SIZE
+RULE_TABLE = GAIN_RANGES + N_OUTPUTS * RANGE_SIZE
+OUTPUT_GRID = RULE_TABLE + N_OUTPUTS * N_SETS * N_SETS
+
+
+@njit(cache=True, error_model="numpy")
+def _output_mu(sp, base, n, s, k):  # pragma: no cover - compiled
+    """mu_s(z_k) of one output whose membership table starts at sp[base]."""
+    return sp[base + s * n + k]
 
 
 @njit(cache=True, error_model="numpy")
 def _aggregate(sp, base, n, k, w0, w1, w2, w3, w4):  # pragma: no cover - compiled
     """max_s min(W_s, mu_s(z_k)) of one output (base: its membership table)."""
-    a = min(w0, sp[base + k])
-    a = max(a, min(w1, sp[base + n + k]))
-    a = max(a, min(w2, sp[base + 2 * n + k]))
-    a = max(a, min(w3, sp[base + 3 * n + k]))
-    return max(a, min(w4, sp[base + 4 * n + k]))
+    a = min(w0, _output_mu(sp, base, n, 0, k))
+    a = max(a, min(w1, _output_mu(sp, base, n, 1, k)))
+    a = max(a, min(w2, _output_mu(sp, base, n, 2, k)))
+    a = max(a, min(w3, _output_mu(sp, base, n, 3, k)))
+    return max(a, min(w4, _output_mu(sp, base, n, 4, k)))
 
 
 @njit(cache=True, error_model="numpy")
 def _centroid(sp, base, n, piecewise, w0, w1, w2, w3, w4):  # pragma: no cover - compiled
-    z0 = _GRID
+    """Centroid of the aggregated output on the grid z (discrete, or of its piecewise-linear
+    interpolation); the universe's middle if nothing fires."""
+    z0 = OUTPUT_GRID
     num = 0.0
     den = 0.0
     if piecewise:
         y1 = _aggregate(sp, base, n, 0, w0, w1, w2, w3, w4)
+        x1 = sp[z0]
         for k in range(1, n):
             y2 = _aggregate(sp, base, n, k, w0, w1, w2, w3, w4)
+            x2 = sp[z0 + k]
             if y1 != 0.0 or y2 != 0.0:
-                x1 = sp[z0 + k - 1]
-                h = sp[z0 + k] - x1
+                h = x2 - x1
                 area = 0.5 * h * (y1 + y2)
                 num += h * h * (y1 + 2.0 * y2) / 6.0 + x1 * area
                 den += area
             y1 = y2
+            x1 = x2
     else:
         for k in range(n):
             a = _aggregate(sp, base, n, k, w0, w1, w2, w3, w4)
@@ -391,7 +413,7 @@ def _centroid(sp, base, n, piecewise, w0, w1, w2, w3, w4):  # pragma: no cover -
             den += a
     if den > 0.0:
         return num / den
-    return 0.5 * (sp[z0] + sp[z0 + n - 1])
+    return 0.5 * (OUTPUT_UNIVERSE[0] + OUTPUT_UNIVERSE[1])
 
 
 @njit(cache=True, error_model="numpy")
@@ -405,16 +427,16 @@ def _fuzzy_gain(sp, g, me, md, n, piecewise):  # pragma: no cover - compiled
     w2 = 0.0
     w3 = 0.0
     w4 = 0.0
-    rb = _RULES + 25 * g
-    for i in range(5):
+    rb = RULE_TABLE + N_SETS * N_SETS * g
+    for i in range(N_SETS):
         a = me[i]
         if a <= 0.0:
             continue
-        for j in range(5):
+        for j in range(N_SETS):
             w = min(a, md[j])
             if w <= 0.0:
                 continue
-            s = int(sp[rb + 5 * i + j])
+            s = int(sp[rb + N_SETS * i + j])
             if s == 0:
                 w0 = max(w0, w)
             elif s == 1:
@@ -425,9 +447,17 @@ def _fuzzy_gain(sp, g, me, md, n, piecewise):  # pragma: no cover - compiled
                 w3 = max(w3, w)
             else:
                 w4 = max(w4, w)
-    k1 = _centroid(sp, _GRID + n + 5 * n * g, n, piecewise, w0, w1, w2, w3, w4)
-    lo = sp[_GAINS + 2 * g]
-    return lo + k1 * (sp[_GAINS + 2 * g + 1] - lo)
+    k1 = _centroid(sp, OUTPUT_GRID + n + N_SETS * n * g, n, piecewise, w0, w1, w2, w3, w4)
+    gain = GAIN_RANGES + RANGE_SIZE * g
+    lo = sp[gain + R.lower]
+    return lo + k1 * (sp[gain + R.upper] - lo)
+
+
+@njit(cache=True, error_model="numpy")
+def _set_mu(x, sp, ranges, i, umin, umax):  # pragma: no cover - compiled
+    """Membership of x in input set i, whose crisp range is the i-th RANGE at sp[ranges]."""
+    at = ranges + RANGE_SIZE * i
+    return _mf(x, sp[at + R.lower], sp[at + R.upper], i, umin, umax)
 
 
 @njit(CALLBACK_SIG, cache=True, error_model="numpy")
@@ -436,24 +466,24 @@ def fuzzy_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
 
     The packed tables start at p[row, o] (layout above)."""
     sp = p[row, o:]
-    n = int(sp[_N])
-    piecewise = sp[_MODE] != 0.0
-    emin, emax, dmin, dmax = sp[_UNIV], sp[_UNIV + 1], sp[_UNIV + 2], sp[_UNIV + 3]
+    n = int(sp[F.resolution])
+    piecewise = sp[F.piecewise] != 0.0
+    emin, emax, dmin, dmax = sp[F.e_min], sp[F.e_max], sp[F.de_min], sp[F.de_max]
     x = min(max(e, emin), emax)
     v = min(max(edot, dmin), dmax)
     me = (
-        _mf(x, sp[_E_SETS], sp[_E_SETS + 1], 0, emin, emax),
-        _mf(x, sp[_E_SETS + 2], sp[_E_SETS + 3], 1, emin, emax),
-        _mf(x, sp[_E_SETS + 4], sp[_E_SETS + 5], 2, emin, emax),
-        _mf(x, sp[_E_SETS + 6], sp[_E_SETS + 7], 3, emin, emax),
-        _mf(x, sp[_E_SETS + 8], sp[_E_SETS + 9], 4, emin, emax),
+        _set_mu(x, sp, E_RANGES, 0, emin, emax),
+        _set_mu(x, sp, E_RANGES, 1, emin, emax),
+        _set_mu(x, sp, E_RANGES, 2, emin, emax),
+        _set_mu(x, sp, E_RANGES, 3, emin, emax),
+        _set_mu(x, sp, E_RANGES, 4, emin, emax),
     )
     md = (
-        _mf(v, sp[_DE_SETS], sp[_DE_SETS + 1], 0, dmin, dmax),
-        _mf(v, sp[_DE_SETS + 2], sp[_DE_SETS + 3], 1, dmin, dmax),
-        _mf(v, sp[_DE_SETS + 4], sp[_DE_SETS + 5], 2, dmin, dmax),
-        _mf(v, sp[_DE_SETS + 6], sp[_DE_SETS + 7], 3, dmin, dmax),
-        _mf(v, sp[_DE_SETS + 8], sp[_DE_SETS + 9], 4, dmin, dmax),
+        _set_mu(v, sp, DE_RANGES, 0, dmin, dmax),
+        _set_mu(v, sp, DE_RANGES, 1, dmin, dmax),
+        _set_mu(v, sp, DE_RANGES, 2, dmin, dmax),
+        _set_mu(v, sp, DE_RANGES, 3, dmin, dmax),
+        _set_mu(v, sp, DE_RANGES, 4, dmin, dmax),
     )
     kp = _fuzzy_gain(sp, 0, me, md, n, piecewise)
     ki = _fuzzy_gain(sp, 1, me, md, n, piecewise)
@@ -477,17 +507,16 @@ class Fuzzy(ScheduleModel):
 
     def pack(self, cfg: FuzzyConfig) -> np.ndarray:
         z, mu, rules = _tables(cfg)
-        head = [
-            float(cfg.resolution),
-            1.0 if cfg.centroid == "piecewise_linear" else 0.0,
-            *cfg.universes.e,
-            *cfg.universes.de_dt,
-            *np.ravel(cfg.sets.ranges("e")),
-            *np.ravel(cfg.sets.ranges("de_dt")),
-            *gain_ranges(cfg),
-        ]
-        sp = np.concatenate([np.array(head, dtype=float), rules.ravel().astype(float), z, mu.ravel()])
-        assert sp.size == _GRID + cfg.resolution * 16
+        (emin, emax), (dmin, dmax) = cfg.universes.e, cfg.universes.de_dt
+        head = FUZZY_HEAD.pack(
+            resolution=cfg.resolution, piecewise=cfg.centroid == "piecewise_linear",
+            e_min=emin, e_max=emax, de_min=dmin, de_max=dmax,
+        )  # fmt: skip
+        ranges = [*cfg.sets.ranges("e"), *cfg.sets.ranges("de_dt"), *np.reshape(gain_ranges(cfg), (-1, 2))]
+        sp = np.concatenate(
+            [head, *(RANGE.pack(lower=lo, upper=hi) for lo, hi in ranges), rules.ravel().astype(float), z, mu.ravel()]
+        )
+        assert sp.size == OUTPUT_GRID + cfg.resolution * (1 + N_OUTPUTS * N_SETS)
         return sp
 
 

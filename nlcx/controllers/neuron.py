@@ -16,13 +16,13 @@ from __future__ import annotations
 
 from typing import Literal
 
-import numpy as np
 from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.errors import ConfigError
 from nlcx.kernel.abi import CONTROLLER_SIG
+from nlcx.layout import Layout
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join
 
@@ -54,53 +54,60 @@ class NeuronConfig(ControllerConfig):
     feedforward: Literal["none", "equilibrium"] = "none"
 
 
-#: cp layout: output index, reference index, input index, K, eta_p, eta_i, eta_d,
-#: normalize, printed second difference, printed rule, sample time (rounded to whole steps), bias.
-#: cs layout: step counter, e(k-1), e(k-2), u(k-1), w1, w2, w3, started.
+#: The parameter row cp (sample time rounded to whole simulation steps; bias the feed-forward).
+NEURON = Layout(
+    "SingleNeuron",
+    ("y_index", "r_index", "u_index", "gain", "eta_p", "eta_i", "eta_d",
+     "normalize", "printed_second_difference", "printed_rule", "sample_time", "bias"),
+)  # fmt: skip
+#: The state cs: step counter, e(k-1), e(k-2), u(k-1), the weights, whether it has started.
+NEURON_STATE = Layout("SingleNeuronState", ("step", "e1", "e2", "u1", "w1", "w2", "w3", "started"))
+N = NEURON.at
+S = NEURON_STATE.at
 
 
 @njit(cache=True, error_model="numpy")
 def _neuron_row(t, dt, y, r, cp, cs, u, log):  # pragma: no cover - compiled
     """Eqs. 5.15-5.19 for one variant at every ``hold``-th simulation step; the input is
     held in between."""
-    yi, ri, ui = int(cp[0]), int(cp[1]), int(cp[2])
-    hold = max(1, round(cp[10] / dt))
-    if int(cs[0]) % hold == 0:
+    yi, ri, ui = int(cp[N.y_index]), int(cp[N.r_index]), int(cp[N.u_index])
+    hold = max(1, round(cp[N.sample_time] / dt))
+    if int(cs[S.step]) % hold == 0:
         e = r[ri] - y[yi]
-        if cs[7] == 0.0:
-            cs[1] = e
-            cs[2] = e
-            cs[7] = 1.0
-        e1, e2, u1 = cs[1], cs[2], cs[3]
-        x1 = e - e1
-        x2 = e
-        x3 = e - 2.0 * e1 - e2 if cp[8] != 0.0 else e - 2.0 * e1 + e2
-        if cp[9] != 0.0:  # eq. 5.19 as printed
-            cs[4] += cp[4] * e1 * u1
-            cs[5] += cp[5] * e1 * u1
-            cs[6] += cp[6] * e1 * u1
+        if cs[S.started] == 0.0:
+            cs[S.e1] = e
+            cs[S.e2] = e
+            cs[S.started] = 1.0
+        e1, e2, u1 = cs[S.e1], cs[S.e2], cs[S.u1]
+        x1 = e - e1  # eq. 5.15
+        x2 = e  # eq. 5.16
+        x3 = e - 2.0 * e1 - e2 if cp[N.printed_second_difference] != 0.0 else e - 2.0 * e1 + e2  # eq. 5.17
+        if cp[N.printed_rule] != 0.0:  # eq. 5.19 as printed
+            cs[S.w1] += cp[N.eta_p] * e1 * u1
+            cs[S.w2] += cp[N.eta_i] * e1 * u1
+            cs[S.w3] += cp[N.eta_d] * e1 * u1
         else:  # supervised Hebbian learning (Liu, 2008)
-            cs[4] += cp[4] * e * u1 * x1
-            cs[5] += cp[5] * e * u1 * x2
-            cs[6] += cp[6] * e * u1 * x3
-        w1, w2, w3 = cs[4], cs[5], cs[6]
-        if cp[7] != 0.0:
+            cs[S.w1] += cp[N.eta_p] * e * u1 * x1
+            cs[S.w2] += cp[N.eta_i] * e * u1 * x2
+            cs[S.w3] += cp[N.eta_d] * e * u1 * x3
+        w1, w2, w3 = cs[S.w1], cs[S.w2], cs[S.w3]
+        if cp[N.normalize] != 0.0:
             total = abs(w1) + abs(w2) + abs(w3)
             if total > 0.0:
                 w1, w2, w3 = w1 / total, w2 / total, w3 / total
-        cs[3] = u1 + cp[3] * (w1 * x1 + w2 * x2 + w3 * x3)
-        cs[2] = e1
-        cs[1] = e
+        cs[S.u1] = u1 + cp[N.gain] * (w1 * x1 + w2 * x2 + w3 * x3)  # eq. 5.18
+        cs[S.e2] = e1
+        cs[S.e1] = e
         log[0] = w1
         log[1] = w2
         log[2] = w3
     else:
-        log[0] = cs[4]
-        log[1] = cs[5]
-        log[2] = cs[6]
-    cs[0] += 1.0
-    u[ui] = cp[11] + cs[3]
-    log[3] = cs[3]
+        log[0] = cs[S.w1]
+        log[1] = cs[S.w2]
+        log[2] = cs[S.w3]
+    cs[S.step] += 1.0
+    u[ui] = cp[N.bias] + cs[S.u1]
+    log[3] = cs[S.u1]
 
 
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
@@ -130,14 +137,15 @@ class SingleNeuron(ControllerModel):
         if len(inputs) != 1:
             raise ConfigError(path, cfg.kind, f"the single neuron drives one input; {plant.name} has {len(inputs)}")
         bias = float(equilibrium_input(plant)[0]) if cfg.feedforward == "equilibrium" else 0.0
-        cp = np.array(
-            [
-                outputs.index(signal), outputs.index(signal), 0, cfg.gain,
-                cfg.learning.p, cfg.learning.i, cfg.learning.d, float(cfg.normalize),
-                float(cfg.second_difference == "printed"), float(cfg.rule == "printed"), cfg.sample_time, bias,
-            ]
+        index = outputs.index(signal)
+        cp = NEURON.pack(
+            y_index=index, r_index=index, u_index=0, gain=cfg.gain,
+            eta_p=cfg.learning.p, eta_i=cfg.learning.i, eta_d=cfg.learning.d, normalize=cfg.normalize,
+            printed_second_difference=cfg.second_difference == "printed", printed_rule=cfg.rule == "printed",
+            sample_time=cfg.sample_time, bias=bias,
         )  # fmt: skip
-        cs0 = np.array([0.0, 0.0, 0.0, 0.0, *cfg.weights, 0.0])
+        w1, w2, w3 = cfg.weights
+        cs0 = NEURON_STATE.pack(step=0, e1=0, e2=0, u1=0, w1=w1, w2=w2, w3=w3, started=0)
         return ControllerInstance(
             label=label,
             kind="single_neuron",

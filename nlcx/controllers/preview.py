@@ -49,13 +49,25 @@ from pydantic import Field
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.errors import ConfigError
 from nlcx.kernel.abi import CONTROLLER_SIG
+from nlcx.layout import Layout
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join
 
-#: Parameter-vector header: n, m, h, integrator (0/1), Ts, y*.
-HEADER = 6
-#: Controller state: sample counter, error integral v, then held u, preview and feedback terms (m each).
-STATE_HEAD = 2
+#: Head of the parameter row cp: plant order n, inputs m, preview length h, integrator (0/1),
+#: sample time Ts, the output's equilibrium y*; then x* (n), u* (m), c (n), Kx (m x n),
+#: Kv (m), Kd (m x (h+1)).
+PREVIEW = Layout("Preview", ("n", "m", "h", "integrator", "sample_time", "y_eq"))
+#: Head of the state cs: sample counter, error integral v; then per input the held u, the
+#: preview and the feedback terms (m each).
+PREVIEW_STATE = Layout("PreviewState", ("counter", "integral"))
+#: What the controller logs per input (then the integral, once).
+PREVIEW_LOG = Layout("PreviewLog", ("u", "preview", "feedback"))
+P = PREVIEW.at
+S = PREVIEW_STATE.at
+G = PREVIEW_LOG.at
+HEADER = PREVIEW.size
+STATE_HEAD = PREVIEW_STATE.size
+LOG_SIZE = PREVIEW_LOG.size
 
 
 # --------------------------------------------------------------------------- design model
@@ -386,52 +398,54 @@ def design_preview(
 def _preview_row(t, dt, x, r, cp, cs, u, log):  # pragma: no cover - compiled
     """Preview servo (eq. 5.21) for one variant, sampled every Ts = N dt and held in between.
 
-    cp: n, m, h, integrator, Ts, y*, x* (n), u* (m), c (n), Kx (m x n), Kv (m), Kd (m x (h+1)).
-    cs: counter, v, u (m), preview term (m), feedback term (m).
+    cp: a PREVIEW head, then x* (n), u* (m), c (n), Kx (m x n), Kv (m), Kd (m x (h+1)).
+    cs: a PREVIEW_STATE head, then u (m), preview term (m), feedback term (m).
     r: r(t), r(t + Ts), ..., r(t + h Ts).
     """
-    n = int(cp[0])
-    m = int(cp[1])
-    nd = int(cp[2]) + 1
-    integ = cp[3] != 0.0
-    Ts = cp[4]
-    y_eq = cp[5]
+    n = int(cp[P.n])
+    m = int(cp[P.m])
+    nd = int(cp[P.h]) + 1
+    integ = cp[P.integrator] != 0.0
+    Ts = cp[P.sample_time]
+    y_eq = cp[P.y_eq]
     o_x = HEADER
     o_u = o_x + n
     o_c = o_u + m
     o_kx = o_c + n
     o_kv = o_kx + m * n
     o_kd = o_kv + m
+    o_pv = STATE_HEAD + m
+    o_fb = o_pv + m
     ratio = Ts / dt
     n_sub = round(ratio)
     valid = n_sub >= 1 and abs(ratio - n_sub) <= 1e-6 * ratio
-    if cs[0] == 0.0:
+    if cs[S.counter] == 0.0:
         for j in range(m):
             fb = 0.0
             for i in range(n):
                 fb += cp[o_kx + j * n + i] * (x[i] - cp[o_x + i])
             if integ:
-                fb += cp[o_kv + j] * cs[1]
+                fb += cp[o_kv + j] * cs[S.integral]
             pv = 0.0
             for i in range(nd):
                 pv += cp[o_kd + j * nd + i] * (r[i] - y_eq)
             cs[STATE_HEAD + j] = cp[o_u + j] + fb + pv if valid else np.nan
-            cs[STATE_HEAD + m + j] = pv
-            cs[STATE_HEAD + 2 * m + j] = fb
+            cs[o_pv + j] = pv
+            cs[o_fb + j] = fb
         if integ:
             e = -r[0]
             for i in range(n):
                 e += cp[o_c + i] * x[i]
-            cs[1] += Ts * e
-    cs[0] += 1.0
-    if cs[0] >= n_sub:
-        cs[0] = 0.0
+            cs[S.integral] += Ts * e
+    cs[S.counter] += 1.0
+    if cs[S.counter] >= n_sub:
+        cs[S.counter] = 0.0
     for j in range(m):
         u[j] = cs[STATE_HEAD + j]
-        log[3 * j] = cs[STATE_HEAD + j]
-        log[3 * j + 1] = cs[STATE_HEAD + m + j]
-        log[3 * j + 2] = cs[STATE_HEAD + 2 * m + j]
-    log[3 * m] = cs[1]
+        log[LOG_SIZE * j + G.u] = cs[STATE_HEAD + j]
+        log[LOG_SIZE * j + G.preview] = cs[o_pv + j]
+        log[LOG_SIZE * j + G.feedback] = cs[o_fb + j]
+    log[LOG_SIZE * m] = cs[S.integral]
 
 
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
@@ -518,7 +532,7 @@ class Preview(ControllerModel):
         Kv = d.Kx[:, n] if aug.integrator else np.zeros(m)
         cp = np.concatenate(
             [
-                [n, m, h, float(aug.integrator), cfg.sample_time, model.y_eq],
+                PREVIEW.pack(n=n, m=m, h=h, integrator=aug.integrator, sample_time=cfg.sample_time, y_eq=model.y_eq),
                 model.x_eq,
                 model.u_eq,
                 model.c,
@@ -549,7 +563,7 @@ class Preview(ControllerModel):
             kind="preview",
             step=self.step,
             cp=np.ascontiguousarray(cp),
-            cs0=np.zeros(STATE_HEAD + 3 * m),
+            cs0=np.zeros(STATE_HEAD + LOG_SIZE * m),
             reference_signals=(signal,) * (h + 1),
             reference_offsets=tuple(i * cfg.sample_time for i in range(h + 1)),
             log_names=tuple(log_names),

@@ -42,6 +42,14 @@ from typing import Any
 
 import numpy as np
 
+from nlcx.layout import Layout
+
+N_INPUTS = 2
+#: Head of a packed model: MF kind (index in MF_KINDS), MFs per input, the inputs' ranges.
+MODEL = Layout("AnfisModel", ("mf", "n_mfs", "x1_min", "x1_max", "x2_min", "x2_max"))
+#: One rule's first-order consequent f = p x1 + q x2 + r.
+CONSEQUENT = Layout("AnfisConsequent", ("p", "q", "r"))
+
 MF_KINDS: tuple[str, ...] = ("gbell", "gauss")
 #: Smallest width, as a fraction of the input range, and smallest bell slope b.
 _MIN_WIDTH = 1e-3
@@ -112,11 +120,15 @@ class AnfisModel:
     # -------------------------------------------------------------------- packing
 
     def to_vector(self) -> np.ndarray:
-        """[mf code, n, x1 min, x1 max, x2 min, x2 max, centres (2n), widths (2n), slopes (2n), (p, q, r) x n^2]."""
+        """A :data:`MODEL` head, then centres (2n), widths (2n), slopes (2n) of the input MFs
+        (x1's n, then x2's) and the n^2 rules' :data:`CONSEQUENT` blocks (p, q, r)."""
+        (x1_min, x1_max), (x2_min, x2_max) = self.ranges
+        head = MODEL.pack(
+            mf=MF_KINDS.index(self.mf), n_mfs=self.n_mfs, x1_min=x1_min, x1_max=x1_max, x2_min=x2_min, x2_max=x2_max
+        )
         return np.concatenate(
             [
-                [float(MF_KINDS.index(self.mf)), float(self.n_mfs)],
-                self.ranges.ravel(),
+                head,
                 self.centres.ravel(),
                 self.widths.ravel(),
                 self.slopes.ravel(),
@@ -127,12 +139,15 @@ class AnfisModel:
     @classmethod
     def from_vector(cls, v: Any) -> AnfisModel:
         v = np.asarray(v, dtype=float)
-        n = int(v[1])
+        head = MODEL.unpack(v)
+        n = int(head["n_mfs"])
         if v.size != vector_size(n):
             raise ValueError(f"an ANFIS vector with {n} MFs per input has {vector_size(n)} entries, not {v.size}")
-        o = 6
-        centres, widths, slopes = (v[o + k * 2 * n : o + (k + 1) * 2 * n] for k in range(3))
-        return cls(MF_KINDS[int(v[0])], centres, widths, slopes, v[o + 6 * n :], v[2:6])
+        o = MODEL.size
+        block = N_INPUTS * n
+        centres, widths, slopes = (v[o + k * block : o + (k + 1) * block] for k in range(3))
+        ranges = [head["x1_min"], head["x1_max"], head["x2_min"], head["x2_max"]]
+        return cls(MF_KINDS[int(head["mf"])], centres, widths, slopes, v[o + 3 * block :], np.array(ranges))
 
     def to_config(self) -> dict[str, Any]:
         """The model as the ``anfis`` schedule's per-gain configuration (lists of floats)."""
@@ -169,7 +184,7 @@ class AnfisModel:
 
 def vector_size(n_mfs: int) -> int:
     """Length of :meth:`AnfisModel.to_vector` with ``n_mfs`` MFs per input."""
-    return 6 + 6 * n_mfs + 3 * n_mfs * n_mfs
+    return MODEL.size + 3 * N_INPUTS * n_mfs + CONSEQUENT.size * n_mfs * n_mfs
 
 
 def _as_inputs(X: Any) -> np.ndarray:
