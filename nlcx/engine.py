@@ -113,10 +113,22 @@ class Prepared:
 
 @dataclass
 class Result:
+    """One experiment's runs and metrics. The metrics are a block of rows of a table shared
+    by the experiments measured together (``rows``: the table and its row range), sliced
+    out only when :attr:`metrics` is read (a sweep reads the shared tables instead)."""
+
     prepared: Prepared
     runs: list[Run]
-    metrics: pd.DataFrame
+    rows: tuple[pd.DataFrame, int, int] | None = None
     timings: dict[str, float] = field(default_factory=dict)
+
+    @functools.cached_property
+    def metrics(self) -> pd.DataFrame:
+        """Long-form metrics of the runs (columns :data:`METRIC_COLUMNS`)."""
+        if self.rows is None:
+            return pd.DataFrame(columns=METRIC_COLUMNS)
+        table, start, stop = self.rows
+        return table.iloc[start:stop][METRIC_COLUMNS].reset_index(drop=True)
 
 
 def _reference_models(exp: Experiment, plant: Plant) -> dict[str, tuple[Any, Any]]:
@@ -583,9 +595,11 @@ def _metric_plans(prepared: Prepared) -> dict[str, MetricPlan]:
     return {s: model.metric_plan(cfg) for s, (model, cfg) in prepared.references.items()}
 
 
-def _measure_all(prepared: list[Prepared], runs: list[list[Run]]) -> list[pd.DataFrame]:
-    """Metrics of every experiment's runs; experiments with the same plant signals and metric
-    definitions are measured together (vectorised over all their runs)."""
+def _measure_all(prepared: list[Prepared], runs: list[list[Run]]) -> list[tuple[pd.DataFrame, int, int] | None]:
+    """Metrics of every experiment's runs as (shared table, first row, end row); experiments
+    with the same plant signals and metric definitions are measured together (vectorised
+    over all their runs). A shared table has the column ``experiment``, the position in
+    ``prepared``; each experiment's rows are contiguous."""
     groups: dict[tuple[Any, ...], list[int]] = {}
     for e, p in enumerate(prepared):
         plant = p.plant
@@ -596,17 +610,29 @@ def _measure_all(prepared: list[Prepared], runs: list[list[Run]]) -> list[pd.Dat
             p.experiment.section.metrics.model_dump_json(),
         )
         groups.setdefault(key, []).append(e)
-    tables: list[pd.DataFrame] = [pd.DataFrame(columns=METRIC_COLUMNS)] * len(prepared)
+    rows: list[tuple[pd.DataFrame, int, int] | None] = [None] * len(prepared)
     for members in groups.values():
-        owner = [e for e in members for _ in runs[e]]
+        owner = np.array([e for e in members for _ in runs[e]], dtype=int)
         flat = [r for e in members for r in runs[e]]
         plans = [_metric_plans(prepared[e]) for e in owner]
         first = prepared[members[0]]
         table = measure_runs(first.plant, flat, plans, first.experiment.section.metrics)
-        of = np.asarray(owner)[table["run"].to_numpy(dtype=int)] if len(table) else np.zeros(0, dtype=int)
-        for e in members:
-            tables[e] = table[of == e].drop(columns="run").reset_index(drop=True)
-    return tables
+        experiment = owner[table["run"].to_numpy(dtype=int)]
+        table.insert(0, "experiment", experiment)
+        bounds = np.searchsorted(experiment, members, side="left"), np.searchsorted(experiment, members, side="right")
+        for e, start, stop in zip(members, *bounds, strict=True):
+            rows[e] = (table, int(start), int(stop))
+    return rows
+
+
+def shared_metrics(results: list[Result]) -> pd.DataFrame:
+    """The metrics of ``results`` (from one :func:`evaluate` call) in one table, with the
+    column ``experiment``: the position of the row's result in ``results``, ascending."""
+    tables = {id(r.rows[0]): r.rows[0] for r in results if r.rows is not None}
+    if not tables:
+        return pd.DataFrame(columns=["experiment", *METRIC_COLUMNS])
+    table = pd.concat([t[["experiment", *METRIC_COLUMNS]] for t in tables.values()], ignore_index=True)
+    return table.sort_values("experiment", kind="stable", ignore_index=True)
 
 
 def evaluate(
@@ -640,12 +666,12 @@ def evaluate(
         for e in members:
             timings[e]["simulate"] = (time.perf_counter() - start) / len(members)
     start = time.perf_counter()
-    tables = _measure_all(prepared, runs) if measure else [pd.DataFrame(columns=METRIC_COLUMNS)] * len(prepared)
+    rows = _measure_all(prepared, runs) if measure else [None] * len(prepared)
     results = []
-    for p, rs, table, timing in zip(prepared, runs, tables, timings, strict=True):
+    for p, rs, block, timing in zip(prepared, runs, rows, timings, strict=True):
         timing["metrics"] = (time.perf_counter() - start) / len(prepared)
         p.tuning = [*p.tuning, *(row for run in rs for row in _controller_records(run))]
-        results.append(Result(prepared=p, runs=rs, metrics=table, timings=timing))
+        results.append(Result(prepared=p, runs=rs, rows=block, timings=timing))
     return results
 
 

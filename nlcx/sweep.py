@@ -247,19 +247,18 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
     # one pipeline call: variants on the same time grid go through the kernel together
     members = list(prepared_of)
     results = engine.evaluate([prepared_of[pos] for pos in members], record_logs=batch.timeseries)
-    frames = []
     for pos, result in zip(members, results, strict=True):
         row = rows[pos]
         row["wall_s"] += result.timings["simulate"] + result.timings["metrics"]
         unstable = [run for run in result.runs if run.status != "ok"]
         if unstable:
             row.update(status="unstable", message=f"{unstable[0].label}: {unstable[0].reason}")
-        frames.append(result.metrics.assign(variant=batch.variants[pos].index)[["variant", *engine.METRIC_COLUMNS]])
         if batch.timeseries:
             name = f"variant_{batch.variants[pos].index:06d}.csv"
             report.write_csv(batch.out_dir / "timeseries" / name, report.timeseries_frame(result))
-    columns = ["variant", *engine.METRIC_COLUMNS]
-    metrics = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=columns)
+    metrics = engine.shared_metrics(results)
+    index_of = np.array([batch.variants[pos].index for pos in members], dtype=int)
+    metrics.insert(0, "variant", index_of[metrics.pop("experiment").to_numpy(dtype=int)])
     digest = hashlib.sha256("".join(batch.hashes).encode()).hexdigest()[:10]
     part = f"{batch.variants[0].index:06d}-{digest}"
     report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", metrics)
