@@ -154,7 +154,7 @@ def bench_d() -> dict[str, float]:
     for key in order:
         loop = loops[key]
         signal = loop.signal or key
-        sched = loop.schedule
+        sched = loop.schedule if isinstance(loop.schedule, dict) else loop.schedule.model_dump()
         sp = np.array([
             sched["kp"]["min"], sched["kp"]["max"], sched["ki"]["min"], sched["ki"]["max"],
             sched["kd"]["min"], sched["kd"]["max"], sched["rate"]["kp"], sched["rate"]["ki"], sched["rate"]["kd"],
