@@ -135,6 +135,7 @@ def bench_d() -> dict[str, float]:
     from scipy.integrate import solve_ivp
 
     from nlcx import config, engine
+    from nlcx.controllers.pid import input_blocks
     from nlcx.controllers.schedules import error_ags_gains
 
     exp = config.load(ROOT / "configs" / "xyz_error_ags.yaml")
@@ -170,7 +171,7 @@ def bench_d() -> dict[str, float]:
                 prepared.references[signal][1],
             )
         )
-    bias = proposed.cp[2 : 2 + len(plant.inputs)]
+    bias = np.array([b["bias"] for b in input_blocks(proposed.cp)])
     n = len(names)
 
     def field(t: float, z: np.ndarray) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from nlcx import config, engine, registry
-from nlcx.controllers.pid import HEAD, LOOP, LOOP_STATE, pid_step
+from nlcx.controllers.pid import HEAD, INPUT, LOOP, LOOP_STATE, pid_step
 from nlcx.controllers.schedules import schedule_slots
 
 
@@ -182,7 +182,7 @@ def test_built_in_schedules_called_directly_equal_the_slot_table(x_error_raw: di
         loops["theta"]["schedule"] = {**schedule, "kind": name}
         via_slot = engine.run_experiment(config.build(x_error_raw))
         cp_direct, cp_slot = direct.prepared.controllers[0].cp, via_slot.prepared.controllers[0].cp
-        first_loop = HEAD.size + 1  # after the head and the one input's bias
+        first_loop = HEAD.size + INPUT.size  # after the head and the one input's block
         direct_field, slot_field = LOOP.unpack(cp_direct, first_loop), LOOP.unpack(cp_slot, first_loop)
         assert direct_field["direct_schedule"] != 0 and slot_field["direct_schedule"] == 0
         (a,), (b,) = direct.runs, via_slot.runs
@@ -191,3 +191,80 @@ def test_built_in_schedules_called_directly_equal_the_slot_table(x_error_raw: di
     finally:
         registry.schedules._entries.pop(name)
         registry.schedules._loaded.pop(name, None)
+
+
+def saturated(anti_windup: str, ki: float, kb: float = 1.0) -> engine.Prepared:
+    """x loop k_p = 10, k_i = ``ki`` on F_x limited to 5 N; the theta loop contributes nothing."""
+    return build(
+        {
+            "kind": "pid",
+            "loops": {
+                "theta": {"sign": -1, "schedule": {"kind": "constant", "kp": 0, "ki": 0, "kd": 0}},
+                "x": {"sign": 1, "schedule": {"kind": "constant", "kp": 10, "ki": ki, "kd": 0}},
+            },
+            "saturation": {"limits": {"F_x": 5.0}, "anti_windup": anti_windup, "kb": kb},
+        }
+    )
+
+
+def drive_integral(prep: engine.Prepared, steps: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(u_k, the x loop's integral after step k) for e = r - y = 1 held."""
+    c = prep.controllers[0]
+    cp, cs = c.cp[None].copy(), c.cs0[None].copy()
+    x_integral = LOOP_STATE.size * 1 + LOOP_STATE.at.integral  # loops in order theta, x
+    us, integrals = [], []
+    for k in range(steps):
+        u = np.zeros((1, 1))
+        log = np.zeros((1, len(c.log_names)))
+        y = np.array([[0.0, 0.0]])  # (x, theta)
+        r = np.array([[1.0, 0.0]])
+        pid_step(k * dt, dt, np.zeros((1, 4)), y, r, cp, cs, u, log, schedule_slots())
+        us.append(u[0, 0])
+        integrals.append(cs[0, x_integral])
+    return np.array(us), np.array(integrals)
+
+
+def test_saturation_without_anti_windup_clips_and_winds_up() -> None:
+    dt = 0.01
+    u, integral = drive_integral(saturated("none", ki=4.0), 50, dt)
+    assert np.all(u == 5.0)  # 10 e + 4 I > 5: clipped
+    assert np.allclose(integral, dt * np.arange(1, 51), rtol=1e-12)  # I keeps integrating e
+
+
+def test_clamping_holds_the_integral_only_while_it_pushes_into_the_limit() -> None:
+    dt = 0.01
+    u, integral = drive_integral(saturated("clamping", ki=4.0), 50, dt)
+    assert np.all(u == 5.0) and np.all(integral == 0.0)  # k_i e > 0 would push further: held
+    u, integral = drive_integral(saturated("clamping", ki=-4.0), 200, dt)
+    # k_i e < 0 pulls the output back from the limit: the integral runs until 10 - 4 I = 5
+    assert np.allclose(integral[:100], dt * np.arange(1, 101), rtol=1e-12)
+    assert np.all(u <= 5.0) and u[-1] < 5.0
+
+
+def test_back_calculation_feeds_back_the_excess() -> None:
+    """I_k = I_{k-1} + e dt - K_b (u - u_sat) dt / k_i (gain outside the integral, sign +1)."""
+    dt, ki, kb = 0.01, 4.0, 2.5
+    u, integral = drive_integral(saturated("back_calculation", ki=ki, kb=kb), 300, dt)
+    expected, i_k = [], 0.0
+    for _ in range(300):
+        i_k += 1.0 * dt
+        v = 10.0 * 1.0 + ki * i_k
+        i_k -= kb * (v - min(max(v, -5.0), 5.0)) * dt / ki
+        expected.append(i_k)
+    np.testing.assert_allclose(integral, expected, rtol=1e-12, atol=1e-15)
+    assert np.all(u == 5.0)
+    # the tracking loop drives 10 + k_i I towards the limit: I -> (5 - 10) / k_i from the excess
+    assert integral[-1] < 0.0
+
+
+def test_saturation_end_to_end_keeps_every_force_within_its_limit() -> None:
+    raw = copy.deepcopy(CONST) | {"saturation": {"limits": {"F_x": 2.0}, "anti_windup": "clamping"}}
+    (run,) = engine.run_experiment(build(raw).experiment).runs
+    assert np.max(np.abs(run.u)) <= 2.0 and np.isclose(np.max(np.abs(run.u)), 2.0)
+
+
+def test_a_limit_on_an_unknown_input_is_a_config_error() -> None:
+    from nlcx.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"controllers\.c\.saturation\.limits\.F_y"):
+        build(copy.deepcopy(CONST) | {"saturation": {"limits": {"F_y": 2.0}}})

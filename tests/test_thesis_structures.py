@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from nlcx import config, engine
+from nlcx.controllers.pid import input_blocks
 from nlcx.thesis import catalog
 from nlcx.thesis.lyapunov import lyapunov_rate
 
@@ -58,8 +59,7 @@ def test_gravity_compensation_from_the_model() -> None:
     """feedforward: equilibrium puts F_z = (M + m) g on the z force."""
     prep = engine.prepare(config.load(THESIS / "ch3" / "fig_3_27.yaml"))
     for c in prep.controllers:
-        n_u = int(c.cp[1])
-        bias = dict(zip(prep.plant.input_names, c.cp[2 : 2 + n_u], strict=True))
+        bias = dict(zip(prep.plant.input_names, [b["bias"] for b in input_blocks(c.cp)], strict=True))
         assert bias["F_z"] == pytest.approx(1.1 * 9.8, rel=1e-12) and bias["F_x"] == 0.0
 
 

@@ -36,9 +36,13 @@ from nlcx.layout import Layout
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join, validate_model
 
-#: The head of the parameter row: number of loops and of inputs; the bias of each input follows.
-HEAD = Layout("PIDHead", ("n_loops", "n_inputs"))
+#: The head of the parameter row: number of loops and of inputs, the actuator saturation's
+#: anti-windup (:data:`ANTI_WINDUP` code; -1: no saturation) and back-calculation gain K_b.
+HEAD = Layout("PIDHead", ("n_loops", "n_inputs", "anti_windup", "kb"))
 H = HEAD.at
+#: One block per input after the head: its constant bias and its limit |u_j| <= limit (inf: none).
+INPUT = Layout("PIDInput", ("bias", "limit"))
+I = INPUT.at
 #: One loop's block, after the head and the biases: which output, reference and input it
 #: uses, the sign of its contribution, its schedule (slot in the callback table, offset and
 #: length of the schedule's parameters, built-in schedule called directly), the derivative
@@ -57,12 +61,15 @@ L = LOOP.at
 #: including a third party's or a replaced built-in, goes through its slot.
 VIA_SLOT, DIRECT_CONSTANT, DIRECT_TIME_AGS, DIRECT_ERROR_AGS = 0, 1, 2, 3
 _DIRECT = {constant_gains: DIRECT_CONSTANT, time_ags_gains: DIRECT_TIME_AGS, error_ags_gains: DIRECT_ERROR_AGS}
-#: One loop's controller state: integral, previous error, filtered derivative, previous y, started.
-LOOP_STATE = Layout("PIDLoopState", ("integral", "e_prev", "d_filtered", "y_prev", "started"))
+#: One loop's controller state: integral, previous error, filtered derivative, previous y,
+#: started, and the integral's increment of the last sample (undone by clamping anti-windup).
+LOOP_STATE = Layout("PIDLoopState", ("integral", "e_prev", "d_filtered", "y_prev", "started", "increment"))
 S = LOOP_STATE.at
 #: One loop's logged values: k_p, k_i, k_d and the loop's signed contribution to its input.
 LOOP_LOG = Layout("PIDLoopLog", ("kp", "ki", "kd", "u"))
 G = LOOP_LOG.at
+#: Anti-windup of a saturated input (Simulink's PID block: none, clamping, back-calculation).
+ANTI_WINDUP = {"off": -1, "none": 0, "clamping": 1, "back_calculation": 2}
 
 
 class DerivativeConfig(BaseModel):
@@ -92,6 +99,21 @@ class LoopConfig(BaseModel):
     derivative: DerivativeConfig | None = None
 
 
+class SaturationConfig(BaseModel):
+    """Actuator limits |u_j| <= limit_j on the summed input, applied by the PID as Simulink's
+    PID block applies its output saturation, and how the loops' integrators avoid windup:
+    ``clamping`` holds a loop's integral while its input is saturated and the error would
+    drive it further; ``back_calculation`` adds K_b (u_sat - u) to the integrator input of
+    every loop on that input (Astrom & Hagglund's tracking anti-windup, K_b = 1 / T_t)."""
+
+    model_config = ConfigDict(extra="forbid")
+    #: Limit of each saturated input, by input name (> 0; inputs not named are unlimited).
+    limits: dict[str, float] = Field(min_length=1)
+    anti_windup: Literal["none", "clamping", "back_calculation"] = "none"
+    #: Back-calculation gain K_b, 1/s.
+    kb: float = Field(1.0, gt=0)
+
+
 class PIDConfig(ControllerConfig):
     kind: Literal["pid"] = "pid"
     loops: dict[str, LoopConfig] = Field(min_length=1)
@@ -106,6 +128,36 @@ class PIDConfig(ControllerConfig):
     feedforward: Literal["none", "equilibrium"] = "none"
     #: Set-point weight b: the proportional term acts on b r - y (b = 1: on the error).
     setpoint_weight: float = 1.0
+    #: Actuator saturation with anti-windup (none: unlimited inputs).
+    saturation: SaturationConfig | None = None
+
+
+@njit(cache=True, error_model="numpy")
+def _saturate(row, dt, cp, cs, u, log):  # pragma: no cover - compiled
+    """Clip each limited input to [-limit, limit] and correct the integrators of the loops on
+    it (clamping: undo this sample's increment if it pushes further into the limit;
+    back-calculation: I += K_b (u_sat - u) dt through the loop's sign and integral gain)."""
+    n_u = int(cp[row, H.n_inputs])
+    base = len(H) + len(I) * n_u
+    mode = int(cp[row, H.anti_windup])
+    for i in range(int(cp[row, H.n_loops])):
+        h = base + len(L) * i
+        j = int(cp[row, h + L.u_index])
+        limit = cp[row, len(H) + len(I) * j + I.limit]
+        excess = u[row, j] - min(max(u[row, j], -limit), limit)
+        if excess == 0.0:
+            continue
+        c = len(S) * i
+        sign = cp[row, h + L.sign]
+        inside = cp[row, h + L.gain_inside] != 0.0
+        ki = log[row, len(G) * i + G.ki]
+        if mode == 1 and excess * sign * cs[row, c + S.increment] * (1.0 if inside else ki) > 0.0:
+            cs[row, c + S.integral] -= cs[row, c + S.increment]
+        elif mode == 2 and (inside or ki != 0.0):
+            cs[row, c + S.integral] -= sign * cp[row, H.kb] * excess * dt / (1.0 if inside else ki)
+    for j in range(n_u):
+        limit = cp[row, len(H) + len(I) * j + I.limit]
+        u[row, j] = min(max(u[row, j], -limit), limit)
 
 
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
@@ -119,8 +171,8 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
     for row in range(x.shape[0]):
         n_u = int(cp[row, H.n_inputs])
         for j in range(n_u):
-            u[row, j] = cp[row, len(H) + j]
-        base = len(H) + n_u
+            u[row, j] = cp[row, len(H) + len(I) * j + I.bias]
+        base = len(H) + len(I) * n_u
         for i in range(int(cp[row, H.n_loops])):
             h = base + len(L) * i
             c = len(S) * i
@@ -149,12 +201,10 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
                 kp, ki, kd = constant_gains(t, e, d, cp, row, off)
             else:
                 kp, ki, kd = callbacks[int(cp[row, h + L.schedule_slot])](t, e, d, cp, row, off)
-            if cp[row, h + L.gain_inside] != 0.0:
-                cs[row, c + S.integral] += ki * e * dt
-                integral_term = cs[row, c + S.integral]
-            else:
-                cs[row, c + S.integral] += e * dt
-                integral_term = ki * cs[row, c + S.integral]
+            step = ki * e * dt if cp[row, h + L.gain_inside] != 0.0 else e * dt
+            cs[row, c + S.integral] += step
+            cs[row, c + S.increment] = step
+            integral_term = cs[row, c + S.integral] * (1.0 if cp[row, h + L.gain_inside] != 0.0 else ki)
             out = cp[row, h + L.sign] * (kp * (cp[row, h + L.setpoint_weight] * r_i - y_i) + integral_term + kd * d)
             g = len(G) * i
             log[row, g + G.kp] = kp
@@ -164,6 +214,8 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
             u[row, int(cp[row, h + L.u_index])] += out
             cs[row, c + S.e_prev] = e
             cs[row, c + S.y_prev] = y_i
+        if cp[row, H.anti_windup] >= 0.0:
+            _saturate(row, dt, cp, cs, u, log)
 
 
 class MultiLoopPID(ControllerModel):
@@ -187,7 +239,15 @@ class MultiLoopPID(ControllerModel):
     def build(self, label: str, cfg: PIDConfig, plant: Plant, path: str, dt: float | None = None) -> ControllerInstance:
         cfg = self.normalize(cfg, path)
         loops = self._resolve_loops(cfg, plant, path)
-        head = [*HEAD.pack(n_loops=len(loops), n_inputs=len(plant.inputs)), *self._bias(cfg, plant, path)]
+        sat = cfg.saturation
+        inputs = zip(self._bias(cfg, plant, path), self._limits(cfg, plant, path), strict=True)
+        head = np.concatenate([
+            HEAD.pack(
+                n_loops=len(loops), n_inputs=len(plant.inputs),
+                anti_windup=ANTI_WINDUP[sat.anti_windup if sat else "off"], kb=sat.kb if sat else 0.0,
+            ),
+            *(INPUT.pack(bias=bias, limit=limit) for bias, limit in inputs),
+        ])  # fmt: skip
         blocks: list[np.ndarray] = []
         schedules: list[np.ndarray] = []
         offset = len(head) + LOOP.size * len(loops)
@@ -204,7 +264,7 @@ class MultiLoopPID(ControllerModel):
             label=label,
             kind="pid",
             step=self.step,
-            cp=np.concatenate([np.array(head, dtype=float), *blocks, *schedules]),
+            cp=np.concatenate([head, *blocks, *schedules]),
             cs0=np.zeros(LOOP_STATE.size * len(loops)),
             reference_signals=tuple(plant.output_names),
             log_names=tuple(log_names),
@@ -212,6 +272,20 @@ class MultiLoopPID(ControllerModel):
             config=cfg.model_dump(),
             callbacks=schedule_slots(),
         )
+
+    @staticmethod
+    def _limits(cfg: PIDConfig, plant: Plant, path: str) -> np.ndarray:
+        """|u_j| <= limit_j per input (inf where none is set)."""
+        inputs = plant.input_names
+        limits = np.full(len(inputs), np.inf)
+        for name, value in (cfg.saturation.limits if cfg.saturation else {}).items():
+            where = join(path, "saturation", "limits", name)
+            if name not in inputs:
+                raise ConfigError(where, value, f"unknown input; allowed: {', '.join(inputs)}")
+            if not value > 0:
+                raise ConfigError(where, value, "must be a limit > 0")
+            limits[inputs.index(name)] = value
+        return limits
 
     @staticmethod
     def _bias(cfg: PIDConfig, plant: Plant, path: str) -> np.ndarray:
@@ -277,6 +351,12 @@ class MultiLoopPID(ControllerModel):
                 f"{', '.join(outputs)}); got {len(signals)} loop(s) on {', '.join(signals)}",
             )
         return resolved
+
+
+def input_blocks(cp: np.ndarray) -> list[dict[str, float]]:
+    """Each input's :data:`INPUT` block (bias, limit) of a PID's parameter row."""
+    head = HEAD.unpack(cp)
+    return [INPUT.unpack(cp, HEAD.size + INPUT.size * j) for j in range(int(head["n_inputs"]))]
 
 
 def _log_units(unit_in: str, unit_sig: str) -> list[str]:
