@@ -8,7 +8,7 @@ JOBS ?= 2
 
 BASELINE_TABLES := table-2.3,table-2.5,table-3.2,table-3.7,table-4.2,table-4.4,table-5.1,table-5.8
 
-.PHONY: install run test lint reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata \
+.PHONY: install run test lint reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
 	baseline baseline-diff sweep-demo bench clean
 
 $(STAMP): pyproject.toml
@@ -68,6 +68,10 @@ sweep-demo: install
 ## bench: the speed benchmarks (writes benchmarks/latest.txt)
 bench: install
 	$(BIN)/python benchmarks/run.py | tee benchmarks/latest.txt
+
+## identify: the identification study (docs/fidelity.md): fit every loop hypothesis on the train tables, rank on validation
+identify: install
+	$(BIN)/nlcx identify configs/identify/pendulum.yaml --jobs $(JOBS) --out results/identify/pendulum_loop
 
 ## calibrate: refit the unprinted conventional gains (writes configs/thesis/gains/conventional.yaml)
 calibrate: install

@@ -290,6 +290,31 @@ def calibrate(
 
 @app.command()
 @one_line_errors
+def identify(
+    spec: Annotated[Path, typer.Argument(help="Identification spec YAML.", show_default=False)],
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Worker processes evaluating each population.")] = 1,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Output directory (default results/identify/<name>).")
+    ] = None,
+) -> None:
+    """Fit loop hypotheses to the train tables, rank them on validation (resumable)."""
+    from nlcx.thesis.identify import identify as run_identify
+    from nlcx.thesis.identify import load_spec
+
+    _imported()
+    out_dir = out or Path("results/identify") / load_spec(spec).name
+
+    def progress(done: int, total: int, name: str) -> None:
+        typer.echo(f"  [{done}/{total}] {name}")
+
+    ranking = run_identify(spec, out_dir, jobs=jobs, progress=progress)
+    columns = ["rank", "hypothesis", "train_loss", "validation_median_rel_error", "validation_direction_agreement"]
+    typer.echo(ranking[columns].head(10).to_string(index=False))
+    typer.echo(f"{len(ranking)} hypotheses; results in {out_dir}/")
+
+
+@app.command()
+@one_line_errors
 def diff(
     base: Annotated[Path, typer.Argument(help="Baseline directory (or CSV file).", show_default=False)],
     new: Annotated[Path, typer.Argument(help="Directory (or CSV file) to check.", show_default=False)],

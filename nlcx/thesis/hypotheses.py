@@ -1,0 +1,148 @@
+"""Hypotheses about the loop the thesis simulated: named sets of real loop options.
+
+Every option is a setting a user can put in any config (nothing here is a special case of
+the kernel): the PID's derivative, integral form and actuator saturation with anti-windup,
+the error-AGS argument, and the reading of the printed gain ranges. A hypothesis picks at
+most one non-default value per family; :func:`apply` writes it into an experiment's
+(interpolated) raw config, with the continuous parameters it frees (e.g. F_max).
+
+The literal hypothesis (no option) is today's behaviour.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+Raw = dict[str, Any]
+
+
+@dataclass(frozen=True)
+class OptionValue:
+    """One value of an option family: how it changes a PID controller's config (given the
+    free parameters' values and the plant's inputs), and the continuous parameters
+    (name -> (lower, upper)) it frees."""
+
+    doc: str
+    change: Callable[[Raw, Mapping[str, float], list[str]], None]
+    free: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+
+
+def _by_magnitude(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """Gain ranges of the negative-gain loops read as min/max of |k|, not of k: where both
+    printed bounds are negative, the "min" value is the one of smaller magnitude."""
+    for loop in pid["loops"].values():
+        schedule = loop["schedule"]
+        for gain in ("kp", "ki", "kd"):
+            bounds = schedule.get(gain)
+            if isinstance(bounds, dict) and bounds["min"] < 0 and bounds["max"] < 0:
+                lo, hi = sorted((bounds["min"], bounds["max"]), key=abs)
+                schedule[gain] = {"min": lo, "max": hi}
+
+
+def _derivative(method: str, on: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    def change(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        pid["derivative"] = {"method": method, "N": 100.0, "on": on}
+
+    return change
+
+
+def _integral_inside(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    pid["integral"] = "inside"
+
+
+def _signed_error(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    for loop in pid["loops"].values():
+        if loop["schedule"].get("kind") == "error_ags":
+            loop["schedule"]["error"] = "signed"
+
+
+def _saturation(anti_windup: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    def change(pid: Raw, params: Mapping[str, float], inputs: list[str]) -> None:
+        pid["saturation"] = {"limits": {name: params["F_max"] for name in inputs}, "anti_windup": anti_windup}
+
+    return change
+
+
+def _unchanged(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """Today's setting: the config as it is."""
+
+
+F_MAX = {"F_max": (2.0, 100.0)}
+
+#: family -> value -> option; the first value of each family is the default (today's).
+FAMILIES: dict[str, dict[str, OptionValue]] = {
+    "ordering": {
+        "value": OptionValue("AGS ranges min/max by value, as printed (today)", _unchanged),
+        "magnitude": OptionValue("negative-gain AGS ranges min/max by magnitude", _by_magnitude),
+    },
+    "derivative": {
+        "backward": OptionValue("backward difference of e (today)", _unchanged),
+        "filtered": OptionValue("filtered N s/(s + N), N = 100 (Simulink's default)", _derivative("filtered", "error")),
+        "measurement": OptionValue("filtered, N = 100, on the measurement", _derivative("filtered", "measurement")),
+    },
+    "integral": {
+        "outside": OptionValue("u = k_i(t) integral(e), eqs. 2.17-2.22 as printed (today)", _unchanged),
+        "inside": OptionValue("u = integral(k_i(t) e) (Simulink's AGS by a gain block)", _integral_inside),
+    },
+    "ags_error": {
+        "abs": OptionValue("error AGS on |e| (today)", _unchanged),
+        "signed": OptionValue("error AGS on e as eqs. 2.20-2.22 print it", _signed_error),
+    },
+    "saturation": {
+        "none": OptionValue("unlimited forces (today)", _unchanged),
+        "plain": OptionValue("|F| <= F_max, no anti-windup", _saturation("none"), F_MAX),
+        "clamping": OptionValue("|F| <= F_max, clamping anti-windup", _saturation("clamping"), F_MAX),
+        "back_calculation": OptionValue(
+            "|F| <= F_max, back-calculation anti-windup", _saturation("back_calculation"), F_MAX
+        ),
+    },
+}
+
+
+def default(family: str) -> str:
+    return next(iter(FAMILIES[family]))
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """Non-default option values by family (empty: the literal loop)."""
+
+    options: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def name(self) -> str:
+        return "+".join(f"{f}={v}" for f, v in self.options) or "literal"
+
+    def free(self) -> dict[str, tuple[float, float]]:
+        """The continuous parameters this hypothesis frees (beyond the conventional gains)."""
+        out: dict[str, tuple[float, float]] = {}
+        for family, value in self.options:
+            out.update(FAMILIES[family][value].free)
+        return out
+
+    def apply(self, raw: Raw, params: Mapping[str, float], inputs: list[str]) -> Raw:
+        """A copy of the interpolated experiment ``raw`` with the options on every PID controller
+        (the plant's ``inputs`` are what a saturation limits)."""
+        out = copy.deepcopy(raw)
+        for controller in out.get("controllers", {}).values():
+            if controller.get("kind") != "pid":
+                continue
+            for family, value in self.options:
+                FAMILIES[family][value].change(controller, params, inputs)
+        return out
+
+
+def family(families: list[str], max_options: int) -> list[Hypothesis]:
+    """The literal loop and every combination of up to ``max_options`` non-default values of
+    distinct ``families`` (in the order of :data:`FAMILIES`)."""
+    ordered = [f for f in FAMILIES if f in families]
+    out = [Hypothesis()]
+    for size in range(1, max_options + 1):
+        for chosen in itertools.combinations(ordered, size):
+            values = [[v for v in FAMILIES[f] if v != default(f)] for f in chosen]
+            out += [Hypothesis(tuple(zip(chosen, combo, strict=True))) for combo in itertools.product(*values)]
+    return out

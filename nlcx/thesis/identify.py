@@ -1,0 +1,295 @@
+"""Which loop did the thesis simulate? Fit each hypothesis on the train tables, rank on validation.
+
+An identification spec (YAML) names the split (configs/identify/split.yaml), the option
+families and the largest number of options combined, the conventional gains left free in
+every hypothesis, and the GA settings::
+
+    name: pendulum_loop
+    split: split.yaml
+    families: [ordering, derivative, integral, ags_error, saturation]
+    max_options: 3
+    free:
+      vars.conventional.angle.kp: [10, 120]
+      ...
+    optimiser: {kind: ga, pop_size: 30, generations: 20, seed: 1}
+
+For every hypothesis (:mod:`nlcx.thesis.hypotheses`), the seeded GA minimises the mean squared
+relative residual over the train cells only (floors as the calibration: 0.05 for M_p, 0.5 s
+for times; a diverged run or an undefined metric costs 10), every candidate's experiments of a
+generation in one pipeline call (:func:`nlcx.engine.evaluate`). The fitted loop is then
+measured on every table and scored per part: the median relative error |ours - thesis| /
+|thesis| of M_p, t_r, t_s (cells with a printed 0 excluded), per controller, and the share of
+comparable cells where the sign of (proposed - conventional) agrees with the thesis.
+Hypotheses are ranked by the validation score, never by the test score.
+
+Each finished fit is written at once (``fits/<hypothesis>.json`` and ``.fit.csv``, atomically),
+so a killed study loses no finished fit and a rerun skips them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from nlcx import config as cfg
+from nlcx import engine, report
+from nlcx.errors import ConfigError
+from nlcx.thesis import catalog, hypotheses, split
+from nlcx.thesis.tables import thesis_value
+from nlcx.tuning.optimise import GASettings, evolve
+from nlcx.validation import validate_model
+
+FLOORS = {"Mp": 0.05, "tr": 0.5, "ts": 0.5}
+PENALTY = 10.0
+CONTROLLERS = ("conventional", "proposed")
+
+
+class IdentifySpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str
+    split: str
+    families: list[str] = Field(default_factory=lambda: list(hypotheses.FAMILIES))
+    max_options: int = Field(3, ge=0, le=len(hypotheses.FAMILIES))
+    #: Conventional gains free in every hypothesis: dotted config keys and bounds.
+    free: dict[str, tuple[float, float]] = Field(min_length=1)
+    optimiser: GASettings = GASettings(pop_size=30, generations=20, seed=1)
+    #: Fit only these hypotheses (by name; default: the whole family).
+    only: list[str] | None = None
+
+    @field_validator("families")
+    @classmethod
+    def _known(cls, families: list[str]) -> list[str]:
+        unknown = [f for f in families if f not in hypotheses.FAMILIES]
+        if unknown:
+            raise ValueError(f"unknown option families {unknown}; allowed: {', '.join(hypotheses.FAMILIES)}")
+        return families
+
+    @field_validator("free")
+    @classmethod
+    def _bounds(cls, free: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        for key, (lo, hi) in free.items():
+            if not lo < hi:
+                raise ValueError(f"bounds of {key} must be [lower, upper] with lower < upper")
+            if not key.startswith("vars.conventional."):
+                raise ValueError(f"{key}: only the conventional gains (vars.conventional.*) are free")
+        return free
+
+
+class TableRuns:
+    """The experiment of each thesis table, with candidate values and a hypothesis applied."""
+
+    def __init__(self, root: Path, tables: list[str]) -> None:
+        paths = {t.table: t.configs[0] for t in catalog.tables(root) if t.kind == "metrics"}
+        self.raw = {table: cfg.read_config(paths[table]) for table in tables}
+        self.inputs = {
+            table: [s.name for s in cfg.build(cfg.interpolate(raw)).plant_model.inputs]
+            for table, raw in self.raw.items()
+        }
+
+    def experiment(self, table: str, hyp: hypotheses.Hypothesis, values: dict[str, float]) -> cfg.Experiment:
+        """Table ``table``'s experiment with the free values set and the hypothesis applied."""
+        gains = [f"{k}={v!r}" for k, v in values.items() if k.startswith("vars.")]
+        raw = cfg.interpolate(cfg.apply_overrides(self.raw[table], gains))
+        return cfg.build(hyp.apply(raw, values, self.inputs[table]))
+
+
+def measure_cells(
+    runs: TableRuns, hyp: hypotheses.Hypothesis, candidates: list[dict[str, float]], cells: pd.DataFrame
+) -> np.ndarray:
+    """Our value of every cell (rows) for every candidate (columns); NaN where a run diverged
+    or the metric is undefined. All candidates' experiments go through one pipeline call."""
+    tables = list(dict.fromkeys(cells.table))
+    exps = [runs.experiment(t, hyp, c) for c in candidates for t in tables]
+    results = engine.evaluate(exps, record_logs=False)
+    out = np.full((len(cells), len(candidates)), np.nan)
+    for k in range(len(candidates)):
+        for t_index, table in enumerate(tables):
+            result = results[k * len(tables) + t_index]
+            ok = {run.label for run in result.runs if run.status == "ok"}
+            metrics = result.metrics
+            for i, cell in enumerate(cells.itertuples(index=False)):
+                if cell.table == table and cell.controller in ok:
+                    out[i, k] = thesis_value(metrics, cell.controller, cell.signal, cell.metric)
+    return out
+
+
+def train_loss(ours: np.ndarray, cells: pd.DataFrame) -> np.ndarray:
+    """Mean squared relative residual per candidate (columns of ``ours``); PENALTY where undefined."""
+    thesis = cells.value.to_numpy()[:, None]
+    floor = cells.metric.map(FLOORS).to_numpy()[:, None]
+    with np.errstate(invalid="ignore"):
+        residual = (ours - thesis) / np.maximum(np.abs(thesis), floor)
+    residual = np.where(np.isfinite(residual), residual, PENALTY)
+    return np.mean(residual**2, axis=0)
+
+
+class Objective:
+    """Train loss of a population of candidates (rows of X: the free values in ``keys`` order)."""
+
+    def __init__(self, root: Path, hyp: hypotheses.Hypothesis, keys: list[str], cells: pd.DataFrame) -> None:
+        self.root, self.hyp, self.keys, self.cells = root, hyp, keys, cells
+        self._runs: TableRuns | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_runs": None}
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        if self._runs is None:
+            self._runs = TableRuns(self.root, list(dict.fromkeys(self.cells.table)))
+        candidates = [dict(zip(self.keys, map(float, x), strict=True)) for x in np.atleast_2d(X)]
+        return train_loss(measure_cells(self._runs, self.hyp, candidates, self.cells), self.cells)
+
+
+def scores(fit: pd.DataFrame) -> dict[str, float]:
+    """Per part: median relative error per controller and overall, and direction agreement."""
+    out: dict[str, float] = {}
+    for part, rows in fit.groupby("part", sort=False):
+        rel = rows[rows.thesis != 0]
+        out[f"{part}_median_rel_error"] = float(np.nanmedian(rel.rel_error)) if len(rel) else math.nan
+        for c in CONTROLLERS:
+            mine = rel[rel.controller == c]
+            out[f"{part}_{c}_median_rel_error"] = float(np.nanmedian(mine.rel_error)) if len(mine) else math.nan
+        out[f"{part}_direction_agreement"] = direction_agreement(rows)
+    return out
+
+
+def direction_agreement(rows: pd.DataFrame) -> float:
+    """Share of (table, signal, metric) cells with both controllers where the sign of
+    (proposed - conventional) is the thesis's; cells the thesis prints equal are left out."""
+    wide = rows.pivot_table(index=["table", "signal", "metric"], columns="controller", values=["thesis", "nlcx"])
+    if not all((col, c) in wide.columns for col in ("thesis", "nlcx") for c in CONTROLLERS):
+        return math.nan
+    theirs = np.sign(wide["thesis"]["proposed"] - wide["thesis"]["conventional"])
+    ours = np.sign(wide["nlcx"]["proposed"] - wide["nlcx"]["conventional"])
+    comparable = (theirs != 0) & ours.notna()
+    return float((theirs[comparable] == ours[comparable]).mean()) if comparable.any() else math.nan
+
+
+def all_cells(spec_split: split.Split) -> pd.DataFrame:
+    """Every pendulum cell of the split with its part."""
+    parts = [split.cells(spec_split, part)[0].assign(part=part) for part in split.PARTS]
+    return pd.concat(parts, ignore_index=True)[["part", "table", "signal", "controller", "metric", "value"]]
+
+
+def fit_hypothesis(
+    spec: IdentifySpec, root: Path, hyp: hypotheses.Hypothesis, cells: pd.DataFrame, jobs: int
+) -> tuple[dict[str, Any], pd.DataFrame]:
+    """Fit ``hyp`` on the train cells, then measure it on every cell: (summary, fit table)."""
+    bounds = {**spec.free, **hyp.free()}
+    keys = list(bounds)
+    train = cells[cells.part == "train"].reset_index(drop=True)
+    objective = Objective(root, hyp, keys, train)
+    lower, upper = (np.array([b[i] for b in bounds.values()]) for i in (0, 1))
+    start = time.perf_counter()
+    if jobs > 1:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            result = evolve(objective, lower, upper, spec.optimiser, pool, jobs)
+    else:
+        result = evolve(objective, lower, upper, spec.optimiser)
+    values = dict(zip(keys, map(float, result.x), strict=True))
+    ours = measure_cells(TableRuns(root, list(dict.fromkeys(cells.table))), hyp, [values], cells)[:, 0]
+    fit = cells.rename(columns={"value": "thesis"}).assign(nlcx=ours)
+    fit["rel_error"] = np.abs(fit.nlcx - fit.thesis) / fit.thesis.abs().where(fit.thesis != 0)
+    summary = {
+        "hypothesis": hyp.name,
+        "options": dict(hyp.options),
+        "values": values,
+        "train_loss": float(result.f),
+        "evaluations": result.evaluations,
+        "wall_s": round(time.perf_counter() - start, 2),
+        **scores(fit),
+    }
+    return summary, fit
+
+
+def load_spec(path: Path) -> IdentifySpec:
+    return validate_model(IdentifySpec, yaml.safe_load(path.read_text(encoding="utf-8")) or {}, "")
+
+
+def spec_digest(spec: IdentifySpec, spec_split: split.Split) -> str:
+    """What a finished fit depends on: the spec (but ``only``) and the split."""
+    text = json.dumps([spec.model_dump(exclude={"only"}), spec_split.model_dump()], sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def identify(path: Path, out_dir: Path, jobs: int = 1, root: Path | None = None, progress: Any = None) -> pd.DataFrame:
+    """Fit every hypothesis of spec ``path`` (resuming), write ranking.csv and the figure."""
+    spec = load_spec(path)
+    spec_split = split.load((path.parent / spec.split).resolve())
+    root = root or Path("configs") / "thesis"
+    cells = all_cells(spec_split)
+    digest = spec_digest(spec, spec_split)
+    family = hypotheses.family(spec.families, spec.max_options)
+    if spec.only is not None:
+        known = {h.name for h in family}
+        missing = [n for n in spec.only if n not in known]
+        if missing:
+            raise ConfigError("only", missing[0], "not a hypothesis of the spec's families and max_options")
+        family = [h for h in family if h.name in spec.only]
+    for k, hyp in enumerate(family):
+        done = out_dir / "fits" / f"{hyp.name}.json"
+        if done.exists() and json.loads(done.read_text()).get("spec_digest") == digest:
+            continue
+        summary, fit = fit_hypothesis(spec, root, hyp, cells, jobs)
+        report.write_csv(out_dir / "fits" / f"{hyp.name}.fit.csv", fit)
+        report.write_text(done, json.dumps({**summary, "spec_digest": digest}, indent=2) + "\n")
+        if progress is not None:
+            progress(k + 1, len(family), hyp.name)
+    return write_ranking(out_dir, [h.name for h in family])
+
+
+def write_ranking(out_dir: Path, names: list[str]) -> pd.DataFrame:
+    """ranking.csv (by validation median relative error) and ranking.png from the fits."""
+    rows = []
+    for name in names:
+        summary = json.loads((out_dir / "fits" / f"{name}.json").read_text())
+        values = summary.pop("values")
+        options = summary.pop("options")
+        summary.pop("spec_digest", None)
+        rows.append({**summary, "options": json.dumps(options), "values": json.dumps(values)})
+    ranking = pd.DataFrame(rows).sort_values(
+        ["validation_median_rel_error", "validation_direction_agreement"], ascending=[True, False], kind="stable"
+    )
+    ranking.insert(0, "rank", np.arange(1, len(ranking) + 1))
+    report.write_csv(out_dir / "ranking.csv", ranking)
+    ranking_figure(ranking, out_dir / "ranking.png")
+    return ranking
+
+
+def ranking_figure(ranking: pd.DataFrame, path: Path, top: int = 8) -> None:
+    """Train, validation and test median relative error of the top hypotheses beside the literal one."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    shown = pd.concat([ranking.head(top), ranking[ranking.hypothesis == "literal"]]).drop_duplicates("hypothesis")
+    x = np.arange(len(shown))
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(shown)), 4.0))
+    for i, part in enumerate(split.PARTS):
+        ax.bar(x + (i - 1) * 0.27, shown[f"{part}_median_rel_error"], width=0.27, label=part)
+    ax.set_xticks(
+        x,
+        [f"{r}. {h}" for r, h in zip(shown["rank"], shown.hypothesis, strict=True)],
+        rotation=30,
+        ha="right",
+        fontsize=7,
+    )
+    ax.set_ylabel("median |nlcx - thesis| / |thesis|")
+    ax.set_title("Hypotheses ranked by validation error (M_p, t_r, t_s)")
+    ax.legend()
+    fig.tight_layout()
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+    tmp.replace(path)

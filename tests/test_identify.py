@@ -1,0 +1,127 @@
+"""The identification study: hypotheses are real loop options; fits see only the train cells."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+from typer.testing import CliRunner
+
+from nlcx import config, engine
+from nlcx.cli import app
+from nlcx.thesis import hypotheses
+from nlcx.thesis.identify import TableRuns, direction_agreement, train_loss
+
+ROOT = Path(__file__).resolve().parents[1]
+THESIS = ROOT / "configs" / "thesis"
+SPLIT = ROOT / "configs" / "identify" / "split.yaml"
+runner = CliRunner()
+GAINS = {
+    "vars.conventional.angle.kp": 71.7077, "vars.conventional.angle.ki": 9.1422, "vars.conventional.angle.kd": 4.8168,
+    "vars.conventional.position.kp": -9.851, "vars.conventional.position.ki": -3.6512,
+    "vars.conventional.position.kd": -12.2729,
+}  # fmt: skip
+
+
+def built(hyp: hypotheses.Hypothesis, table: str = "2.5", **values: float) -> engine.Prepared:
+    runs = TableRuns(THESIS, [table])
+    return engine.prepare(runs.experiment(table, hyp, {**GAINS, **values}))
+
+
+def test_the_family_is_every_combination_of_up_to_three_options() -> None:
+    family = hypotheses.family(list(hypotheses.FAMILIES), 3)
+    names = [h.name for h in family]
+    assert names[0] == "literal" and len(names) == len(set(names)) == 67
+    assert all(len(h.options) <= 3 for h in family)
+    assert all(len({f for f, _ in h.options}) == len(h.options) for h in family)  # one value per family
+
+
+def test_literal_is_todays_experiment() -> None:
+    ours = built(hypotheses.Hypothesis())
+    today = engine.prepare(config.load(THESIS / "ch2" / "fig_2_17.yaml"))
+    for a, b in zip(ours.controllers, today.controllers, strict=True):
+        assert np.array_equal(a.cp, b.cp)
+
+
+def test_options_reach_the_controllers_as_loop_settings() -> None:
+    hyp = hypotheses.Hypothesis((("ordering", "magnitude"), ("derivative", "filtered"), ("saturation", "clamping")))
+    prep = built(hyp, F_max=7.5)
+    proposed = next(c for c in prep.controllers if c.label == "proposed").config
+    assert proposed["loops"]["x"]["schedule"]["kp"] == {"min": -2.4, "max": -3.0}  # |min| < |max|
+    assert proposed["loops"]["theta"]["schedule"]["kp"] == {"min": 24.0, "max": 36.0}  # positive: unchanged
+    assert proposed["derivative"]["method"] == "filtered" and proposed["derivative"]["N"] == 100.0
+    assert proposed["saturation"] == {"limits": {"F_x": 7.5}, "anti_windup": "clamping", "kb": 1.0}
+    signed = built(hypotheses.Hypothesis((("ags_error", "signed"), ("integral", "inside"))))
+    proposed = next(c for c in signed.controllers if c.label == "proposed").config
+    assert proposed["loops"]["x"]["schedule"]["error"] == "signed" and proposed["integral"] == "inside"
+    assert hyp.free() == {"F_max": (2.0, 100.0)}
+
+
+def test_train_loss_is_the_mean_squared_relative_residual_with_floors() -> None:
+    cells = pd.DataFrame({"metric": ["Mp", "tr", "ts"], "value": [0.0, 2.0, 4.0]})
+    ours = np.array([[0.1, np.nan], [2.5, 2.0], [4.0, 4.0]])
+    loss = train_loss(ours, cells)
+    assert np.isclose(loss[0], ((0.1 / 0.05) ** 2 + 0.25**2 + 0.0) / 3)
+    assert np.isclose(loss[1], (10.0**2 + 0 + 0) / 3)  # an undefined metric costs 10
+
+
+def test_direction_agreement_counts_signs_of_proposed_minus_conventional() -> None:
+    rows = pd.DataFrame(
+        [
+            ("2.3", "x", "Mp", "conventional", 0.5, 0.4),
+            ("2.3", "x", "Mp", "proposed", 0.2, 0.3),  # both better: agrees
+            ("2.3", "x", "tr", "conventional", 2.0, 1.0),
+            ("2.3", "x", "tr", "proposed", 2.1, 0.9),  # thesis worse, ours better: disagrees
+            ("2.3", "x", "ts", "conventional", 3.0, 3.0),
+            ("2.3", "x", "ts", "proposed", 3.0, 2.0),  # printed equal: not comparable
+        ],
+        columns=["table", "signal", "metric", "controller", "thesis", "nlcx"],
+    )
+    assert direction_agreement(rows) == 0.5
+
+
+def _spec(tmp_path: Path, split: Path) -> Path:
+    raw = {
+        "name": "tiny",
+        "split": str(split),
+        "families": ["saturation"],
+        "max_options": 1,
+        "only": ["literal", "saturation=back_calculation"],
+        "free": {k: [v * 0.8, v * 1.2] if v > 0 else [v * 1.2, v * 0.8] for k, v in GAINS.items()}
+        | {"vars.conventional.z.kp": [60, 100], "vars.conventional.z.ki": [20, 30], "vars.conventional.z.kd": [25, 35]},
+        "optimiser": {"kind": "ga", "pop_size": 4, "generations": 1, "seed": 3},
+    }
+    path = tmp_path / "spec.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+def test_identify_fits_on_train_only_ranks_on_validation_and_resumes(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["identify", str(_spec(tmp_path, SPLIT)), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    ranking = pd.read_csv(out / "ranking.csv")
+    assert set(ranking.hypothesis) == {"literal", "saturation=back_calculation"}
+    assert list(ranking.validation_median_rel_error) == sorted(ranking.validation_median_rel_error)
+    assert (out / "ranking.png").stat().st_size > 0
+    fit = pd.read_csv(out / "fits" / "literal.fit.csv", dtype={"table": str})
+    assert set(fit[fit.part == "train"].table) == {"2.3", "2.5", "3.7"}
+    first = json.loads((out / "fits" / "literal.json").read_text())
+    # a second run resumes: the finished fits are not redone
+    stamp = (out / "fits" / "literal.json").stat().st_mtime_ns
+    assert runner.invoke(app, ["identify", str(_spec(tmp_path, SPLIT)), "--out", str(out)]).exit_code == 0
+    assert (out / "fits" / "literal.json").stat().st_mtime_ns == stamp
+    # moving a validation table to test changes nothing the fit saw: same values, same loss
+    moved = yaml.safe_load(SPLIT.read_text())
+    moved["pendulum"]["validation"].remove("2.4")
+    moved["pendulum"]["test"].append("2.4")
+    other = tmp_path / "other_split.yaml"
+    other.write_text(yaml.safe_dump(moved))
+    out2 = tmp_path / "out2"
+    assert runner.invoke(app, ["identify", str(_spec(tmp_path, other)), "--out", str(out2)]).exit_code == 0
+    second = json.loads((out2 / "fits" / "literal.json").read_text())
+    assert second["values"] == first["values"] and second["train_loss"] == first["train_loss"]
+    assert second["validation_median_rel_error"] != first["validation_median_rel_error"]
