@@ -72,6 +72,7 @@ bench: install
 ## identify: the identification study (docs/fidelity.md): fit every loop hypothesis on the train tables, rank on validation
 identify: install
 	$(BIN)/nlcx identify configs/identify/pendulum.yaml --jobs $(JOBS) --out results/identify/pendulum_loop
+	$(BIN)/python scripts/fidelity_report.py results/identify/pendulum_loop > docs/fidelity_results.md
 
 ## calibrate: refit the unprinted conventional gains (writes configs/thesis/gains/conventional.yaml)
 calibrate: install

@@ -231,11 +231,17 @@ def reproduce(
         list[str] | None,
         typer.Option("--set", help="Override for every experiment, e.g. plant.params.equations=printed."),
     ] = None,
+    profile: Annotated[
+        str,
+        typer.Option("--profile", help="Loop profile (configs/thesis/profiles/NAME.yaml); literal: as printed."),
+    ] = "literal",
 ) -> None:
     """Regenerate the thesis's figures and tables (ours beside theirs) and check its claims."""
+    from nlcx.thesis import profiles
     from nlcx.thesis.reproduce import reproduce as run_reproduce
 
     _imported()
+    chosen = profiles.load(profile, configs)
 
     start = time.perf_counter()
     keys = [k for k in (only or "").split(",") if k.strip()]
@@ -248,9 +254,16 @@ def reproduce(
         typer.echo(f"  [{done[0]:>3}] {record.name:<12} {record.wall:5.2f} s{note}")
 
     summary = run_reproduce(
-        configs, out, chapters=chapter, only=keys, jobs=jobs, progress=progress, overrides=tuple(set_ or ())
+        configs,
+        out,
+        chapters=chapter,
+        only=keys,
+        jobs=jobs,
+        progress=progress,
+        overrides=tuple(set_ or ()),
+        profile=chosen,
     )
-    typer.echo(f"{len(summary['figures'])} figures, {len(summary['tables'])} tables -> {out}/")
+    typer.echo(f"profile {chosen.name}: {len(summary['figures'])} figures, {len(summary['tables'])} tables -> {out}/")
     if "claims" in summary:
         counts = summary["claims"].reproduced.value_counts().to_dict()
         typer.echo("claims: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))

@@ -22,9 +22,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from nlcx.config import load as load_config
 from nlcx.errors import ConfigError, NlcxError
-from nlcx.thesis import catalog, cstr, tables
+from nlcx.thesis import catalog, cstr, profiles, tables
 from nlcx.thesis.catalog import FigureSpec, TableSpec
 
 
@@ -64,16 +63,21 @@ def _extras(result: Any) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["controller", "signal", "metric", "value"])
 
 
-def run_config(config: Path, out_dir: Path, figure: tuple[str, str] | None, overrides: tuple[str, ...] = ()) -> Record:
-    """Run one experiment, write its run directory and (optionally) its figure."""
+def run_config(
+    config: Path,
+    out_dir: Path,
+    figure: tuple[str, str] | None,
+    overrides: tuple[str, ...] = (),
+    profile: profiles.Profile | None = None,
+) -> Record:
+    """Run one experiment (under ``profile``), write its run directory and (optionally) its figure."""
     import time
 
-    from nlcx import config as cfg
     from nlcx import engine, report
     from nlcx.thesis.lyapunov import lyapunov_rate
 
     start = time.perf_counter()
-    exp = cfg.load(config, [*overrides, "outputs.timeseries=false", "outputs.figure=false"])
+    exp = profiles.experiment(config, [*overrides, "outputs.timeseries=false", "outputs.figure=false"], profile)
     result = engine.run_experiment(exp)
     report.write_run(result, out_dir / "runs" / exp.name, result.timings, started=start)
     if figure is not None:
@@ -134,14 +138,14 @@ def _needed_configs(root: Path, figs: list[FigureSpec], tabs: list[TableSpec], w
     return list(needed)
 
 
-def _check_configs(configs: list[Path], overrides: tuple[str, ...]) -> None:
+def _check_configs(configs: list[Path], overrides: tuple[str, ...], profile: profiles.Profile | None) -> None:
     """Fail fast, in this process, on a missing or bad config."""
     missing = [str(c) for c in configs if not c.is_file()]
     if missing:
         raise NlcxError(f"missing experiment config(s): {', '.join(missing[:3])}")
     for config in configs:
         try:
-            load_config(config, list(overrides))
+            profiles.experiment(config, list(overrides), profile)
         except ConfigError as exc:
             raise NlcxError(f"{config}: {exc}") from None
 
@@ -153,11 +157,12 @@ def _run_all(
     overrides: tuple[str, ...],
     jobs: int,
     progress: Any,
+    profile: profiles.Profile | None = None,
 ) -> dict[Path, Record]:
     """Run every config in a process pool, in order, drawing the response figures named in ``titles``."""
     records: dict[Path, Record] = {}
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = {c: pool.submit(run_config, c, out_dir, titles.get(c), overrides) for c in configs}
+        futures = {c: pool.submit(run_config, c, out_dir, titles.get(c), overrides, profile) for c in configs}
         for config, future in futures.items():
             records[config] = future.result()
             if progress is not None:
@@ -206,17 +211,19 @@ def reproduce(
     jobs: int | None = None,
     progress: Any = None,
     overrides: tuple[str, ...] = (),
+    profile: profiles.Profile | None = None,
 ) -> dict[str, Any]:
-    """Run what the selected figures and tables need, then write them and the claims."""
+    """Run what the selected figures and tables need (every experiment under ``profile``),
+    then write them and the claims."""
     from nlcx import report
     from nlcx.thesis import claims
 
     figs, tabs = select(catalog.figures(root), catalog.tables(root), chapters, only)
     claims_needed = not only
     needed = _needed_configs(root, figs, tabs, claims_needed)
-    _check_configs(needed, overrides)
+    _check_configs(needed, overrides, profile)
     titles = {f.configs[0]: (f.filename, f.title) for f in figs if f.kind == "response"}
-    records = _run_all(needed, out_dir, titles, overrides, jobs or os.cpu_count() or 1, progress)
+    records = _run_all(needed, out_dir, titles, overrides, jobs or os.cpu_count() or 1, progress, profile)
     for spec in figs:
         if spec.kind in ("lyapunov", "membership"):
             _write_figure(spec, records, out_dir)

@@ -1,0 +1,88 @@
+"""Reproduction profiles: the loop hypothesis (and fitted values) every thesis experiment runs with.
+
+A profile (``configs/thesis/profiles/<name>.yaml``) names a hypothesis of
+:mod:`nlcx.thesis.hypotheses` by its options, the values it was fitted to (the conventional
+gains and the hypothesis's own parameters, e.g. F_max) and the plants it applies to::
+
+    name: saturation-clamping
+    hypothesis: {saturation: clamping}
+    values: {vars.conventional.angle.kp: 80.1, ..., F_max: 24.5}
+    plants: [x_pendulum, xy_pendulum, xz_pendulum, xyz_pendulum]
+    source: nlcx identify configs/identify/pendulum.yaml (rank 1 by validation)
+
+``literal`` is today's behaviour: no option, no value, every experiment exactly as its config.
+``nlcx reproduce --profile NAME`` runs every figure, table and claim under a profile.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from nlcx import config as cfg
+from nlcx.errors import ConfigError
+from nlcx.thesis import hypotheses
+from nlcx.validation import validate_model
+
+PENDULUMS = ["x_pendulum", "xy_pendulum", "xz_pendulum", "xyz_pendulum"]
+
+
+class Profile(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str
+    #: Non-default option values by family (empty: the literal loop).
+    hypothesis: dict[str, str] = Field(default_factory=dict)
+    #: Fitted values: conventional gains (vars.*) and the hypothesis's free parameters.
+    values: dict[str, float] = Field(default_factory=dict)
+    #: Plants whose experiments the profile changes; the others run as configured.
+    plants: list[str] = Field(default_factory=lambda: list(PENDULUMS))
+    source: str = ""
+
+    @field_validator("hypothesis")
+    @classmethod
+    def _options(cls, options: dict[str, str]) -> dict[str, str]:
+        for family, value in options.items():
+            if family not in hypotheses.FAMILIES or value not in hypotheses.FAMILIES[family]:
+                allowed = ", ".join(f"{f}={v}" for f, vs in hypotheses.FAMILIES.items() for v in vs)
+                raise ValueError(f"unknown option {family}={value}; allowed: {allowed}")
+        return options
+
+    @property
+    def literal(self) -> bool:
+        return not self.hypothesis and not self.values
+
+    def as_hypothesis(self) -> hypotheses.Hypothesis:
+        order = list(hypotheses.FAMILIES)
+        return hypotheses.Hypothesis(tuple(sorted(self.hypothesis.items(), key=lambda kv: order.index(kv[0]))))
+
+
+def load(name: str, root: Path) -> Profile:
+    """The profile ``name`` (a file in ``root/profiles/`` or a path to a YAML file)."""
+    path = Path(name) if name.endswith((".yaml", ".yml")) else root / "profiles" / f"{name}.yaml"
+    if not path.is_file():
+        known = sorted(p.stem for p in (root / "profiles").glob("*.yaml"))
+        raise ConfigError("--profile", name, f"no such profile; allowed: {', '.join(known)}")
+    return validate_model(Profile, yaml.safe_load(path.read_text(encoding="utf-8")) or {}, "")
+
+
+def experiment(path: Path, overrides: list[str], profile: Profile | None) -> cfg.Experiment:
+    """The experiment of config ``path`` under ``profile`` (none or literal: as configured)."""
+    if profile is None or profile.literal:
+        return cfg.load(path, overrides)
+    raw = cfg.apply_overrides(cfg.read_config(path), overrides)
+    plant = (raw.get("plant") or {}).get("name")
+    if plant not in profile.plants:
+        return cfg.build(cfg.interpolate(raw))
+    return apply(raw, profile.as_hypothesis(), profile.values)
+
+
+def apply(raw: dict[str, Any], hyp: hypotheses.Hypothesis, values: dict[str, float]) -> cfg.Experiment:
+    """``raw`` (a config before interpolation) with the fitted ``values`` set and ``hyp``'s
+    options on its PID controllers, validated."""
+    gains = [f"{k}={v!r}" for k, v in values.items() if k.startswith("vars.")]
+    resolved = cfg.interpolate(cfg.apply_overrides(raw, gains))
+    inputs = [s.name for s in cfg.build(resolved).plant_model.inputs]
+    return cfg.build(hyp.apply(resolved, values, inputs))
