@@ -223,6 +223,11 @@ def _settle_heap() -> None:
     gc.freeze()
 
 
+def _cell(value: Any) -> Any:
+    """A varied value as a sweep.csv cell: a mapping or list (e.g. a whole section) as JSON."""
+    return json.dumps(value, sort_keys=True) if isinstance(value, dict | list) else value
+
+
 def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
     """Simulate a batch of variants and write its part files (the metrics, then the index).
 
@@ -236,7 +241,7 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
     for pos, (variant, digest) in enumerate(zip(batch.variants, batch.hashes, strict=True)):
         start = time.perf_counter()
         row: dict[str, Any] = {"variant": variant.index, "seed": variant.seed, "config_hash": digest}
-        row.update({f"value:{k}": v for k, v in variant.values.items()})
+        row.update({f"value:{k}": _cell(v) for k, v in variant.values.items()})
         try:
             prepared_of[pos] = engine.prepare(cfg.build(variant.resolve(batch.base_raw)))
             row.update(status="ok", message="")

@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 
 from nlcx import config, engine
 from nlcx.cli import app
-from nlcx.thesis import hypotheses
+from nlcx.thesis import hypotheses, profiles
 from nlcx.thesis.identify import TableRuns, direction_agreement, train_loss
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -107,6 +107,9 @@ def test_identify_fits_on_train_only_ranks_on_validation_and_resumes(tmp_path: P
     assert set(ranking.hypothesis) == {"literal", "saturation=back_calculation"}
     assert list(ranking.validation_median_rel_error) == sorted(ranking.validation_median_rel_error)
     assert (out / "ranking.png").stat().st_size > 0
+    profile = profiles.load(str(out / "profile.yaml"), THESIS)  # rank 1 as a reproduction profile
+    assert profile.as_hypothesis().name == ranking.hypothesis.iloc[0]
+    assert set(profile.values) >= {"vars.conventional.angle.kp", "vars.conventional.z.kd"}
     fit = pd.read_csv(out / "fits" / "literal.fit.csv", dtype={"table": str})
     assert set(fit[fit.part == "train"].table) == {"2.3", "2.5", "3.7"}
     first = json.loads((out / "fits" / "literal.json").read_text())

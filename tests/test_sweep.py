@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -157,3 +158,16 @@ def test_timeseries_only_on_request(tmp_path: Path, timeseries: bool) -> None:
     assert runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)]).exit_code == 0
     files = sorted(p.name for p in (out / "timeseries").glob("*.csv")) if (out / "timeseries").exists() else []
     assert files == (["variant_000000.csv", "variant_000001.csv"] if timeseries else [])
+
+
+def test_a_whole_section_can_be_varied_and_is_recorded_as_json(tmp_path: Path) -> None:
+    saturation = {"limits": {"F_x": 2.5}, "anti_windup": "clamping"}
+    path = write_sweep(tmp_path, {"grid": {"controllers.conventional.saturation": [None, saturation]}})
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    index = pd.read_csv(out / "sweep.csv", keep_default_na=False)
+    assert list(index["value:controllers.conventional.saturation"]) == ["", json.dumps(saturation, sort_keys=True)]
+    metrics = pd.read_csv(out / "metrics.csv")
+    peak = metrics[(metrics.controller == "conventional") & (metrics.metric == "peak_input")]
+    assert peak[peak.variant == 1].value.abs().max() <= 2.5 < peak[peak.variant == 0].value.abs().max()
