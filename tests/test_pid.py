@@ -268,3 +268,44 @@ def test_a_limit_on_an_unknown_input_is_a_config_error() -> None:
 
     with pytest.raises(ConfigError, match=r"controllers\.c\.saturation\.limits\.F_y"):
         build(copy.deepcopy(CONST) | {"saturation": {"limits": {"F_y": 2.0}}})
+
+
+@pytest.mark.parametrize("form", ["parallel", "ideal", "series"])
+def test_pid_forms_are_simulinks(form: str) -> None:
+    """ideal: u = k_p (e + k_i I + k_d D); series: u = k_p (1 + k_i/s)(1 + k_d s) e
+    = k_p ((1 + k_i k_d) e + k_i I + k_d D); logged gains are the parallel ones."""
+    dt, kp, ki, kd = 0.01, 3.0, 0.5, 0.2
+    raw = {
+        "kind": "pid",
+        "form": form,
+        "loops": {
+            "theta": {"sign": 1, "schedule": {"kind": "constant", "kp": 0, "ki": 0, "kd": 0}},
+            "x": {"sign": 1, "schedule": {"kind": "constant", "kp": kp, "ki": ki, "kd": kd}},
+        },
+    }
+    e = np.sin(np.linspace(0, 3, 60))
+    ys = np.column_stack([-e, np.zeros_like(e)])  # y_x = -e with r_x = 0
+    u, logs = drive(build(raw), ys, np.zeros_like(ys), dt)
+    parallel = {
+        "parallel": (kp, ki, kd),
+        "ideal": (kp, kp * ki, kp * kd),
+        "series": (kp * (1 + ki * kd), kp * ki, kp * kd),
+    }[form]
+    np.testing.assert_allclose(u, reference_pid(e, *parallel, dt), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(logs[0, 4:7], parallel, rtol=1e-15)
+
+
+def test_a_loop_in_degrees_sees_y_and_r_scaled() -> None:
+    """scale = 180/pi: the loop's error, and so its output, is that of the angle in degrees."""
+    dt = 0.01
+    raw = copy.deepcopy(CONST)
+    rng = np.random.default_rng(5)
+    ys, rs = rng.normal(size=(30, 2)) * 0.1, np.zeros((30, 2))
+    u_rad, _ = drive(build(raw), ys, rs, dt)
+    raw["loops"]["theta"]["scale"] = 180 / np.pi
+    u_deg, _ = drive(build(raw), ys, rs, dt)
+    scaled = ys.copy()
+    scaled[:, 1] *= 180 / np.pi
+    u_manual, _ = drive(build(copy.deepcopy(CONST)), scaled, rs, dt)
+    np.testing.assert_allclose(u_deg, u_manual, rtol=1e-12, atol=1e-12)
+    assert not np.allclose(u_deg, u_rad)

@@ -47,12 +47,14 @@ I = INPUT.at
 #: uses, the sign of its contribution, its schedule (slot in the callback table, offset and
 #: length of the schedule's parameters, built-in schedule called directly), the derivative
 #: (filtered or backward, N, on the measurement or the error), the integral gain inside the
-#: integral, and the set-point weight b of the proportional term.
+#: integral, the set-point weight b of the proportional term, the PID form (:data:`FORMS`)
+#: and the scale of the units the loop sees y and r in (e.g. 180/pi: an angle in degrees).
 LOOP = Layout(
     "PIDLoop",
     (
         "y_index", "r_index", "u_index", "sign", "schedule_slot", "filtered", "N", "on_measurement",
         "gain_inside", "schedule_offset", "schedule_length", "setpoint_weight", "direct_schedule",
+        "form", "scale",
     ),
 )  # fmt: skip
 L = LOOP.at
@@ -68,6 +70,9 @@ S = LOOP_STATE.at
 #: One loop's logged values: k_p, k_i, k_d and the loop's signed contribution to its input.
 LOOP_LOG = Layout("PIDLoopLog", ("kp", "ki", "kd", "u"))
 G = LOOP_LOG.at
+#: How the schedule's (k_p, k_i, k_d) act (Simulink's PID block forms): parallel
+#: k_p + k_i/s + k_d s; ideal k_p (1 + k_i/s + k_d s); series k_p (1 + k_i/s)(1 + k_d s).
+FORMS = {"parallel": 0, "ideal": 1, "series": 2}
 #: Anti-windup of a saturated input (Simulink's PID block: none, clamping, back-calculation).
 ANTI_WINDUP = {"off": -1, "none": 0, "clamping": 1, "back_calculation": 2}
 
@@ -97,6 +102,10 @@ class LoopConfig(BaseModel):
     #: after :meth:`MultiLoopPID.normalize`.
     schedule: dict[str, Any] | SerializeAsAny[ScheduleConfig]
     derivative: DerivativeConfig | None = None
+    #: The units the loop sees its output and reference in, as a factor on y and r (the
+    #: error, the schedule's argument and the gains' units follow): 1 as the plant gives
+    #: them, 57.29577951308232 (180/pi) for an angle in degrees.
+    scale: float = Field(1.0, gt=0)
 
 
 class SaturationConfig(BaseModel):
@@ -128,6 +137,8 @@ class PIDConfig(ControllerConfig):
     feedforward: Literal["none", "equilibrium"] = "none"
     #: Set-point weight b: the proportional term acts on b r - y (b = 1: on the error).
     setpoint_weight: float = 1.0
+    #: PID form of every loop (:data:`FORMS`): the schedule's gains are the form's parameters.
+    form: Literal["parallel", "ideal", "series"] = "parallel"
     #: Actuator saturation with anti-windup (none: unlimited inputs).
     saturation: SaturationConfig | None = None
 
@@ -166,7 +177,9 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
 
     Per loop i: e = r - y, I += e dt (or k_i e dt with the gain inside), D = de/dt by a
     backward difference or filtered by N/(s + N), (k_p, k_i, k_d) from the loop's schedule,
-    u += sign (k_p (b r - y) + k_i I + k_d D). ``callbacks`` holds the registered schedules.
+    u += sign (k_p (b r - y) + k_i I + k_d D), with y and r in the loop's units (scale) and
+    (k_p, k_i, k_d) turned into parallel gains for the ideal or series form.
+    ``callbacks`` holds the registered schedules.
     """
     for row in range(x.shape[0]):
         n_u = int(cp[row, H.n_inputs])
@@ -176,8 +189,8 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
         for i in range(int(cp[row, H.n_loops])):
             h = base + len(L) * i
             c = len(S) * i
-            y_i = y[row, int(cp[row, h + L.y_index])]
-            r_i = r[row, int(cp[row, h + L.r_index])]
+            y_i = y[row, int(cp[row, h + L.y_index])] * cp[row, h + L.scale]
+            r_i = r[row, int(cp[row, h + L.r_index])] * cp[row, h + L.scale]
             e = r_i - y_i
             if cs[row, c + S.started] == 0.0:
                 cs[row, c + S.e_prev] = e
@@ -201,6 +214,9 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
                 kp, ki, kd = constant_gains(t, e, d, cp, row, off)
             else:
                 kp, ki, kd = callbacks[int(cp[row, h + L.schedule_slot])](t, e, d, cp, row, off)
+            form = cp[row, h + L.form]
+            if form != 0.0:  # ideal: k_p (1, k_i, k_d); series: k_p (1 + k_i k_d, k_i, k_d)
+                kp, ki, kd = (kp * (1.0 + ki * kd) if form == 2.0 else kp), kp * ki, kp * kd
             step = ki * e * dt if cp[row, h + L.gain_inside] != 0.0 else e * dt
             cs[row, c + S.integral] += step
             cs[row, c + S.increment] = step
@@ -319,6 +335,8 @@ class MultiLoopPID(ControllerModel):
             schedule_length=length,
             setpoint_weight=cfg.setpoint_weight,
             direct_schedule=_DIRECT.get(registry.schedules.get(kind).gains, VIA_SLOT),
+            form=FORMS[cfg.form],
+            scale=loop.scale,
         )
 
     @staticmethod

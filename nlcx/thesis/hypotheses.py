@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import itertools
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -71,6 +72,21 @@ def _unchanged(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
     """Today's setting: the config as it is."""
 
 
+def _form(form: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    def change(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        pid["form"] = form
+
+    return change
+
+
+def _angles_in_degrees(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """The angle loops (theta, phi) see their output and reference in degrees."""
+    for key, loop in pid["loops"].items():
+        if (loop.get("signal") or key) in ANGLES:
+            loop["scale"] = 180.0 / math.pi
+
+
+ANGLES = ("theta", "phi")
 F_MAX = {"F_max": (2.0, 100.0)}
 
 #: family -> value -> option; the first value of each family is the default (today's).
@@ -91,6 +107,15 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
     "ags_error": {
         "abs": OptionValue("error AGS on |e| (today)", _unchanged),
         "signed": OptionValue("error AGS on e as eqs. 2.20-2.22 print it", _signed_error),
+    },
+    "form": {
+        "parallel": OptionValue("k_p + k_i/s + k_d s (today)", _unchanged),
+        "ideal": OptionValue("k_p (1 + k_i/s + k_d s), Simulink's ideal form", _form("ideal")),
+        "series": OptionValue("k_p (1 + k_i/s)(1 + k_d s)", _form("series")),
+    },
+    "units": {
+        "radians": OptionValue("angle loops see radians (today)", _unchanged),
+        "degrees": OptionValue("angle loops see degrees (y, r, e and the schedule's argument)", _angles_in_degrees),
     },
     "saturation": {
         "none": OptionValue("unlimited forces (today)", _unchanged),
