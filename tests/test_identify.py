@@ -127,4 +127,23 @@ def test_identify_fits_on_train_only_ranks_on_validation_and_resumes(tmp_path: P
     assert runner.invoke(app, ["identify", str(_spec(tmp_path, other)), "--out", str(out2)]).exit_code == 0
     second = json.loads((out2 / "fits" / "literal.json").read_text())
     assert second["values"] == first["values"] and second["train_loss"] == first["train_loss"]
-    assert second["validation_median_rel_error"] != first["validation_median_rel_error"]
+    moved_fit = pd.read_csv(out2 / "fits" / "literal.fit.csv", dtype={"table": str})
+    assert set(moved_fit[moved_fit.table == "2.4"].part) == {"test"}  # scored, as test, not fitted
+
+
+def test_a_diverged_cell_counts_as_a_failure_not_as_missing() -> None:
+    from nlcx.thesis.identify import scores
+
+    fit = pd.DataFrame(
+        {
+            "part": ["validation"] * 3,
+            "table": ["2.4"] * 3,
+            "signal": ["x"] * 3,
+            "controller": ["conventional"] * 3,
+            "metric": ["Mp", "tr", "ts"],
+            "thesis": [0.5, 2.0, 4.0],
+            "nlcx": [0.5, np.nan, np.nan],
+        }
+    )
+    got = scores(fit)
+    assert got["validation_median_rel_error"] == np.inf and got["validation_measured_share"] == 1 / 3

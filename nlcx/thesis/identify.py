@@ -150,15 +150,25 @@ class Objective:
         return train_loss(measure_cells(self._runs, self.hyp, candidates, self.cells), self.cells)
 
 
+def relative_errors(fit: pd.DataFrame) -> pd.Series:
+    """|nlcx - thesis| / |thesis| per cell; inf where our run diverged or the metric is
+    undefined (a failure counts, it is not dropped), NaN where the thesis prints 0."""
+    rel = (fit.nlcx - fit.thesis).abs() / fit.thesis.abs().where(fit.thesis != 0)
+    return rel.where(fit.nlcx.notna() | (fit.thesis == 0), np.inf)
+
+
 def scores(fit: pd.DataFrame) -> dict[str, float]:
-    """Per part: median relative error per controller and overall, and direction agreement."""
+    """Per part: median relative error per controller and overall (failed cells count as
+    infinitely wrong), the share of cells we measured, and direction agreement."""
     out: dict[str, float] = {}
+    fit = fit.assign(rel_error=relative_errors(fit))
     for part, rows in fit.groupby("part", sort=False):
         rel = rows[rows.thesis != 0]
-        out[f"{part}_median_rel_error"] = float(np.nanmedian(rel.rel_error)) if len(rel) else math.nan
+        out[f"{part}_median_rel_error"] = float(np.median(rel.rel_error)) if len(rel) else math.nan
         for c in CONTROLLERS:
             mine = rel[rel.controller == c]
-            out[f"{part}_{c}_median_rel_error"] = float(np.nanmedian(mine.rel_error)) if len(mine) else math.nan
+            out[f"{part}_{c}_median_rel_error"] = float(np.median(mine.rel_error)) if len(mine) else math.nan
+        out[f"{part}_measured_share"] = float(rows.nlcx.notna().mean())
         out[f"{part}_direction_agreement"] = direction_agreement(rows)
     return out
 
@@ -199,7 +209,7 @@ def fit_hypothesis(
     values = dict(zip(keys, map(float, result.x), strict=True))
     ours = measure_cells(TableRuns(root, list(dict.fromkeys(cells.table))), hyp, [values], cells)[:, 0]
     fit = cells.rename(columns={"value": "thesis"}).assign(nlcx=ours)
-    fit["rel_error"] = np.abs(fit.nlcx - fit.thesis) / fit.thesis.abs().where(fit.thesis != 0)
+    fit["rel_error"] = relative_errors(fit)
     summary = {
         "hypothesis": hyp.name,
         "options": dict(hyp.options),
@@ -249,14 +259,17 @@ def identify(path: Path, out_dir: Path, jobs: int = 1, root: Path | None = None,
 
 
 def write_ranking(out_dir: Path, names: list[str]) -> pd.DataFrame:
-    """ranking.csv (by validation median relative error) and ranking.png from the fits."""
+    """ranking.csv (by validation median relative error) and ranking.png from the fits; the
+    scores are recomputed from each fit's cells, so a change of scoring needs no refit."""
     rows = []
     for name in names:
         summary = json.loads((out_dir / "fits" / f"{name}.json").read_text())
-        values = summary.pop("values")
-        options = summary.pop("options")
-        summary.pop("spec_digest", None)
-        rows.append({**summary, "options": json.dumps(options), "values": json.dumps(values)})
+        fit = pd.read_csv(out_dir / "fits" / f"{name}.fit.csv", dtype={"table": str})
+        keep = ("hypothesis", "train_loss", "evaluations", "wall_s")
+        rows.append(
+            {**{k: summary[k] for k in keep}, **scores(fit),
+             "options": json.dumps(summary["options"]), "values": json.dumps(summary["values"])}
+        )  # fmt: skip
     ranking = pd.DataFrame(rows).sort_values(
         ["validation_median_rel_error", "validation_direction_agreement"], ascending=[True, False], kind="stable"
     )
