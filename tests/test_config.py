@@ -72,13 +72,13 @@ CASES = [
         ["reference.x.kind=ramp"],
         "reference.x.kind",
         "'ramp'",
-        "unknown reference; allowed: constant, sine, step",
+        "unknown reference; allowed: constant, filtered_step, sine, step",
     ),
     (
         ["uncertainty.wind={}"],
         "uncertainty.wind.kind",
         "'wind'",
-        "unknown uncertainty; allowed: disturbance, friction, noise",
+        "unknown uncertainty; allowed: actuator_lag, disturbance, friction, noise",
     ),
     (
         ["simulation.dt=0.003"],

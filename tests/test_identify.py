@@ -14,6 +14,7 @@ from nlcx import config, engine
 from nlcx.cli import app
 from nlcx.thesis import hypotheses, profiles
 from nlcx.thesis.identify import TableRuns, direction_agreement, train_loss
+from nlcx.uncertainty.actuator_lag import first_order_lag
 
 ROOT = Path(__file__).resolve().parents[1]
 THESIS = ROOT / "configs" / "thesis"
@@ -32,7 +33,8 @@ def built(hyp: hypotheses.Hypothesis, table: str = "2.5", **values: float) -> en
 
 
 def test_the_family_is_every_combination_of_up_to_three_options() -> None:
-    family = hypotheses.family(list(hypotheses.FAMILIES), 3)
+    spec = yaml.safe_load((ROOT / "configs" / "identify" / "pendulum.yaml").read_text())
+    family = hypotheses.family(spec["families"], spec["max_options"])
     names = [h.name for h in family]
     assert names[0] == "literal" and len(names) == len(set(names)) == 184  # 1 + 11 + 50 + 122
     assert all(len(h.options) <= 3 for h in family)
@@ -58,6 +60,12 @@ def test_options_reach_the_controllers_as_loop_settings() -> None:
     proposed = next(c for c in signed.controllers if c.label == "proposed").config
     assert proposed["loops"]["x"]["schedule"]["error"] == "signed" and proposed["integral"] == "inside"
     assert hyp.free() == {"F_max": (2.0, 100.0)}
+    loop = hypotheses.Hypothesis((("lag", "first_order"), ("prefilter", "first_order")))
+    prep = built(loop, tau=0.05, T_f=0.4)
+    assert [(e.hook, e.function) for e in prep.hooks.elements] == [("actuator", first_order_lag)]
+    _, cfg = prep.references["x"]
+    assert cfg.kind == "filtered_step" and cfg.time_constant == 0.4 and cfg.final == 1.0
+    assert loop.free() == {"tau": (0.001, 0.3), "T_f": (0.01, 3.0)}
 
 
 def test_train_loss_is_the_mean_squared_relative_residual_with_floors() -> None:

@@ -23,6 +23,12 @@ class StepConfig(ReferenceConfig):
     time: float = Field(0.0, ge=0)
 
 
+class FilteredStepConfig(StepConfig):
+    kind: Literal["filtered_step"] = "filtered_step"  # type: ignore[assignment]
+    #: Time constant T_f of the first-order prefilter 1 / (T_f s + 1) on the step, s.
+    time_constant: float = Field(gt=0)
+
+
 class SineConfig(ReferenceConfig):
     kind: Literal["sine"] = "sine"
     amplitude: float
@@ -56,6 +62,21 @@ class Step(ReferenceModel):
         if cfg.final == cfg.initial:
             return MetricPlan("regulation", final=cfg.final)
         return MetricPlan("step", final=cfg.final, t_step=cfg.time)
+
+
+class FilteredStep(ReferenceModel):
+    """A step through a first-order prefilter: r(t) = initial + (final - initial)
+    (1 - exp(-(t - time) / T_f)) for t >= time. Measured as the step it filters (the metrics
+    of the plain step: a prefilter is part of the loop, not of the specification)."""
+
+    Config = FilteredStepConfig
+
+    def values(self, cfg: FilteredStepConfig, t: np.ndarray) -> np.ndarray:
+        rise = -np.expm1(-np.maximum(t - cfg.time, 0.0) / cfg.time_constant)
+        return cfg.initial + (cfg.final - cfg.initial) * rise
+
+    def metric_plan(self, cfg: FilteredStepConfig) -> MetricPlan:
+        return Step().metric_plan(cfg)
 
 
 class Sine(ReferenceModel):

@@ -30,6 +30,9 @@ class OptionValue:
     doc: str
     change: Callable[[Raw, Mapping[str, float], list[str]], None]
     free: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    #: "controller": ``change`` edits each PID controller's section; "experiment": the
+    #: whole experiment (a loop element or a reference).
+    scope: str = "controller"
 
 
 def _by_magnitude(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
@@ -86,6 +89,18 @@ def _angles_in_degrees(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
             loop["scale"] = 180.0 / math.pi
 
 
+def _actuator_lag(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """A first-order lag tau on every force (the actuator_lag loop element)."""
+    raw.setdefault("uncertainty", {})["actuator_lag"] = {"kind": "actuator_lag", "tau": params["tau"]}
+
+
+def _prefilter(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """Every step reference through a first-order prefilter of time constant T_f."""
+    for reference in raw.get("reference", {}).values():
+        if reference.get("kind") == "step":
+            reference.update(kind="filtered_step", time_constant=params["T_f"])
+
+
 ANGLES = ("theta", "phi")
 F_MAX = {"F_max": (2.0, 100.0)}
 
@@ -116,6 +131,18 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
     "units": {
         "radians": OptionValue("angle loops see radians (today)", _unchanged),
         "degrees": OptionValue("angle loops see degrees (y, r, e and the schedule's argument)", _angles_in_degrees),
+    },
+    "lag": {
+        "none": OptionValue("forces applied as commanded (today)", _unchanged),
+        "first_order": OptionValue(
+            "first-order actuator lag tau on every force", _actuator_lag, {"tau": (0.001, 0.3)}, "experiment"
+        ),
+    },
+    "prefilter": {
+        "none": OptionValue("raw step references (today)", _unchanged),
+        "first_order": OptionValue(
+            "first-order prefiltered steps, time constant T_f", _prefilter, {"T_f": (0.01, 3.0)}, "experiment"
+        ),
     },
     "saturation": {
         "none": OptionValue("unlimited forces (today)", _unchanged),
@@ -153,11 +180,14 @@ class Hypothesis:
         """A copy of the interpolated experiment ``raw`` with the options on every PID controller
         (the plant's ``inputs`` are what a saturation limits)."""
         out = copy.deepcopy(raw)
-        for controller in out.get("controllers", {}).values():
-            if controller.get("kind") != "pid":
+        for family, value in self.options:
+            option = FAMILIES[family][value]
+            if option.scope == "experiment":
+                option.change(out, params, inputs)
                 continue
-            for family, value in self.options:
-                FAMILIES[family][value].change(controller, params, inputs)
+            for controller in out.get("controllers", {}).values():
+                if controller.get("kind") == "pid":
+                    option.change(controller, params, inputs)
         return out
 
 

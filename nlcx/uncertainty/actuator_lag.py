@@ -1,0 +1,76 @@
+"""A first-order lag on the applied forces: an ACTUATOR loop element.
+
+Each lagged input passes through 1 / (tau s + 1) sampled at the simulation step: with
+alpha = 1 - exp(-dt / tau), the force applied over [t_k, t_k+1] is
+
+    v_k = v_{k-1} + alpha (u_k - v_{k-1}),   v_{-1} = u_0 (the lag starts at rest),
+
+the exact response of the lag to a held input, read at the end of each step. The element
+acts after the controller (and after a PID's own saturation), before the plant.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+from numba import njit
+from pydantic import Field
+
+from nlcx.errors import ConfigError
+from nlcx.kernel.abi import ELEMENT_SIG
+from nlcx.layout import Layout
+from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
+from nlcx.validation import join
+
+#: Per input: alpha = 1 - exp(-dt / tau) (0: not lagged).
+LAG = Layout("ActuatorLag", ("alpha",))
+#: Per input: the lag's output v and whether it has started.
+LAG_STATE = Layout("ActuatorLagState", ("v", "started"))
+A = LAG.at
+V = LAG_STATE.at
+
+
+class ActuatorLagConfig(UncertaintyConfig):
+    kind: Literal["actuator_lag"] = "actuator_lag"
+    #: Time constant tau of the lag, s.
+    tau: float = Field(gt=0)
+    #: Inputs that are lagged, by name; default: every input.
+    inputs: list[str] | None = None
+
+
+@njit(ELEMENT_SIG, cache=True, error_model="numpy")
+def first_order_lag(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
+    """v = v + alpha (u - v) on every lagged input of every row; u becomes v."""
+    for b in range(signal.shape[0]):
+        v_id = vid[b]
+        for j in range(signal.shape[1]):
+            alpha = ep[v_id, p_off + len(A) * j + A.alpha]
+            if alpha == 0.0:
+                continue
+            s = s_off + len(V) * j
+            if es[v_id, s + V.started] == 0.0:
+                es[v_id, s + V.v] = signal[b, j]
+                es[v_id, s + V.started] = 1.0
+            es[v_id, s + V.v] += alpha * (signal[b, j] - es[v_id, s + V.v])
+            signal[b, j] = es[v_id, s + V.v]
+
+
+class ActuatorLag(UncertaintyModel):
+    """First-order actuator lag 1 / (tau s + 1) on the plant's inputs."""
+
+    Config = ActuatorLagConfig
+
+    def apply(self, cfg: ActuatorLagConfig, hooks: Hooks, path: str) -> None:
+        names = hooks.plant.input_names
+        dt = float(hooks.t[1] - hooks.t[0])
+        alpha = np.zeros(len(names))
+        for i, name in enumerate(cfg.inputs if cfg.inputs is not None else names):
+            if name not in names:
+                raise ConfigError(join(path, "inputs", i), name, f"not an input; allowed: {', '.join(names)}")
+            alpha[names.index(name)] = -math.expm1(-dt / cfg.tau)
+        params = np.concatenate([LAG.pack(alpha=a) for a in alpha])
+        hooks.add_element(
+            Element("actuator", first_order_lag, params, np.zeros(LAG_STATE.size * len(names)), None, "lag")
+        )
