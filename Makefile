@@ -74,6 +74,8 @@ identify: install
 	$(BIN)/nlcx identify configs/identify/pendulum.yaml --jobs $(JOBS) --out results/identify/pendulum_loop
 	$(BIN)/python scripts/fidelity_report.py results/identify/pendulum_loop > docs/fidelity_results.md
 	cp results/identify/pendulum_loop/profile.yaml configs/thesis/profiles/selected.yaml
+	$(BIN)/nlcx identify configs/identify/pendulum_lag_prefilter.yaml --jobs $(JOBS) --out results/identify/pendulum_lag_prefilter
+	$(BIN)/python scripts/fidelity_report.py results/identify/pendulum_lag_prefilter > docs/fidelity_results_lag.md
 	$(BIN)/nlcx sweep configs/identify/consistency_x.yaml --out results/identify/consistency_x
 	$(BIN)/python scripts/consistency.py results/identify/consistency_x > docs/consistency_results.md
 
