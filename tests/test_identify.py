@@ -115,6 +115,12 @@ def test_identify_fits_on_train_only_ranks_on_validation_and_resumes(tmp_path: P
     assert set(ranking.hypothesis) == {"literal", "saturation=back_calculation"}
     assert list(ranking.validation_median_rel_error) == sorted(ranking.validation_median_rel_error)
     assert (out / "ranking.png").stat().st_size > 0
+    definitions = pd.read_csv(out / "definitions.csv")  # measurement side, reported apart
+    default = definitions[definitions.definition.str.endswith("(nlcx)") & (definitions.hypothesis == "literal")]
+    literal = ranking[ranking.hypothesis == "literal"]
+    for column in ("train_median_rel_error", "validation_median_rel_error", "test_median_rel_error"):
+        assert default[column].item() == literal[column].item()
+    assert len(set(definitions.definition)) == 4
     profile = profiles.load(str(out / "profile.yaml"), THESIS)  # rank 1 as a reproduction profile
     assert profile.as_hypothesis().name == ranking.hypothesis.iloc[0]
     assert set(profile.values) >= {"vars.conventional.angle.kp", "vars.conventional.z.kd"}

@@ -96,20 +96,30 @@ class TableRuns:
             for table, raw in self.raw.items()
         }
 
-    def experiment(self, table: str, hyp: hypotheses.Hypothesis, values: dict[str, float]) -> cfg.Experiment:
-        """Table ``table``'s experiment with the free values set and the hypothesis applied."""
+    def experiment(
+        self, table: str, hyp: hypotheses.Hypothesis, values: dict[str, float], metrics: dict[str, Any] | None = None
+    ) -> cfg.Experiment:
+        """Table ``table``'s experiment with the free values set and the hypothesis applied
+        (``metrics``: other metric definitions, e.g. the rise limits)."""
         gains = [f"{k}={v!r}" for k, v in values.items() if k.startswith("vars.")]
         raw = cfg.interpolate(cfg.apply_overrides(self.raw[table], gains))
-        return cfg.build(hyp.apply(raw, values, self.inputs[table]))
+        raw = hyp.apply(raw, values, self.inputs[table])
+        if metrics:
+            raw["metrics"] = {**raw.get("metrics", {}), **metrics}
+        return cfg.build(raw)
 
 
 def measure_cells(
-    runs: TableRuns, hyp: hypotheses.Hypothesis, candidates: list[dict[str, float]], cells: pd.DataFrame
+    runs: TableRuns,
+    hyp: hypotheses.Hypothesis,
+    candidates: list[dict[str, float]],
+    cells: pd.DataFrame,
+    metrics: dict[str, Any] | None = None,
 ) -> np.ndarray:
     """Our value of every cell (rows) for every candidate (columns); NaN where a run diverged
     or the metric is undefined. All candidates' experiments go through one pipeline call."""
     tables = list(dict.fromkeys(cells.table))
-    exps = [runs.experiment(t, hyp, c) for c in candidates for t in tables]
+    exps = [runs.experiment(t, hyp, c, metrics) for c in candidates for t in tables]
     results = engine.evaluate(exps, record_logs=False)
     out = np.full((len(cells), len(candidates)), np.nan)
     for k in range(len(candidates)):
@@ -255,7 +265,36 @@ def identify(path: Path, out_dir: Path, jobs: int = 1, root: Path | None = None,
         report.write_text(done, json.dumps({**summary, "spec_digest": digest}, indent=2) + "\n")
         if progress is not None:
             progress(k + 1, len(family), hyp.name)
-    return write_ranking(out_dir, [h.name for h in family])
+    ranking = write_ranking(out_dir, [h.name for h in family])
+    chosen = list(dict.fromkeys(["literal", str(ranking.hypothesis.iloc[0])]))
+    write_definitions(out_dir, root, cells, [n for n in chosen if n in set(ranking.hypothesis)])
+    return ranking
+
+
+#: Measurement-side definitions, reported beside the fits and never part of a hypothesis.
+DEFINITIONS = {
+    "rise 10-90 %, band 2 % (nlcx)": {"rise_limits": [0.1, 0.9], "settling_band": 0.02},
+    "rise 0-100 %, band 2 %": {"rise_limits": [0.0, 1.0], "settling_band": 0.02},
+    "rise 10-90 %, band 5 %": {"rise_limits": [0.1, 0.9], "settling_band": 0.05},
+    "rise 0-100 %, band 5 %": {"rise_limits": [0.0, 1.0], "settling_band": 0.05},
+}
+
+
+def write_definitions(out_dir: Path, root: Path, cells: pd.DataFrame, names: list[str]) -> pd.DataFrame:
+    """definitions.csv: the fitted loops of ``names`` (their fitted values, unchanged)
+    measured under each definition of :data:`DEFINITIONS`, scored per part."""
+    runs = TableRuns(root, list(dict.fromkeys(cells.table)))
+    rows = []
+    for name in names:
+        summary = json.loads((out_dir / "fits" / f"{name}.json").read_text())
+        hyp = hypotheses.Hypothesis(tuple(summary["options"].items()))
+        for label, metrics in DEFINITIONS.items():
+            ours = measure_cells(runs, hyp, [summary["values"]], cells, metrics)[:, 0]
+            fit = cells.rename(columns={"value": "thesis"}).assign(nlcx=ours)
+            rows.append({"hypothesis": name, "definition": label, **scores(fit)})
+    table = pd.DataFrame(rows)
+    report.write_csv(out_dir / "definitions.csv", table)
+    return table
 
 
 def write_ranking(out_dir: Path, names: list[str]) -> pd.DataFrame:
