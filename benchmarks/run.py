@@ -136,7 +136,7 @@ def bench_d() -> dict[str, float]:
 
     from nlcx import config, engine
     from nlcx.controllers.pid import input_blocks
-    from nlcx.controllers.schedules import error_ags_gains
+    from nlcx.controllers.schedules import ErrorAGS, ErrorAGSConfig, error_ags_gains
 
     exp = config.load(ROOT / "configs" / "xyz_error_ags.yaml")
     prepared = engine.prepare(exp)
@@ -156,11 +156,7 @@ def bench_d() -> dict[str, float]:
         loop = loops[key]
         signal = loop.signal or key
         sched = loop.schedule if isinstance(loop.schedule, dict) else loop.schedule.model_dump()
-        sp = np.array([
-            sched["kp"]["min"], sched["kp"]["max"], sched["ki"]["min"], sched["ki"]["max"],
-            sched["kd"]["min"], sched["kd"]["max"], sched["rate"]["kp"], sched["rate"]["ki"], sched["rate"]["kd"],
-            1.0 if sched["error"] == "abs" else 0.0,
-        ])  # fmt: skip
+        sp = ErrorAGS().pack(ErrorAGSConfig.model_validate(sched))  # the schedule's own layout
         info.append(
             (
                 names.index(signal),

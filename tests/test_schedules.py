@@ -99,3 +99,13 @@ def test_reversed_range_as_printed_for_the_z_loop() -> None:
     sp = TimeAGS().pack(cfg)
     assert np.allclose(gains(time_ags_gains, sp, t=0), [15, 15, 10])
     assert np.allclose(gains(time_ags_gains, sp, t=1e4), [25, 10, 15])
+
+
+def test_error_ags_argument_scale_multiplies_only_the_schedules_argument() -> None:
+    """error_scale c: the gains at e are eqs. 2.20-2.22 at s = |c e| (c = 180/pi: e in degrees)."""
+    c = 180 / math.pi
+    scaled = ErrorAGS().pack(ErrorAGSConfig(**RANGES, rate=RATES, error_scale=c))
+    plain = ErrorAGS().pack(ErrorAGSConfig(**RANGES, rate=RATES))
+    for e in (-0.3, 0.01, 0.2):
+        assert np.array_equal(gains(error_ags_gains, scaled, e=e), gains(error_ags_gains, plain, e=e * c))
+    assert not np.allclose(gains(error_ags_gains, scaled, e=0.2), gains(error_ags_gains, plain, e=0.2))

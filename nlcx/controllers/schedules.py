@@ -35,7 +35,7 @@ _AGS_FIELDS = ("kp_min", "kp_max", "ki_min", "ki_max", "kd_min", "kd_max", "kp_r
 TIME_AGS = Layout("TimeAGS", _AGS_FIELDS)
 TA = TIME_AGS.at
 #: Error-AGS (eqs. 2.20-2.22): as time-AGS, and whether the schedule runs on |e| (1) or e (0).
-ERROR_AGS = Layout("ErrorAGS", (*_AGS_FIELDS, "on_abs_error"))
+ERROR_AGS = Layout("ErrorAGS", (*_AGS_FIELDS, "on_abs_error", "error_scale"))
 EA = ERROR_AGS.at
 
 
@@ -83,6 +83,9 @@ class ErrorAGSConfig(AGSConfig):
     kind: Literal["error_ags"] = "error_ags"
     #: Schedule on |e(t)| (default) or on the signed e(t) as eqs. 2.20-2.22 literally print.
     error: Literal["abs", "signed"] = "abs"
+    #: Factor c on the schedule's argument: s = |c e| (1: e as the loop sees it; e.g. 1/step
+    #: size to normalise it, or 180/pi for an angle in degrees). Only the schedule sees it.
+    error_scale: float = Field(1.0, gt=0)
 
 
 @njit(cache=True, error_model="numpy")
@@ -130,7 +133,9 @@ def time_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
 
 @njit(CALLBACK_SIG, cache=True, error_model="numpy")
 def error_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
-    """Eqs. 2.20-2.22 on s = |e| (``on_abs_error`` = 1) or s = e (0), an :data:`ERROR_AGS` block at p[row, o].
+    """Eqs. 2.20-2.22 on s = |c e| (``on_abs_error`` = 1) or s = c e (0), c = ``error_scale``
+    (1 as the loop sees e; 1/step size, or 180/pi for an angle in degrees), an
+    :data:`ERROR_AGS` block at p[row, o].
 
     k_p = kp_max - (kp_max - kp_min) exp(-k s)     (2.20)
     k_i = ki_min - (ki_min - ki_max) exp(-k s)     (2.21)
@@ -143,6 +148,7 @@ def error_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
         p[row, o + EA.ki_max],
     )
     kd_min, kd_max = p[row, o + EA.kd_min], p[row, o + EA.kd_max]
+    e = e * p[row, o + EA.error_scale]
     s = abs(e) if p[row, o + EA.on_abs_error] != 0.0 else e
     a_p, a_i, a_d = _decays(p[row, o + EA.kp_rate], p[row, o + EA.ki_rate], p[row, o + EA.kd_rate], s)
     kp = kp_max - (kp_max - kp_min) * a_p
@@ -200,7 +206,7 @@ class ErrorAGS(ScheduleModel):
     gains = staticmethod(error_ags_gains)
 
     def pack(self, cfg: ErrorAGSConfig) -> np.ndarray:
-        return ERROR_AGS.pack(_ags_values(cfg), on_abs_error=cfg.error == "abs")
+        return ERROR_AGS.pack(_ags_values(cfg), on_abs_error=cfg.error == "abs", error_scale=cfg.error_scale)
 
 
 @cache

@@ -89,6 +89,13 @@ def _angles_in_degrees(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
             loop["scale"] = 180.0 / math.pi
 
 
+def _ags_angle_degrees(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """The error schedules of the angle loops take e in degrees (the loop itself stays in radians)."""
+    for key, loop in pid["loops"].items():
+        if (loop.get("signal") or key) in ANGLES and loop["schedule"].get("kind") == "error_ags":
+            loop["schedule"]["error_scale"] = 180.0 / math.pi
+
+
 def _actuator_lag(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
     """A first-order lag tau on every force (the actuator_lag loop element)."""
     raw.setdefault("uncertainty", {})["actuator_lag"] = {"kind": "actuator_lag", "tau": params["tau"]}
@@ -122,6 +129,10 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
     "ags_error": {
         "abs": OptionValue("error AGS on |e| (today)", _unchanged),
         "signed": OptionValue("error AGS on e as eqs. 2.20-2.22 print it", _signed_error),
+    },
+    "ags_argument": {
+        "as_seen": OptionValue("the error schedule's argument is e as the loop sees it (today)", _unchanged),
+        "angle_degrees": OptionValue("the angle loops' error schedules take e in degrees", _ags_angle_degrees),
     },
     "form": {
         "parallel": OptionValue("k_p + k_i/s + k_d s (today)", _unchanged),
