@@ -76,6 +76,7 @@ identify: install
 	cp results/identify/pendulum_loop/profile.yaml configs/thesis/profiles/selected.yaml
 	$(BIN)/nlcx identify configs/identify/pendulum_lag_prefilter.yaml --jobs $(JOBS) --out results/identify/pendulum_lag_prefilter
 	$(BIN)/python scripts/fidelity_report.py results/identify/pendulum_lag_prefilter > docs/fidelity_results_lag.md
+	sed "s/^name: selected$$/name: selected_study2/" results/identify/pendulum_lag_prefilter/profile.yaml > configs/thesis/profiles/selected_study2.yaml
 	$(BIN)/nlcx sweep configs/identify/consistency_x.yaml --out results/identify/consistency_x
 	$(BIN)/python scripts/consistency.py results/identify/consistency_x > docs/consistency_results.md
 
