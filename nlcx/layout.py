@@ -3,8 +3,8 @@
 The compiled step functions take their numbers from flat float64 rows (a row per variant).
 Every block of such a row (a PID loop's header, a schedule's parameters, a friction axis,
 a loop element's parameters) is declared once, by name, as a :class:`Layout`. The compiled
-code reads the offsets the declaration generates, ``p[row, o + AGS.kp_rate]`` rather than
-``p[row, o + 6]``, and the Python side packs and unpacks through the same declaration::
+code reads the offsets the declaration generates, ``p[row, o + AGS.kp_rate]``, never a
+literal position, and the Python side packs and unpacks through the same declaration::
 
     LOOP = Layout("PIDLoop", ("y_index", "sign", "N"))
     L = LOOP.at                      # a namedtuple of offsets: L.y_index == 0, L.N == 2
@@ -12,8 +12,9 @@ code reads the offsets the declaration generates, ``p[row, o + AGS.kp_rate]`` ra
     LOOP.unpack(row)                 # {'y_index': 0.0, 'sign': -1.0, 'N': 100.0}
 
 numba freezes a module-level namedtuple of ints into constants, so ``o + L.N`` compiles to
-the same code as ``o + 2``. Declare a layout in the module whose compiled functions read it:
-numba's disk cache is invalidated by a change of that module's source only.
+the same code as the literal offset. Declare a layout in the module whose compiled functions
+read it (numba's cache keys a function on its own module; :mod:`nlcx.compiled_cache` drops
+the whole cache when any source file changes, so a layout read from elsewhere stays correct).
 """
 
 from __future__ import annotations

@@ -345,12 +345,7 @@ def _friction_at_sample(
                 for j in range(u.shape[1]):
                     FRICTION[v, k, j] = 0.0
             continue
-        for i in range(x.shape[1]):  # row b's state, input and plant parameters
-            xo[i] = x[b, i]
-        for j in range(u.shape[1]):
-            uo[j] = u[b, j]
-        for i in range(pw.shape[1]):
-            one[2][0, i] = pw[b, i]
+        _load_one(b, x, u, pw, xo, uo, one)
         drow = dist[_row(dist.shape[0], v), kd]
         update_friction_modes(
             rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
@@ -361,6 +356,17 @@ def _friction_at_sample(
             )
             for j in range(u.shape[1]):
                 FRICTION[v, k, j] = f[j]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _load_one(b, x, u, pw, xo, uo, one):  # pragma: no cover - compiled
+    """Copy row b's state, input and plant parameters into the one-variant work space."""
+    for i in range(x.shape[1]):
+        xo[i] = x[b, i]
+    for j in range(u.shape[1]):
+        uo[j] = u[b, j]
+    for i in range(pw.shape[1]):
+        one[2][0, i] = pw[b, i]
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -377,12 +383,7 @@ def _step_frictional_rows(
         if stopped[b]:
             continue
         v = vid[b]
-        for i in range(x.shape[1]):  # row b's state, input and plant parameters
-            xo[i] = x[b, i]
-        for j in range(u.shape[1]):
-            uo[j] = u[b, j]
-        for i in range(pw.shape[1]):
-            one[2][0, i] = pw[b, i]
+        _load_one(b, x, u, pw, xo, uo, one)
         step_with_friction(
             rhs, t, dt, xo, xo_new, xo_mid, uo, dist[_row(dist.shape[0], v), kd], c, dist_map,
             fw[b], mode[b], direction[b], hold[b], rk_a, rk_b, scratch,

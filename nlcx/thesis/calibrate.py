@@ -37,7 +37,7 @@ from nlcx import engine
 from nlcx.errors import ConfigError
 from nlcx.thesis import catalog
 from nlcx.thesis.tables import thesis_value
-from nlcx.tuning.optimise import GASettings, evolve
+from nlcx.tuning.optimise import GASettings, check_search_box, evolve
 from nlcx.validation import validate_model
 
 FLOORS = {"Mp": 0.05, "tr": 0.5, "ts": 0.5, "ess": 0.01}
@@ -72,12 +72,8 @@ class CalibrationSpec(BaseModel):
     @field_validator("parameters")
     @classmethod
     def _bounds(cls, params: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
-        for key, (lo, hi) in params.items():
-            if not lo < hi:
-                raise ValueError(f"bounds of {key} must be [lower, upper] with lower < upper")
-            if not key.startswith(("vars.", "controllers.")):
-                raise ValueError(f"{key}: only controller settings (controllers.* or vars.*) can be fitted")
-        return params
+        refusal = "only controller settings (controllers.* or vars.*) can be fitted"
+        return check_search_box(params, ("vars.", "controllers."), refusal)
 
 
 def target_cells(target: Target) -> pd.DataFrame:

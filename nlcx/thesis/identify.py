@@ -44,9 +44,9 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from nlcx import config as cfg
 from nlcx import engine, report
 from nlcx.errors import ConfigError
-from nlcx.thesis import catalog, hypotheses, split
+from nlcx.thesis import catalog, hypotheses, profiles, split
 from nlcx.thesis.tables import thesis_value
-from nlcx.tuning.optimise import GASettings, evolve
+from nlcx.tuning.optimise import GASettings, check_search_box, evolve
 from nlcx.validation import validate_model
 
 FLOORS = {"Mp": 0.05, "tr": 0.5, "ts": 0.5}
@@ -77,12 +77,8 @@ class IdentifySpec(BaseModel):
     @field_validator("free")
     @classmethod
     def _bounds(cls, free: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
-        for key, (lo, hi) in free.items():
-            if not lo < hi:
-                raise ValueError(f"bounds of {key} must be [lower, upper] with lower < upper")
-            if not key.startswith("vars.conventional."):
-                raise ValueError(f"{key}: only the conventional gains (vars.conventional.*) are free")
-        return free
+        refusal = "only the conventional gains (vars.conventional.*) are free"
+        return check_search_box(free, ("vars.conventional.",), refusal)
 
 
 class TableRuns:
@@ -91,22 +87,14 @@ class TableRuns:
     def __init__(self, root: Path, tables: list[str]) -> None:
         paths = {t.table: t.configs[0] for t in catalog.tables(root) if t.kind == "metrics"}
         self.raw = {table: cfg.read_config(paths[table]) for table in tables}
-        self.inputs = {
-            table: [s.name for s in cfg.build(cfg.interpolate(raw)).plant_model.inputs]
-            for table, raw in self.raw.items()
-        }
+        self.inputs = {table: profiles.plant_inputs(raw) for table, raw in self.raw.items()}
 
     def experiment(
         self, table: str, hyp: hypotheses.Hypothesis, values: dict[str, float], metrics: dict[str, Any] | None = None
     ) -> cfg.Experiment:
         """Table ``table``'s experiment with the free values set and the hypothesis applied
-        (``metrics``: other metric definitions, e.g. the rise limits)."""
-        gains = [f"{k}={v!r}" for k, v in values.items() if k.startswith("vars.")]
-        raw = cfg.interpolate(cfg.apply_overrides(self.raw[table], gains))
-        raw = hyp.apply(raw, values, self.inputs[table])
-        if metrics:
-            raw["metrics"] = {**raw.get("metrics", {}), **metrics}
-        return cfg.build(raw)
+        (the same path as a reproduction profile, :func:`nlcx.thesis.profiles.apply`)."""
+        return profiles.apply(self.raw[table], hyp, values, self.inputs[table], metrics)
 
 
 def measure_cells(
@@ -122,14 +110,14 @@ def measure_cells(
     exps = [runs.experiment(t, hyp, c, metrics) for c in candidates for t in tables]
     results = engine.evaluate(exps, record_logs=False)
     out = np.full((len(cells), len(candidates)), np.nan)
+    of_table = {t: [(i, c) for i, c in enumerate(cells.itertuples(index=False)) if c.table == t] for t in tables}
     for k in range(len(candidates)):
         for t_index, table in enumerate(tables):
             result = results[k * len(tables) + t_index]
             ok = {run.label for run in result.runs if run.status == "ok"}
-            metrics = result.metrics
-            for i, cell in enumerate(cells.itertuples(index=False)):
-                if cell.table == table and cell.controller in ok:
-                    out[i, k] = thesis_value(metrics, cell.controller, cell.signal, cell.metric)
+            for i, cell in of_table[table]:
+                if cell.controller in ok:
+                    out[i, k] = thesis_value(result.metrics, cell.controller, cell.signal, cell.metric)
     return out
 
 

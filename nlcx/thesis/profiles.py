@@ -79,10 +79,24 @@ def experiment(path: Path, overrides: list[str], profile: Profile | None) -> cfg
     return apply(raw, profile.as_hypothesis(), profile.values)
 
 
-def apply(raw: dict[str, Any], hyp: hypotheses.Hypothesis, values: dict[str, float]) -> cfg.Experiment:
+def plant_inputs(raw: dict[str, Any]) -> list[str]:
+    """The input names of the plant of ``raw`` (a config before interpolation)."""
+    return [s.name for s in cfg.build(cfg.interpolate(raw)).plant_model.inputs]
+
+
+def apply(
+    raw: dict[str, Any],
+    hyp: hypotheses.Hypothesis,
+    values: dict[str, float],
+    inputs: list[str] | None = None,
+    metrics: dict[str, Any] | None = None,
+) -> cfg.Experiment:
     """``raw`` (a config before interpolation) with the fitted ``values`` set and ``hyp``'s
-    options on its PID controllers, validated."""
+    options applied, validated; ``inputs``: the plant's inputs if known (a saturation limits
+    them), ``metrics``: other metric definitions (e.g. the rise limits)."""
     gains = [f"{k}={v!r}" for k, v in values.items() if k.startswith("vars.")]
     resolved = cfg.interpolate(cfg.apply_overrides(raw, gains))
-    inputs = [s.name for s in cfg.build(resolved).plant_model.inputs]
-    return cfg.build(hyp.apply(resolved, values, inputs))
+    changed = hyp.apply(resolved, values, inputs if inputs is not None else plant_inputs(raw))
+    if metrics:
+        changed["metrics"] = {**changed.get("metrics", {}), **metrics}
+    return cfg.build(changed)

@@ -34,6 +34,19 @@ class GASettings(BaseModel):
     mutation_eta: float = Field(20.0, gt=0)
 
 
+def check_search_box(
+    bounds: dict[str, tuple[float, float]], prefixes: tuple[str, ...], refusal: str
+) -> dict[str, tuple[float, float]]:
+    """Validate a search box of config keys: lower < upper, every key starting with one of
+    ``prefixes`` (``refusal`` says which keys may be searched)."""
+    for key, (lo, hi) in bounds.items():
+        if not lo < hi:
+            raise ValueError(f"bounds of {key} must be [lower, upper] with lower < upper")
+        if not key.startswith(prefixes):
+            raise ValueError(f"{key}: {refusal}")
+    return bounds
+
+
 @dataclass
 class OptimResult:
     x: np.ndarray
