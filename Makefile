@@ -8,7 +8,7 @@ JOBS ?= 2
 
 BASELINE_TABLES := table-2.3,table-2.5,table-3.2,table-3.7,table-4.2,table-4.4,table-5.1,table-5.8
 
-.PHONY: install run test lint reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
+.PHONY: install run test lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
 	baseline baseline-diff sweep-demo bench clean
 
 $(STAMP): pyproject.toml
@@ -47,6 +47,10 @@ reproduce-cstr: install
 reproduce: install
 	$(BIN)/nlcx reproduce --jobs $(JOBS)
 
+## screenshots: docs/img/report_*.png from results/thesis/report.html (after make reproduce; needs chromium)
+screenshots: install
+	$(BIN)/python scripts/report_screenshots.py results/thesis/report.html docs/img
+
 ## tables / figures: every thesis table / figure (both come from one reproduce run)
 tables figures: reproduce
 
@@ -69,16 +73,19 @@ sweep-demo: install
 bench: install
 	$(BIN)/python benchmarks/run.py | tee benchmarks/latest.txt
 
-## identify: the identification study (docs/fidelity.md): fit every loop hypothesis on the train tables, rank on validation
+## identify: the identification studies and docs/fidelity.md (every number on it): fit every loop hypothesis on
+## the train tables (pendulums: ~25 min on 2 cores; chapter 5), reproduce under the literal and selected profiles
 identify: install
-	$(BIN)/nlcx identify configs/identify/pendulum.yaml --jobs $(JOBS) --out results/identify/pendulum_loop
-	$(BIN)/python scripts/fidelity_report.py results/identify/pendulum_loop > docs/fidelity_results.md
-	cp results/identify/pendulum_loop/profile.yaml configs/thesis/profiles/selected.yaml
-	$(BIN)/nlcx identify configs/identify/pendulum_lag_prefilter.yaml --jobs $(JOBS) --out results/identify/pendulum_lag_prefilter
-	$(BIN)/python scripts/fidelity_report.py results/identify/pendulum_lag_prefilter > docs/fidelity_results_lag.md
-	sed "s/^name: selected$$/name: selected_study2/" results/identify/pendulum_lag_prefilter/profile.yaml > configs/thesis/profiles/selected_study2.yaml
+	$(BIN)/nlcx identify configs/identify/pendulum_all.yaml --jobs $(JOBS) --out results/identify/pendulum_all
+	$(BIN)/nlcx identify configs/identify/cstr.yaml --jobs $(JOBS) --out results/identify/cstr
+	$(BIN)/python scripts/fidelity_report.py profile results/identify > results/identify/selected.yaml
+	cp results/identify/selected.yaml configs/thesis/profiles/selected.yaml
+	$(BIN)/nlcx reproduce --profile literal --jobs $(JOBS) --out results/identify/reproduce_literal
+	$(BIN)/nlcx reproduce --profile selected --jobs $(JOBS) --out results/identify/reproduce_selected
 	$(BIN)/nlcx sweep configs/identify/consistency_x.yaml --out results/identify/consistency_x
-	$(BIN)/python scripts/consistency.py results/identify/consistency_x > docs/consistency_results.md
+	$(BIN)/python scripts/consistency.py results/identify/consistency_x > results/identify/consistency_x/consistency.md
+	$(BIN)/python scripts/fidelity_report.py doc results/identify > results/identify/fidelity.md
+	cp results/identify/fidelity.md docs/fidelity.md
 
 ## calibrate: refit the unprinted conventional gains (writes configs/thesis/gains/conventional.yaml)
 calibrate: install

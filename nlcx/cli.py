@@ -14,7 +14,7 @@ from typing import Annotated, Any, TypeVar
 import typer
 
 from nlcx import registry
-from nlcx.errors import NlcxError
+from nlcx.errors import ConfigError, NlcxError
 
 app = typer.Typer(
     add_completion=False,
@@ -30,6 +30,7 @@ OverridesArg = Annotated[
     list[str] | None,
     typer.Argument(help="Overrides key=value with dotted keys, e.g. simulation.t_end=30.", show_default=False),
 ]
+NoReport = Annotated[bool, typer.Option("--no-report", help="Do not write report.html / report.md.")]
 
 
 def one_line_errors(func: F) -> F:
@@ -99,6 +100,7 @@ def run(
     overrides: OverridesArg = None,
     out: Annotated[Path | None, typer.Option("--out", help="Run directory (default results/<name>).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only the run directory.")] = False,
+    no_report: NoReport = False,
 ) -> None:
     """Run an experiment: every controller of CONFIG on its plant, then write the run directory."""
     import matplotlib.figure  # noqa: F401 - the run draws; imported while the collector is off
@@ -108,7 +110,7 @@ def run(
 
     _imported()
     if "sweep" in cfg.apply_overrides(cfg.read_config(config), overrides or []):
-        _sweep(config, overrides or [], out, "process", 2, None, False, False)
+        _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report)
         return
     start = time.perf_counter()
     exp = cfg.load(config, overrides or [])
@@ -117,6 +119,7 @@ def run(
     out_dir = out or Path(exp.section.outputs.dir or Path("results") / exp.name)
     timings = {"load": loaded - start, **result.timings}
     report.write_run(result, out_dir, timings, started=start)
+    page = None if no_report else _write_report(out_dir)
     elapsed = time.perf_counter() - start
     if quiet:
         typer.echo(str(out_dir))
@@ -126,7 +129,7 @@ def run(
         f"{result.prepared.grid.n_steps} steps of {result.prepared.grid.dt:g} s"
     )
     typer.echo(_summary(result))
-    typer.echo(f"wrote {out_dir}/ in {elapsed:.2f} s")
+    typer.echo(f"wrote {out_dir}/ in {elapsed:.2f} s" + (f"; report {page}" if page else ""))
 
 
 def _sweep(
@@ -138,6 +141,7 @@ def _sweep(
     scheduler: str | None,
     force: bool,
     dry_run: bool,
+    with_report: bool = True,
 ) -> None:
     from rich.progress import (
         BarColumn,
@@ -179,6 +183,8 @@ def _sweep(
         f"{len(outcome.index)} variants ({outcome.computed} computed, {outcome.skipped} already done): {summary}; "
         f"{outcome.wall:.1f} s -> {outcome.out_dir}/"
     )
+    if with_report and not outcome.index.empty:
+        typer.echo(f"report {_write_report(outcome.out_dir)}")
     if counts.get("failed"):
         failed = outcome.index[outcome.index.status == "failed"].head(3)
         for row in failed.itertuples():
@@ -197,11 +203,12 @@ def sweep_command(
     scheduler: Annotated[str | None, typer.Option("--scheduler", help="Dask scheduler address.")] = None,
     force: Annotated[bool, typer.Option("--force", help="Recompute variants that already have results.")] = False,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Print the expansion and stop.")] = False,
+    no_report: NoReport = False,
 ) -> None:
     """Run the sweep of CONFIG (its sweep: section); a rerun resumes where it stopped."""
     if executor not in ("process", "serial", "dask"):
         raise NlcxError(f"--executor = {executor!r}: allowed values: process, serial, dask")
-    _sweep(config, overrides or [], out, executor, jobs, scheduler, force, dry_run)
+    _sweep(config, overrides or [], out, executor, jobs, scheduler, force, dry_run, not no_report)
 
 
 @app.command()
@@ -235,6 +242,7 @@ def reproduce(
         str,
         typer.Option("--profile", help="Loop profile (configs/thesis/profiles/NAME.yaml); literal: as printed."),
     ] = "literal",
+    no_report: NoReport = False,
 ) -> None:
     """Regenerate the thesis's figures and tables (ours beside theirs) and check its claims."""
     from nlcx.thesis import profiles
@@ -267,7 +275,57 @@ def reproduce(
     if "claims" in summary:
         counts = summary["claims"].reproduced.value_counts().to_dict()
         typer.echo("claims: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
-    typer.echo(f"done in {time.perf_counter() - start:.1f} s")
+    wall = time.perf_counter() - start
+    write_reproduction_manifest(out, chosen, wall, jobs)
+    typer.echo(f"done in {wall:.1f} s")
+    if not no_report:
+        t0 = time.perf_counter()
+        page = _write_report(out, configs)
+        typer.echo(f"report {page} ({time.perf_counter() - t0:.1f} s)")
+
+
+def write_reproduction_manifest(out: Path, profile: Any, wall: float, jobs: int | None) -> None:
+    """manifest.json of a reproduction: the command, profile, versions, commit and run time."""
+    import datetime
+    import json
+    import os
+    import sys
+
+    from nlcx import report
+
+    record = {
+        "command": "nlcx " + " ".join(sys.argv[1:]),
+        "profile": profile.name,
+        "profile_source": profile.source,
+        "versions": report.package_versions(),
+        "git": report.git_state(),
+        "wall_s": round(wall, 2),
+        "jobs": jobs or os.cpu_count(),
+        "started": (datetime.datetime.now() - datetime.timedelta(seconds=wall)).isoformat(timespec="seconds"),
+    }
+    report.write_text(out / "manifest.json", json.dumps(record, indent=2) + "\n")
+
+
+def _write_report(directory: Path, configs: Path | None = None) -> Path:
+    """DIR/report.html and report.md; returns the page's path."""
+    from nlcx.pages.render import write_report
+
+    html, _ = write_report(directory, configs)
+    return html
+
+
+@app.command()
+@one_line_errors
+def report(
+    directory: Annotated[Path, typer.Argument(help="A reproduction, sweep or run directory.", show_default=False)],
+    configs: Annotated[Path, typer.Option("--configs", help="Thesis configs (tolerances.yaml).")] = Path(
+        "configs/thesis"
+    ),
+) -> None:
+    """Write DIR/report.html and DIR/report.md: one page summarising what DIR holds."""
+    if not directory.is_dir():
+        raise ConfigError("DIR", str(directory), "an existing output directory")
+    typer.echo(str(_write_report(directory, configs)))
 
 
 @app.command()
@@ -310,16 +368,28 @@ def identify(
         Path | None, typer.Option("--out", help="Output directory (default results/identify/<name>).")
     ] = None,
 ) -> None:
-    """Fit loop hypotheses to the train tables, rank them on validation (resumable)."""
+    """Fit loop hypotheses to the train tables, rank them on validation (resumable).
+    A spec with ``chapter: 5`` is chapter 5's study (Table 5.8), ranked by train loss."""
+    import yaml
+
     from nlcx.thesis.identify import identify as run_identify
-    from nlcx.thesis.identify import load_spec
+    from nlcx.thesis.identify_cstr import identify_cstr
 
     _imported()
-    out_dir = out or Path("results/identify") / load_spec(spec).name
+    raw = yaml.safe_load(spec.read_text(encoding="utf-8")) if spec.is_file() else None
+    if not isinstance(raw, dict) or not isinstance(raw.get("name"), str):
+        raise ConfigError("spec", str(spec), "an identification spec: a YAML mapping with a name")
+    out_dir = out or Path("results/identify") / raw["name"]
 
     def progress(done: int, total: int, name: str) -> None:
         typer.echo(f"  [{done}/{total}] {name}")
 
+    if raw.get("chapter") == 5:
+        ranking = identify_cstr(spec, out_dir, jobs=jobs, progress=progress)
+        columns = ["rank", "hypothesis", "train_loss", "test_median_rel_error"]
+        typer.echo(ranking[columns].head(10).to_string(index=False))
+        typer.echo(f"{len(ranking)} hypotheses; results in {out_dir}/")
+        return
     ranking = run_identify(spec, out_dir, jobs=jobs, progress=progress)
     columns = ["rank", "hypothesis", "train_loss", "validation_median_rel_error", "validation_direction_agreement"]
     typer.echo(ranking[columns].head(10).to_string(index=False))

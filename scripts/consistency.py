@@ -1,7 +1,7 @@
 """Can Table 2.3's conventional column hold together? Evidence from a wide gain search.
 
     nlcx sweep configs/identify/consistency_x.yaml --out results/identify/consistency_x
-    python scripts/consistency.py results/identify/consistency_x > docs/consistency_results.md
+    python scripts/consistency.py results/identify/consistency_x > results/identify/consistency_x/consistency.md
 
 Reads the sweep's metrics.csv (36 000 conventional x-pendulum loops: random gains, backward
 and filtered derivative, unlimited or clamped forces) and reports, for the loops that settle: the range of x rise times

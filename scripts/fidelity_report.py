@@ -1,107 +1,171 @@
-"""Write the results section of docs/fidelity.md from an identification study's ranking.
+"""docs/fidelity.md from the identification study's outputs, and the selected profile.
 
-    python scripts/fidelity_report.py results/identify/pendulum_loop > docs/fidelity_results.md
+    python scripts/fidelity_report.py doc results/identify > docs/fidelity.md
+    python scripts/fidelity_report.py profile results/identify > configs/thesis/profiles/selected.yaml
 
-(`make identify` runs the study and then this.) Every number comes from ranking.csv and the
-fits' JSON files; nothing is typed in by hand.
+`make identify` runs the studies, the two reproductions (literal and selected profiles) and
+the consistency sweep, then this. Every number on the page comes from those outputs (the
+ranking CSVs, the fits' JSON files, study.json, claims.csv and the tables of each
+reproduction, the consistency sweep); the narrative is the template
+scripts/templates/fidelity.md.j2.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
+from typing import Any
 
+import jinja2
+import numpy as np
 import pandas as pd
+import yaml
 
+from nlcx.thesis import hypotheses, split
+from nlcx.thesis.identify import scores
+
+ROOT = Path(__file__).resolve().parents[1]
+SPLIT = ROOT / "configs" / "identify" / "split.yaml"
+PENDULUM_SPEC = ROOT / "configs" / "identify" / "pendulum_all.yaml"
+CSTR_SPEC = ROOT / "configs" / "identify" / "cstr.yaml"
+#: The issue's targets (test set, selected profile): measure -> (goal, bound, sense, value before the study).
 TARGETS = {
-    "test_proposed_median_rel_error": ("≤ 0.25", 0.66),
-    "test_conventional_median_rel_error": ("≤ 0.20", 0.32),
-    "test_direction_agreement": ("≥ 0.85", 0.54),
+    "proposed, median relative error": ("≤ 0.25", 0.25, -1, 0.66),
+    "conventional, median relative error": ("≤ 0.20", 0.20, -1, 0.32),
+    "direction agreement": ("≥ 0.85", 0.85, 1, 0.54),
+    "Table 5.8 test rows, median relative error": ("≤ 0.25", 0.25, -1, 0.77),
+    "claims: yes": ("≥ 90", 90, 1, 50),
 }
+CSTR_METRICS = ("tr_s", "ts_s", "Mp_percent")
 
 
-def fmt(value: float) -> str:
-    return "—" if pd.isna(value) else ("inf" if value == float("inf") else f"{value:.3f}")
+def fmt(value: Any, digits: int = 3) -> str:
+    """A number as the page shows it: — for missing, inf, or ``digits`` decimals."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "—"
+    if isinstance(value, float) and math.isinf(value):
+        return "inf"
+    if isinstance(value, float) and abs(value) >= 1000:
+        return f"{value:.3g}"
+    return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
 
 
-def ranking_table(ranking: pd.DataFrame, top: int) -> list[str]:
+def reproduction(directory: Path, spec_split: split.Split) -> dict[str, Any]:
+    """A reproduction's claims counts, its pendulum test scores and its Table 5.8 test error."""
+    claims = pd.read_csv(directory / "claims.csv").reproduced.value_counts()
+    rows = []
+    for part in split.PARTS:
+        for table in getattr(spec_split.pendulum, part):
+            frame = pd.read_csv(directory / "tables" / f"table_{table.replace('.', '_')}.csv")
+            frame = frame[frame.metric.isin(spec_split.metrics)]
+            rows.append(frame.assign(part=part, table=table)[["part", "table", "signal", "controller", "metric",
+                                                              "thesis", "nlcx"]])  # fmt: skip
+    table_5_8 = pd.read_csv(directory / "tables" / "table_5_8.csv")
+    test = table_5_8[table_5_8.method.isin(spec_split.cstr.test) & table_5_8.metric.isin(CSTR_METRICS)]
+    test = test[test.thesis != 0]
+    rel = ((test.nlcx - test.thesis).abs() / test.thesis.abs()).fillna(np.inf)
+    return {
+        "claims": {v: int(claims.get(v, 0)) for v in ("yes", "partly", "no")},
+        "scores": scores(pd.concat(rows, ignore_index=True)),
+        "table_5_8_test": float(np.median(rel)),
+    }
+
+
+def ranking_rows(ranking: pd.DataFrame, top: int) -> list[dict[str, Any]]:
     shown = pd.concat([ranking.head(top), ranking[ranking.hypothesis == "literal"]]).drop_duplicates("hypothesis")
-    lines = [
-        "| rank | hypothesis | train loss | validation: conv. | validation: prop. | validation: direction "
-        "| validation: measured | test: conv. | test: prop. | test: direction |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+    return shown.to_dict("records")
+
+
+def families_rows(families: dict[str, dict[str, hypotheses.OptionValue]]) -> list[dict[str, str]]:
+    """One row per family: its values (the first is today's) and what each does."""
+    return [
+        {
+            "family": name,
+            "choices": ", ".join(values),
+            "docs": "; ".join(f"*{v}*: {o.doc}" for v, o in values.items()).replace("|", "\\|"),
+            "free": ", ".join(
+                dict.fromkeys(f"{k} ∈ [{lo:g}, {hi:g}]" for o in values.values() for k, (lo, hi) in o.free.items())
+            ),
+        }
+        for name, values in families.items()
     ]
-    for r in shown.itertuples(index=False):
-        lines.append(
-            f"| {r.rank} | {r.hypothesis} | {fmt(r.train_loss)} | {fmt(r.validation_conventional_median_rel_error)} "
-            f"| {fmt(r.validation_proposed_median_rel_error)} | {fmt(r.validation_direction_agreement)} "
-            f"| {fmt(r.validation_measured_share)} "
-            f"| {fmt(r.test_conventional_median_rel_error)} | {fmt(r.test_proposed_median_rel_error)} "
-            f"| {fmt(r.test_direction_agreement)} |"
-        )
-    return lines
 
 
-def definitions_table(study: Path) -> list[str]:
-    """The measurement-side definitions, reported apart from the loop hypotheses."""
-    path = study / "definitions.csv"
-    if not path.is_file():
-        return []
-    table = pd.read_csv(path)
-    lines = [
-        "The same fitted loops measured with other definitions of t_r and t_s (not a hypothesis: "
-        "the thesis states only the 2 % band for Table 5.8):",
-        "",
-        "| hypothesis | definition | validation: conv. | validation: prop. | test: conv. | test: prop. "
-        "| test: direction |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for r in table.itertuples(index=False):
-        lines.append(
-            f"| {r.hypothesis} | {r.definition} | {fmt(r.validation_conventional_median_rel_error)} "
-            f"| {fmt(r.validation_proposed_median_rel_error)} | {fmt(r.test_conventional_median_rel_error)} "
-            f"| {fmt(r.test_proposed_median_rel_error)} | {fmt(r.test_direction_agreement)} |"
-        )
-    return lines
+def targets(literal: dict[str, Any], selected: dict[str, Any]) -> list[dict[str, Any]]:
+    """The issue's targets with the literal and selected profiles' values (reproductions)."""
+
+    def values(rep: dict[str, Any]) -> list[float]:
+        s = rep["scores"]
+        return [s["test_proposed_median_rel_error"], s["test_conventional_median_rel_error"],
+                s["test_direction_agreement"], rep["table_5_8_test"], rep["claims"]["yes"]]  # fmt: skip
+
+    rows = []
+    for (name, (goal, bound, sense, before)), lit, sel in zip(TARGETS.items(), values(literal), values(selected),
+                                                              strict=True):  # fmt: skip
+        rows.append({"measure": name, "goal": goal, "before": before, "literal": lit, "selected": sel,
+                     "reached": sense * (sel - bound) >= 0})  # fmt: skip
+    return rows
 
 
-def main(study: Path) -> None:
-    ranking = pd.read_csv(study / "ranking.csv")
-    best = ranking.iloc[0]
-    literal = ranking[ranking.hypothesis == "literal"].iloc[0]
-    fitted = json.loads((study / "fits" / f"{best.hypothesis}.json").read_text())["values"]
-    out = [
-        "<!-- generated by scripts/fidelity_report.py from results/identify/pendulum_loop (make identify) -->",
-        f"Study: {len(ranking)} hypotheses, {int(ranking.evaluations.iloc[0])} GA evaluations each; "
-        f"wall time of the fits {ranking.wall_s.sum() / 60:.1f} min.",
-        "",
-        "Median relative error |nlcx − thesis| / |thesis| of M_p, t_r, t_s (cells printed as 0 left out; "
-        "a cell our run does not reach, diverged or never settled, counts as infinitely wrong: inf) per "
-        "controller, the share of cells measured, and the share of cells where (proposed − conventional) "
-        "has the thesis's sign. "
-        "Ranked by the validation error of both controllers together; the top 10 and the literal loop:",
-        "",
-        *ranking_table(ranking, 10),
-        "",
-        f"Selected by validation: **{best.hypothesis}**, fitted values:",
-        "",
-        "| parameter | value |",
-        "|---|---|",
-        *(f"| {k} | {v:.4g} |" for k, v in fitted.items()),
-        "",
-        "Test set, selected against literal and against the issue's targets (today's value in brackets):",
-        "",
-        "| measure | target | literal | selected |",
-        "|---|---|---|---|",
-        *(
-            f"| {name} | {goal} (today {today}) | {fmt(literal[name])} | {fmt(best[name])} |"
-            for name, (goal, today) in TARGETS.items()
-        ),
-    ]
-    out += ["", *definitions_table(study)]
-    print("\n".join(out))
+def context(results: Path) -> dict[str, Any]:
+    spec_split = split.load(SPLIT)
+    pend = pd.read_csv(results / "pendulum_all" / "ranking.csv")
+    cstr = pd.read_csv(results / "cstr" / "ranking.csv")
+    best = pend.iloc[0]
+    literal_rep = reproduction(results / "reproduce_literal", spec_split)
+    selected_rep = reproduction(results / "reproduce_selected", spec_split)
+    return {
+        "split": spec_split,
+        "pendulum_spec": yaml.safe_load(PENDULUM_SPEC.read_text()),
+        "cstr_spec": yaml.safe_load(CSTR_SPEC.read_text()),
+        "families": families_rows(hypotheses.FAMILIES),
+        "cstr_families": families_rows(hypotheses.CSTR_FAMILIES),
+        "pend": pend,
+        "pend_study": json.loads((results / "pendulum_all" / "study.json").read_text()),
+        "pend_top": ranking_rows(pend, 10),
+        "pend_best": best,
+        "pend_literal": pend[pend.hypothesis == "literal"].iloc[0],
+        "pend_values": json.loads(best["values"]),
+        "singles": [r for r in pend.to_dict("records") if len(json.loads(r["options"])) <= 1],
+        "definitions": pd.read_csv(results / "pendulum_all" / "definitions.csv").to_dict("records"),
+        "cstr": cstr,
+        "cstr_study": json.loads((results / "cstr" / "study.json").read_text()),
+        "cstr_top": ranking_rows(cstr, 10),
+        "cstr_best": cstr.iloc[0],
+        "cstr_literal": cstr[cstr.hypothesis == "literal"].iloc[0],
+        "literal": literal_rep,
+        "selected": selected_rep,
+        "targets": targets(literal_rep, selected_rep),
+        "consistency": (results / "consistency_x" / "consistency.md").read_text(encoding="utf-8"),
+    }
+
+
+def render(results: Path) -> str:
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader(Path(__file__).parent / "templates"),
+        undefined=jinja2.StrictUndefined,
+        keep_trailing_newline=True,
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
+    env.filters["f"] = fmt
+    env.filters["from_json"] = json.loads
+    return env.get_template("fidelity.md.j2").render(**context(results))
+
+
+def selected_profile(results: Path) -> str:
+    """The pendulum study's rank 1 (by validation) with chapter 5's rank 1 (by train loss)."""
+    pend = yaml.safe_load((results / "pendulum_all" / "profile.yaml").read_text())
+    cstr = yaml.safe_load((results / "cstr" / "profile.yaml").read_text())
+    profile = {**pend, "chapter5": cstr["chapter5"]}
+    chapter5 = "+".join(f"{k}={v}" for k, v in cstr["chapter5"]["hypothesis"].items()) or "literal"
+    profile["source"] = f"{pend['source']}; chapter 5: {chapter5}, rank 1 by train loss in cstr"
+    header = "# Generated by make identify (scripts/fidelity_report.py profile); do not edit.\n"
+    return header + yaml.safe_dump(profile, sort_keys=False)
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]))
+    command, results = sys.argv[1], Path(sys.argv[2])
+    sys.stdout.write(render(results) if command == "doc" else selected_profile(results))

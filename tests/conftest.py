@@ -66,3 +66,18 @@ def x_error_raw() -> dict[str, Any]:
 
 def rel(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+@pytest.fixture(scope="session")
+def reproduction(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One full ``nlcx reproduce`` (every figure, table and claim, with its report), shared by
+    the report tests."""
+    from typer.testing import CliRunner
+
+    from nlcx.cli import app
+
+    out = tmp_path_factory.mktemp("reproduction")
+    args = ["reproduce", "--jobs", "2", "--out", str(out), "--configs", str(CONFIGS / "thesis")]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    return out

@@ -37,6 +37,8 @@ def test_run_writes_the_run_directory(name: str, tmp_path: Path) -> None:
         "figure.png",
         "gains.png",
         "manifest.json",
+        "report.html",
+        "report.md",
     }
     metrics = pd.read_csv(out / "metrics.csv")
     assert list(metrics.columns) == ["controller", "signal", "metric", "value", "unit", "status", "note"]

@@ -78,7 +78,7 @@ CASES = [
         ["uncertainty.wind={}"],
         "uncertainty.wind.kind",
         "'wind'",
-        "unknown uncertainty; allowed: actuator_lag, disturbance, friction, noise",
+        "unknown uncertainty; allowed: actuator_lag, actuator_saturation, disturbance, friction, noise",
     ),
     (
         ["simulation.dt=0.003"],

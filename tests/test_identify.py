@@ -33,10 +33,10 @@ def built(hyp: hypotheses.Hypothesis, table: str = "2.5", **values: float) -> en
 
 
 def test_the_family_is_every_combination_of_up_to_three_options() -> None:
-    spec = yaml.safe_load((ROOT / "configs" / "identify" / "pendulum.yaml").read_text())
+    spec = yaml.safe_load((ROOT / "configs" / "identify" / "pendulum_all.yaml").read_text())
     family = hypotheses.family(spec["families"], spec["max_options"])
     names = [h.name for h in family]
-    assert names[0] == "literal" and len(names) == len(set(names)) == 184  # 1 + 11 + 50 + 122
+    assert names[0] == "literal" and len(names) == len(set(names)) == 508  # 1 + 15 + 100 + 392
     assert all(len(h.options) <= 3 for h in family)
     assert all(len({f for f, _ in h.options}) == len(h.options) for h in family)  # one value per family
 
@@ -161,3 +161,34 @@ def test_a_diverged_cell_counts_as_a_failure_not_as_missing() -> None:
     )
     got = scores(fit)
     assert got["validation_median_rel_error"] == np.inf and got["validation_measured_share"] == 1 / 3
+
+
+def test_a_warm_start_seeds_the_first_population_and_the_fit_never_loses_to_it(tmp_path: Path) -> None:
+    """With warm_start, each hypothesis's GA starts from the literal fit (the freed T_s at its
+    neutral 1 ms = dt, which is the literal loop): elitism keeps its train loss <= the literal's.
+    Workers fit one hypothesis each; the fits equal the serial ones."""
+    raw = yaml.safe_load(_spec(tmp_path, SPLIT).read_text())
+    raw |= {"families": ["sampling", "saturation"], "only": ["literal", "sampling=discrete", "saturation=plain"]}
+    raw |= {"warm_start": {"kind": "ga", "pop_size": 6, "generations": 2, "seed": 2}}
+    spec = tmp_path / "warm.yaml"
+    spec.write_text(yaml.safe_dump(raw))
+    for out, jobs in ((tmp_path / "serial", "1"), (tmp_path / "pool", "2")):
+        assert runner.invoke(app, ["identify", str(spec), "--out", str(out), "--jobs", jobs]).exit_code == 0
+    fits = {name: json.loads((tmp_path / "serial" / "fits" / f"{name}.json").read_text()) for name in raw["only"]}
+    literal = fits["literal"]
+    assert literal["evaluations"] == 12  # the warm start's GA, not the spec's (4 x 1)
+    for name in ("sampling=discrete", "saturation=plain"):
+        assert fits[name]["train_loss"] <= literal["train_loss"] + 1e-12
+        pooled = json.loads((tmp_path / "pool" / "fits" / f"{name}.json").read_text())
+        assert pooled["values"] == fits[name]["values"] and pooled["train_loss"] == fits[name]["train_loss"]
+
+
+def test_the_first_population_is_the_start_then_seeded_draws_in_the_box() -> None:
+    from nlcx.tuning.optimise import GASettings, _first_population
+
+    lower, upper = np.array([0.0, -1.0]), np.array([1.0, 1.0])
+    settings = GASettings(pop_size=5, seed=4)
+    pop = _first_population(np.array([[0.5, 3.0]]), lower, upper, settings)
+    assert pop.shape == (5, 2) and list(pop[0]) == [0.5, 1.0]  # clipped into the box
+    assert np.all((pop >= lower) & (pop <= upper))
+    assert np.array_equal(pop, _first_population(np.array([[0.5, 3.0]]), lower, upper, settings))

@@ -51,3 +51,16 @@ def test_a_prefiltered_step_rises_exponentially_and_is_measured_as_the_step() ->
     model, cfg = prep.references["F_x"]
     plan = model.metric_plan(cfg)
     assert (plan.kind, plan.final, plan.t_step) == ("step", 1.0, 0.2)
+
+
+def test_actuator_saturation_clips_what_any_controller_commands() -> None:
+    """An open-loop ramp of F_x through |F_x| <= 0.7: applied = clip(commanded)."""
+    raw = BASE | {
+        "reference": {"F_x": {"kind": "sine", "amplitude": 2.0, "frequency": 1.0}},
+        "uncertainty": {"limit": {"kind": "actuator_saturation", "limit": 0.7}},
+    }
+    (run,) = engine.run_experiment(config.build(raw)).runs
+    (free,) = engine.run_experiment(config.build(BASE | {"reference": raw["reference"]})).runs
+    np.testing.assert_array_equal(run.r[:, 0], free.r[:, 0])
+    np.testing.assert_array_equal(run.u[:, 0], np.clip(free.u[:, 0], -0.7, 0.7))
+    assert np.max(np.abs(free.u[:, 0])) > 1.9

@@ -309,3 +309,48 @@ def test_a_loop_in_degrees_sees_y_and_r_scaled() -> None:
     u_manual, _ = drive(build(copy.deepcopy(CONST)), scaled, rs, dt)
     np.testing.assert_allclose(u_deg, u_manual, rtol=1e-12, atol=1e-12)
     assert not np.allclose(u_deg, u_rad)
+
+
+def test_discrete_pid_is_the_difference_equation_at_its_samples_held_between() -> None:
+    """T_s = 5 dt: at t_k = k T_s, u_k = k_p e_k + k_i T_s sum e_j + k_d (e_k - e_{k-1}) / T_s
+    of the sampled errors; between samples the output is held (zero-order hold)."""
+    dt, every = 0.01, 5
+    raw = copy.deepcopy(CONST) | {"sample_time": every * dt}
+    rng = np.random.default_rng(11)
+    n = 60
+    ys = np.column_stack([rng.normal(size=n).cumsum() * 0.01, rng.normal(size=n) * 0.05])
+    rs = np.column_stack([np.ones(n), np.zeros(n)])
+    u, logs = drive(build(raw), ys, rs, dt)
+    picks = np.arange(0, n, every)
+    ts = every * dt
+    expected = -reference_pid(rs[picks, 1] - ys[picks, 1], 30, 2, 4, ts) + reference_pid(
+        rs[picks, 0] - ys[picks, 0], -3, -1, -2, ts
+    )
+    np.testing.assert_allclose(u[picks], expected, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(u, np.repeat(u[picks], every)[:n])
+    names = build(raw).controllers[0].log_names
+    np.testing.assert_allclose(logs[picks, names.index("x.kp")], -3)
+
+
+def test_a_discrete_pid_in_the_loop_holds_force_and_log_between_samples() -> None:
+    """T_s = 5 dt over 1 s: the applied force and every logged value change only at t = k T_s."""
+    (run,) = engine.run_experiment(build(copy.deepcopy(CONST) | {"sample_time": 0.05}).experiment).runs
+    for signal in (run.u[:100, 0], *run.log[:100].T):
+        blocks = signal.reshape(20, 5)
+        np.testing.assert_array_equal(blocks, np.repeat(blocks[:, :1], 5, axis=1))
+    assert len(np.unique(run.u[:100, 0])) == 20
+
+
+def test_a_discrete_pid_sampled_every_step_is_the_continuous_one_bit_for_bit() -> None:
+    raw = copy.deepcopy(CONST) | {"saturation": {"limits": {"F_x": 3.0}, "anti_windup": "back_calculation"}}
+    continuous = engine.run_experiment(build(raw).experiment).runs[0]
+    sampled = engine.run_experiment(build(raw | {"sample_time": 0.01}).experiment).runs[0]
+    np.testing.assert_array_equal(continuous.u, sampled.u)
+    np.testing.assert_array_equal(continuous.x, sampled.x)
+
+
+def test_a_sample_time_below_the_step_is_a_config_error() -> None:
+    from nlcx.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"controllers\.c\.sample_time = 0\.001: allowed: .*0\.01"):
+        build(copy.deepcopy(CONST) | {"sample_time": 0.001})

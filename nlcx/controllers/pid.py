@@ -37,8 +37,9 @@ from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join, validate_model
 
 #: The head of the parameter row: number of loops and of inputs, the actuator saturation's
-#: anti-windup (:data:`ANTI_WINDUP` code; -1: no saturation) and back-calculation gain K_b.
-HEAD = Layout("PIDHead", ("n_loops", "n_inputs", "anti_windup", "kb"))
+#: anti-windup (:data:`ANTI_WINDUP` code; -1: no saturation), back-calculation gain K_b and
+#: the sampling period T_s of a discrete PID (0: sampled at every integration step).
+HEAD = Layout("PIDHead", ("n_loops", "n_inputs", "anti_windup", "kb", "sample_time"))
 H = HEAD.at
 #: One block per input after the head: its constant bias and its limit |u_j| <= limit (inf: none).
 INPUT = Layout("PIDInput", ("bias", "limit"))
@@ -64,8 +65,13 @@ L = LOOP.at
 VIA_SLOT, DIRECT_CONSTANT, DIRECT_TIME_AGS, DIRECT_ERROR_AGS = 0, 1, 2, 3
 _DIRECT = {constant_gains: DIRECT_CONSTANT, time_ags_gains: DIRECT_TIME_AGS, error_ags_gains: DIRECT_ERROR_AGS}
 #: One loop's controller state: integral, previous error, filtered derivative, previous y,
-#: started, and the integral's increment of the last sample (undone by clamping anti-windup).
-LOOP_STATE = Layout("PIDLoopState", ("integral", "e_prev", "d_filtered", "y_prev", "started", "increment"))
+#: started, the integral's increment of the last sample (undone by clamping anti-windup), the
+#: period of this step's update (dt, T_s, or 0 while a discrete PID holds its output), the
+#: time of the next sample and the held output of a discrete PID.
+LOOP_STATE = Layout(
+    "PIDLoopState",
+    ("integral", "e_prev", "d_filtered", "y_prev", "started", "increment", "period", "next_sample", "held"),
+)
 S = LOOP_STATE.at
 #: One loop's logged values: k_p, k_i, k_d and the loop's signed contribution to its input.
 LOOP_LOG = Layout("PIDLoopLog", ("kp", "ki", "kd", "u"))
@@ -141,13 +147,18 @@ class PIDConfig(ControllerConfig):
     form: Literal["parallel", "ideal", "series"] = "parallel"
     #: Actuator saturation with anti-windup (none: unlimited inputs).
     saturation: SaturationConfig | None = None
+    #: Sampling period T_s of a discrete PID, s: the loops update every T_s (integral e T_s,
+    #: derivative over T_s) and hold their output in between (zero-order hold). 0: updated at
+    #: every integration step dt (a continuous PID to within dt).
+    sample_time: float = Field(0.0, ge=0)
 
 
 @njit(cache=True, error_model="numpy")
 def _saturate(row, dt, cp, cs, u, log):  # pragma: no cover - compiled
     """Clip each limited input to [-limit, limit] and correct the integrators of the loops on
-    it (clamping: undo this sample's increment if it pushes further into the limit;
-    back-calculation: I += K_b (u_sat - u) dt through the loop's sign and integral gain)."""
+    it that updated at this step (clamping: undo this sample's increment if it pushes further
+    into the limit; back-calculation: I += K_b (u_sat - u) T through the loop's sign and
+    integral gain, T the loop's update period)."""
     n_u = int(cp[row, H.n_inputs])
     base = len(H) + len(I) * n_u
     mode = int(cp[row, H.anti_windup])
@@ -159,26 +170,42 @@ def _saturate(row, dt, cp, cs, u, log):  # pragma: no cover - compiled
         if excess == 0.0:
             continue
         c = len(S) * i
+        period = cs[row, c + S.period]
+        if period == 0.0:
+            continue
         sign = cp[row, h + L.sign]
         inside = cp[row, h + L.gain_inside] != 0.0
         ki = log[row, len(G) * i + G.ki]
         if mode == 1 and excess * sign * cs[row, c + S.increment] * (1.0 if inside else ki) > 0.0:
             cs[row, c + S.integral] -= cs[row, c + S.increment]
         elif mode == 2 and (inside or ki != 0.0):
-            cs[row, c + S.integral] -= sign * cp[row, H.kb] * excess * dt / (1.0 if inside else ki)
+            cs[row, c + S.integral] -= sign * cp[row, H.kb] * excess * period / (1.0 if inside else ki)
     for j in range(n_u):
         limit = cp[row, len(H) + len(I) * j + I.limit]
         u[row, j] = min(max(u[row, j], -limit), limit)
+
+
+@njit(cache=True, error_model="numpy")
+def _update_period(t, dt, sample_time, cs, row, c):  # pragma: no cover - compiled
+    """The period a loop updates over at t: dt for a continuous PID (T_s = 0); T_s at a
+    discrete PID's sampling instant (the next one scheduled T_s later); 0 while it holds."""
+    if sample_time == 0.0:
+        return dt
+    if t < cs[row, c + S.next_sample] - 0.5 * dt:
+        return 0.0
+    cs[row, c + S.next_sample] += sample_time
+    return sample_time
 
 
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy")
 def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """Multi-loop PID with pluggable gain schedules, one sample (zero-order hold), every row.
 
-    Per loop i: e = r - y, I += e dt (or k_i e dt with the gain inside), D = de/dt by a
+    Per loop i: e = r - y, I += e T (or k_i e T with the gain inside), D = de/dt by a
     backward difference or filtered by N/(s + N), (k_p, k_i, k_d) from the loop's schedule,
     u += sign (k_p (b r - y) + k_i I + k_d D), with y and r in the loop's units (scale) and
-    (k_p, k_i, k_d) turned into parallel gains for the ideal or series form.
+    (k_p, k_i, k_d) turned into parallel gains for the ideal or series form. T = dt, or the
+    sampling period T_s of a discrete PID, which holds its output between samples.
     ``callbacks`` holds the registered schedules.
     """
     for row in range(x.shape[0]):
@@ -189,6 +216,11 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
         for i in range(int(cp[row, H.n_loops])):
             h = base + len(L) * i
             c = len(S) * i
+            period = _update_period(t, dt, cp[row, H.sample_time], cs, row, c)
+            cs[row, c + S.period] = period
+            if period == 0.0:
+                u[row, int(cp[row, h + L.u_index])] += cs[row, c + S.held]
+                continue
             y_i = y[row, int(cp[row, h + L.y_index])] * cp[row, h + L.scale]
             r_i = r[row, int(cp[row, h + L.r_index])] * cp[row, h + L.scale]
             e = r_i - y_i
@@ -200,10 +232,10 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
             dv = (cs[row, c + S.y_prev] - y_i) if on_measurement else (e - cs[row, c + S.e_prev])
             if cp[row, h + L.filtered] != 0.0:
                 N = cp[row, h + L.N]
-                d = (cs[row, c + S.d_filtered] + N * dv) / (1.0 + N * dt)
+                d = (cs[row, c + S.d_filtered] + N * dv) / (1.0 + N * period)
                 cs[row, c + S.d_filtered] = d
             else:
-                d = dv / dt
+                d = dv / period
             off = int(cp[row, h + L.schedule_offset])
             direct = int(cp[row, h + L.direct_schedule])
             if direct == DIRECT_ERROR_AGS:
@@ -217,7 +249,7 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
             form = cp[row, h + L.form]
             if form != 0.0:  # ideal: k_p (1, k_i, k_d); series: k_p (1 + k_i k_d, k_i, k_d)
                 kp, ki, kd = (kp * (1.0 + ki * kd) if form == 2.0 else kp), kp * ki, kp * kd
-            step = ki * e * dt if cp[row, h + L.gain_inside] != 0.0 else e * dt
+            step = ki * e * period if cp[row, h + L.gain_inside] != 0.0 else e * period
             cs[row, c + S.integral] += step
             cs[row, c + S.increment] = step
             integral_term = cs[row, c + S.integral] * (1.0 if cp[row, h + L.gain_inside] != 0.0 else ki)
@@ -227,6 +259,7 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
             log[row, g + G.ki] = ki
             log[row, g + G.kd] = kd
             log[row, g + G.u] = out
+            cs[row, c + S.held] = out
             u[row, int(cp[row, h + L.u_index])] += out
             cs[row, c + S.e_prev] = e
             cs[row, c + S.y_prev] = y_i
@@ -254,6 +287,9 @@ class MultiLoopPID(ControllerModel):
 
     def build(self, label: str, cfg: PIDConfig, plant: Plant, path: str, dt: float | None = None) -> ControllerInstance:
         cfg = self.normalize(cfg, path)
+        if dt is not None and 0.0 < cfg.sample_time < dt:
+            allowed = f"allowed: 0 (updated every step) or a period >= simulation.dt = {dt:g} s"
+            raise ConfigError(join(path, "sample_time"), cfg.sample_time, allowed)
         loops = self._resolve_loops(cfg, plant, path)
         sat = cfg.saturation
         inputs = zip(self._bias(cfg, plant, path), self._limits(cfg, plant, path), strict=True)
@@ -261,6 +297,7 @@ class MultiLoopPID(ControllerModel):
             HEAD.pack(
                 n_loops=len(loops), n_inputs=len(plant.inputs),
                 anti_windup=ANTI_WINDUP[sat.anti_windup if sat else "off"], kb=sat.kb if sat else 0.0,
+                sample_time=cfg.sample_time,
             ),
             *(INPUT.pack(bias=bias, limit=limit) for bias, limit in inputs),
         ])  # fmt: skip

@@ -1,8 +1,9 @@
 """Hypotheses about the loop the thesis simulated: named sets of real loop options.
 
 Every option is a setting a user can put in any config (nothing here is a special case of
-the kernel): the PID's derivative, integral form and actuator saturation with anti-windup,
-the error-AGS argument, and the reading of the printed gain ranges. A hypothesis picks at
+the kernel): the PID's derivative, integral form, PID form, sampling and actuator saturation with
+anti-windup, the units its loops see, the error-AGS argument, the reading of the printed gain
+ranges, an actuator lag and a reference prefilter. A hypothesis picks at
 most one non-default value per family; :func:`apply` writes it into an experiment's
 (interpolated) raw config, with the continuous parameters it frees (e.g. F_max).
 
@@ -108,8 +109,16 @@ def _prefilter(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
             reference.update(kind="filtered_step", time_constant=params["T_f"])
 
 
+def _sampled(pid: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """A discrete PID sampled every T_s (the free parameter)."""
+    pid["sample_time"] = params["T_s"]
+
+
 ANGLES = ("theta", "phi")
 F_MAX = {"F_max": (2.0, 100.0)}
+#: The free parameters' values nearest today's loop: the widest limit, the shortest lag,
+#: prefilter and sampling period.
+NEUTRAL = {"F_max": 100.0, "tau": 0.001, "T_f": 0.01, "T_s": 0.001, "u_max": 20.0}
 
 #: family -> value -> option; the first value of each family is the default (today's).
 FAMILIES: dict[str, dict[str, OptionValue]] = {
@@ -155,6 +164,14 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
             "first-order prefiltered steps, time constant T_f", _prefilter, {"T_f": (0.01, 3.0)}, "experiment"
         ),
     },
+    "sampling": {
+        "continuous": OptionValue("PID updated at every integration step, dt = 1 ms (today)", _unchanged),
+        "discrete": OptionValue(
+            "discrete PID at T_s (free in [1, 50] ms; 10 and 20 ms inside), output held between samples",
+            _sampled,
+            {"T_s": (0.001, 0.05)},
+        ),
+    },
     "saturation": {
         "none": OptionValue("unlimited forces (today)", _unchanged),
         "plain": OptionValue("|F| <= F_max, no anti-windup", _saturation("none"), F_MAX),
@@ -166,8 +183,122 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
 }
 
 
+def _zn_rule(rule: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """Every Ziegler-Nichols tuner of the controller uses ``rule`` (PI: no derivative)."""
+
+    def change(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        for tuner in pid.get("tune", []):
+            if tuner.get("kind") == "ziegler_nichols":
+                tuner["rule"] = rule
+
+    return change
+
+
+def _setpoint_weight(b: float) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    def change(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        pid["setpoint_weight"] = b
+
+    return change
+
+
+def _derivative_n(method: str, on: str, n: float) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    def change(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        pid["derivative"] = {"method": method, "N": n, "on": on}
+
+    return change
+
+
+def _step_at_one_second(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """The reference steps at t = 1 s (Simulink's Step block default), not at t = 0."""
+    for reference in raw.get("reference", {}).values():
+        if reference.get("kind") == "step":
+            reference["time"] = 1.0
+
+
+def _actuator_limit(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """|u| <= u_max on the plant input, whatever controller drives it (a loop element)."""
+    raw.setdefault("uncertainty", {})["limit"] = {"kind": "actuator_saturation", "limit": params["u_max"]}
+
+
+def _model_in_seconds(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """The model's time unit read as seconds converted from minutes: G(s) -> G(60 s), with
+    the run's horizon and step scaled alike (t_end and dt x 60)."""
+    params = raw["plant"]["params"]
+    for key in ("num", "den"):
+        coefficients = params[key]
+        n = len(coefficients) - 1
+        params[key] = [c * 60.0 ** (n - i) for i, c in enumerate(coefficients)]
+    raw["simulation"] = {**raw["simulation"], "t_end": raw["simulation"]["t_end"] * 60.0}
+    raw["simulation"]["dt"] = raw["simulation"]["dt"] * 60.0
+
+
+def _nonlinear_reactor(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """The Van de Vusse reactor (eqs. 5.1-5.2) in place of its transfer function: every
+    controller adds the operating dilution rate, the step is 0.05 gmol/L about C_Bs (a unit
+    step is beyond the reactor's reach; M_p, t_r, t_s are relative to the step)."""
+    raw["plant"] = {"name": "cstr"}
+    for controller in raw.get("controllers", {}).values():
+        controller["feedforward"] = "equilibrium"
+    for reference in raw.get("reference", {}).values():
+        step = reference["final"] - reference.get("initial", 0.0)
+        reference.update(initial=CSTR_OPERATING_CB, final=CSTR_OPERATING_CB + 0.05 * step)
+
+
+#: C_B at the CSTR's operating point (u_s = 4/7 1/min), gmol/L (configs/cstr_nonlinear.yaml).
+CSTR_OPERATING_CB = 1.117021276595745
+
+#: Chapter 5's families (Table 5.8; the CSTR), same form as :data:`FAMILIES`.
+CSTR_FAMILIES: dict[str, dict[str, OptionValue]] = {
+    "zn_rule": {
+        "classic": OptionValue("Ziegler-Nichols PID, Table 5.1 (today)", _unchanged),
+        "pi": OptionValue("Ziegler-Nichols PI, Table 5.1 (PI instead of PID)", _zn_rule("pi")),
+        "pessen": OptionValue("Pessen's integral rule", _zn_rule("pessen")),
+        "some_overshoot": OptionValue("ZN 'some overshoot'", _zn_rule("some_overshoot")),
+        "no_overshoot": OptionValue("ZN 'no overshoot'", _zn_rule("no_overshoot")),
+        "tyreus_luyben": OptionValue("Tyreus-Luyben PID", _zn_rule("tyreus_luyben")),
+    },
+    "cstr_derivative": {
+        "backward": OptionValue("backward difference of e (today)", _unchanged),
+        "filtered_n100": OptionValue("filtered, N = 100 (Simulink's default)", _derivative_n("filtered", "error", 100)),
+        "filtered_n10": OptionValue("filtered, N = 10", _derivative_n("filtered", "error", 10)),
+        "measurement": OptionValue(
+            "backward difference of -y (no kick)", _derivative_n("backward", "measurement", 100)
+        ),
+    },
+    "setpoint_weight": {
+        "one": OptionValue("proportional term on e (today)", _unchanged),
+        "half": OptionValue("proportional term on 0.5 r - y", _setpoint_weight(0.5)),
+        "zero": OptionValue("proportional term on -y (b = 0; I-PD with the derivative on y)", _setpoint_weight(0.0)),
+    },
+    "step_time": {
+        "zero": OptionValue("reference step at t = 0 (today)", _unchanged),
+        "one_second": OptionValue(
+            "reference step at t = 1 s (Simulink's default)", _step_at_one_second, scope="experiment"
+        ),
+    },
+    "actuator_limit": {
+        "none": OptionValue("unlimited dilution rate (today)", _unchanged),
+        "saturated": OptionValue(
+            "|u| <= u_max on the input, any controller", _actuator_limit, {"u_max": (0.1, 20.0)}, "experiment"
+        ),
+    },
+    "time_unit": {
+        "minutes": OptionValue("the model's time unit (min) printed as s (today)", _unchanged),
+        "seconds": OptionValue("the model converted to seconds, G(60 s)", _model_in_seconds, scope="experiment"),
+    },
+    "reactor": {
+        "transfer_function": OptionValue("the transfer function 5.10 (today)", _unchanged),
+        "nonlinear": OptionValue(
+            "the nonlinear reactor about its operating point", _nonlinear_reactor, scope="experiment"
+        ),
+    },
+}
+#: Every option by family, both chapters.
+OPTIONS = {**FAMILIES, **CSTR_FAMILIES}
+
+
 def default(family: str) -> str:
-    return next(iter(FAMILIES[family]))
+    return next(iter(OPTIONS[family]))
 
 
 @dataclass(frozen=True)
@@ -184,15 +315,19 @@ class Hypothesis:
         """The continuous parameters this hypothesis frees (beyond the conventional gains)."""
         out: dict[str, tuple[float, float]] = {}
         for family, value in self.options:
-            out.update(FAMILIES[family][value].free)
+            out.update(OPTIONS[family][value].free)
         return out
+
+    def neutral(self) -> dict[str, float]:
+        """Each free parameter's value nearest today's loop (:data:`NEUTRAL`)."""
+        return {name: NEUTRAL[name] for name in self.free()}
 
     def apply(self, raw: Raw, params: Mapping[str, float], inputs: list[str]) -> Raw:
         """A copy of the interpolated experiment ``raw`` with the options on every PID controller
         (the plant's ``inputs`` are what a saturation limits)."""
         out = copy.deepcopy(raw)
         for family, value in self.options:
-            option = FAMILIES[family][value]
+            option = OPTIONS[family][value]
             if option.scope == "experiment":
                 option.change(out, params, inputs)
                 continue
@@ -204,11 +339,11 @@ class Hypothesis:
 
 def family(families: list[str], max_options: int) -> list[Hypothesis]:
     """The literal loop and every combination of up to ``max_options`` non-default values of
-    distinct ``families`` (in the order of :data:`FAMILIES`)."""
-    ordered = [f for f in FAMILIES if f in families]
+    distinct ``families`` (in the order of :data:`OPTIONS`)."""
+    ordered = [f for f in OPTIONS if f in families]
     out = [Hypothesis()]
     for size in range(1, max_options + 1):
         for chosen in itertools.combinations(ordered, size):
-            values = [[v for v in FAMILIES[f] if v != default(f)] for f in chosen]
+            values = [[v for v in OPTIONS[f] if v != default(f)] for f in chosen]
             out += [Hypothesis(tuple(zip(chosen, combo, strict=True))) for combo in itertools.product(*values)]
     return out

@@ -32,7 +32,8 @@ import hashlib
 import json
 import math
 import time
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +66,11 @@ class IdentifySpec(BaseModel):
     optimiser: GASettings = GASettings(pop_size=30, generations=20, seed=1)
     #: Fit only these hypotheses (by name; default: the whole family).
     only: list[str] | None = None
+    #: GA settings of a first fit of the literal loop whose gains seed every other
+    #: hypothesis's first population, the freed parameters at their values nearest today's
+    #: loop (:data:`nlcx.thesis.hypotheses.NEUTRAL`): each GA then starts from the literal
+    #: fit, and its elitism keeps the best candidate. None: every GA starts at random.
+    warm_start: GASettings | None = None
 
     @field_validator("families")
     @classmethod
@@ -190,20 +196,28 @@ def all_cells(spec_split: split.Split) -> pd.DataFrame:
 
 
 def fit_hypothesis(
-    spec: IdentifySpec, root: Path, hyp: hypotheses.Hypothesis, cells: pd.DataFrame, jobs: int
+    spec: IdentifySpec,
+    root: Path,
+    hyp: hypotheses.Hypothesis,
+    cells: pd.DataFrame,
+    jobs: int = 1,
+    start: dict[str, float] | None = None,
 ) -> tuple[dict[str, Any], pd.DataFrame]:
-    """Fit ``hyp`` on the train cells, then measure it on every cell: (summary, fit table)."""
+    """Fit ``hyp`` on the train cells (the GA's first population seeded with ``start``, the
+    conventional gains, and the freed parameters' neutral values), then measure it on every
+    cell: (summary, fit table)."""
     bounds = {**spec.free, **hyp.free()}
     keys = list(bounds)
     train = cells[cells.part == "train"].reset_index(drop=True)
     objective = Objective(root, hyp, keys, train)
     lower, upper = (np.array([b[i] for b in bounds.values()]) for i in (0, 1))
-    start = time.perf_counter()
+    seed = None if start is None else np.array([[{**start, **hyp.neutral()}[k] for k in keys]])
+    t0 = time.perf_counter()
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            result = evolve(objective, lower, upper, spec.optimiser, pool, jobs)
+            result = evolve(objective, lower, upper, spec.optimiser, pool, jobs, start=seed)
     else:
-        result = evolve(objective, lower, upper, spec.optimiser)
+        result = evolve(objective, lower, upper, spec.optimiser, start=seed)
     values = dict(zip(keys, map(float, result.x), strict=True))
     ours = measure_cells(TableRuns(root, list(dict.fromkeys(cells.table))), hyp, [values], cells)[:, 0]
     fit = cells.rename(columns={"value": "thesis"}).assign(nlcx=ours)
@@ -214,7 +228,7 @@ def fit_hypothesis(
         "values": values,
         "train_loss": float(result.f),
         "evaluations": result.evaluations,
-        "wall_s": round(time.perf_counter() - start, 2),
+        "wall_s": round(time.perf_counter() - t0, 2),
         **scores(fit),
     }
     return summary, fit
@@ -224,9 +238,11 @@ def load_spec(path: Path) -> IdentifySpec:
     return validate_model(IdentifySpec, yaml.safe_load(path.read_text(encoding="utf-8")) or {}, "")
 
 
-def spec_digest(spec: IdentifySpec, spec_split: split.Split) -> str:
-    """What a finished fit depends on: the spec (but ``only``) and the split."""
-    text = json.dumps([spec.model_dump(exclude={"only"}), spec_split.model_dump()], sort_keys=True)
+def spec_digest(spec: BaseModel, spec_split: split.Split) -> str:
+    """What a finished fit depends on: the spec (but ``only``; ``warm_start`` when set, so
+    the fits of a spec written before it existed stay valid) and the split."""
+    exclude = {"only"} | (set() if getattr(spec, "warm_start", None) is not None else {"warm_start"})
+    text = json.dumps([spec.model_dump(exclude=exclude), spec_split.model_dump()], sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -237,26 +253,81 @@ def identify(path: Path, out_dir: Path, jobs: int = 1, root: Path | None = None,
     root = root or Path("configs") / "thesis"
     cells = all_cells(spec_split)
     digest = spec_digest(spec, spec_split)
-    family = hypotheses.family(spec.families, spec.max_options)
-    if spec.only is not None:
-        known = {h.name for h in family}
-        missing = [n for n in spec.only if n not in known]
-        if missing:
-            raise ConfigError("only", missing[0], "not a hypothesis of the spec's families and max_options")
-        family = [h for h in family if h.name in spec.only]
-    for k, hyp in enumerate(family):
-        done = out_dir / "fits" / f"{hyp.name}.json"
-        if done.exists() and json.loads(done.read_text()).get("spec_digest") == digest:
-            continue
-        summary, fit = fit_hypothesis(spec, root, hyp, cells, jobs)
-        report.write_csv(out_dir / "fits" / f"{hyp.name}.fit.csv", fit)
-        report.write_text(done, json.dumps({**summary, "spec_digest": digest}, indent=2) + "\n")
+    family = select(spec, hypotheses.family(spec.families, spec.max_options))
+    t0 = time.perf_counter()
+    fits = out_dir / "fits"
+    done = {h.name for h in family if finished(fits / f"{h.name}.json", digest)}
+    fitted_now = len(family) - len(done)
+    start = None
+    if spec.warm_start is not None:
+        literal = hypotheses.Hypothesis()
+        if literal.name not in done:
+            first = spec.model_copy(update={"optimiser": spec.warm_start})
+            save_fit(fits, digest, *fit_hypothesis(first, root, literal, cells, jobs))
+        start = json.loads((fits / "literal.json").read_text())["values"]
+        done.add(literal.name)
+    todo = [h for h in family if h.name not in done]
+    for k, (summary, fit) in enumerate(_fits(spec, root, todo, cells, jobs, start)):
+        save_fit(fits, digest, summary, fit)
         if progress is not None:
-            progress(k + 1, len(family), hyp.name)
+            progress(len(family) - len(todo) + k + 1, len(family), summary["hypothesis"])
+    write_study(out_dir, len(family), fitted_now, jobs, time.perf_counter() - t0)
     ranking = write_ranking(out_dir, [h.name for h in family])
     chosen = list(dict.fromkeys(["literal", str(ranking.hypothesis.iloc[0])]))
     write_definitions(out_dir, root, cells, [n for n in chosen if n in set(ranking.hypothesis)])
     return ranking
+
+
+def write_study(out_dir: Path, hypotheses_total: int, fitted: int, jobs: int, wall_s: float) -> None:
+    """study.json: how many hypotheses the study holds, how many this invocation fitted, on how
+    many workers and in what wall time (a resumed study's time covers only its rest; a run
+    that fitted nothing keeps the record of the last one that did)."""
+    if fitted == 0 and (out_dir / "study.json").is_file():
+        return
+    record = {"hypotheses": hypotheses_total, "fitted_now": fitted, "jobs": jobs, "wall_s": round(wall_s, 1)}
+    report.write_text(out_dir / "study.json", json.dumps(record, indent=2) + "\n")
+
+
+def select(spec: IdentifySpec, family: list[hypotheses.Hypothesis]) -> list[hypotheses.Hypothesis]:
+    """The hypotheses of ``family`` the spec's ``only`` names (all without it)."""
+    if spec.only is None:
+        return family
+    known = {h.name for h in family}
+    missing = [n for n in spec.only if n not in known]
+    if missing:
+        raise ConfigError("only", missing[0], "not a hypothesis of the spec's families and max_options")
+    return [h for h in family if h.name in spec.only]
+
+
+def finished(path: Path, digest: str) -> bool:
+    return path.exists() and json.loads(path.read_text()).get("spec_digest") == digest
+
+
+def save_fit(fits: Path, digest: str, summary: dict[str, Any], fit: pd.DataFrame) -> None:
+    """A finished fit, atomically: the fit table first, then the summary that marks it done."""
+    report.write_csv(fits / f"{summary['hypothesis']}.fit.csv", fit)
+    text = json.dumps({**summary, "spec_digest": digest}, indent=2) + "\n"
+    report.write_text(fits / f"{summary['hypothesis']}.json", text)
+
+
+def _fits(
+    spec: IdentifySpec,
+    root: Path,
+    todo: list[hypotheses.Hypothesis],
+    cells: pd.DataFrame,
+    jobs: int,
+    start: dict[str, float] | None,
+) -> Iterator[tuple[dict[str, Any], pd.DataFrame]]:
+    """Each hypothesis's fit as it finishes: one hypothesis per worker (a fit depends only on
+    its hypothesis and ``start``, so the order and the number of workers change nothing)."""
+    if jobs <= 1 or len(todo) <= 1:
+        for hyp in todo:
+            yield fit_hypothesis(spec, root, hyp, cells, jobs, start)
+        return
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures = [pool.submit(fit_hypothesis, spec, root, hyp, cells, 1, start) for hyp in todo]
+        for future in as_completed(futures):
+            yield future.result()
 
 
 #: Measurement-side definitions, reported beside the fits and never part of a hypothesis.

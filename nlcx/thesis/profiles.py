@@ -8,7 +8,8 @@ gains and the hypothesis's own parameters, e.g. F_max) and the plants it applies
     hypothesis: {saturation: clamping}
     values: {vars.conventional.angle.kp: 80.1, ..., F_max: 24.5}
     plants: [x_pendulum, xy_pendulum, xz_pendulum, xyz_pendulum]
-    source: nlcx identify configs/identify/pendulum.yaml (rank 1 by validation)
+    source: nlcx identify configs/identify/pendulum_all.yaml (rank 1 by validation)
+    chapter5: {hypothesis: {zn_rule: pessen}, values: {}}   # Table 5.8's experiments
 
 ``literal`` is today's behaviour: no option, no value, every experiment exactly as its config.
 ``nlcx reproduce --profile NAME`` runs every figure, table and claim under a profile.
@@ -28,6 +29,35 @@ from nlcx.thesis import hypotheses
 from nlcx.validation import validate_model
 
 PENDULUMS = ["x_pendulum", "xy_pendulum", "xz_pendulum", "xyz_pendulum"]
+#: The plants of chapter 5's experiments (a profile's ``chapter5`` part applies to them).
+CHAPTER5_PLANTS = ("transfer_function", "cstr")
+
+
+def _check_options(options: dict[str, str], families: dict[str, dict[str, Any]]) -> dict[str, str]:
+    for family, value in options.items():
+        if family not in families or value not in families[family]:
+            allowed = ", ".join(f"{f}={v}" for f, vs in families.items() for v in vs)
+            raise ValueError(f"unknown option {family}={value}; allowed: {allowed}")
+    return options
+
+
+def _as_hypothesis(options: dict[str, str]) -> hypotheses.Hypothesis:
+    order = list(hypotheses.OPTIONS)
+    return hypotheses.Hypothesis(tuple(sorted(options.items(), key=lambda kv: order.index(kv[0]))))
+
+
+class Chapter5Part(BaseModel):
+    """The hypothesis every chapter-5 experiment (Table 5.8, the CSTR) runs under."""
+
+    model_config = ConfigDict(extra="forbid")
+    hypothesis: dict[str, str] = Field(default_factory=dict)
+    #: The hypothesis's fitted parameters (e.g. u_max).
+    values: dict[str, float] = Field(default_factory=dict)
+
+    @field_validator("hypothesis")
+    @classmethod
+    def _options(cls, options: dict[str, str]) -> dict[str, str]:
+        return _check_options(options, hypotheses.CSTR_FAMILIES)
 
 
 class Profile(BaseModel):
@@ -39,24 +69,21 @@ class Profile(BaseModel):
     values: dict[str, float] = Field(default_factory=dict)
     #: Plants whose experiments the profile changes; the others run as configured.
     plants: list[str] = Field(default_factory=lambda: list(PENDULUMS))
+    #: Chapter 5's hypothesis (its experiments' plants: the transfer function, the reactor).
+    chapter5: Chapter5Part = Chapter5Part()
     source: str = ""
 
     @field_validator("hypothesis")
     @classmethod
     def _options(cls, options: dict[str, str]) -> dict[str, str]:
-        for family, value in options.items():
-            if family not in hypotheses.FAMILIES or value not in hypotheses.FAMILIES[family]:
-                allowed = ", ".join(f"{f}={v}" for f, vs in hypotheses.FAMILIES.items() for v in vs)
-                raise ValueError(f"unknown option {family}={value}; allowed: {allowed}")
-        return options
+        return _check_options(options, hypotheses.FAMILIES)
 
     @property
     def literal(self) -> bool:
-        return not self.hypothesis and not self.values
+        return not (self.hypothesis or self.values or self.chapter5.hypothesis or self.chapter5.values)
 
     def as_hypothesis(self) -> hypotheses.Hypothesis:
-        order = list(hypotheses.FAMILIES)
-        return hypotheses.Hypothesis(tuple(sorted(self.hypothesis.items(), key=lambda kv: order.index(kv[0]))))
+        return _as_hypothesis(self.hypothesis)
 
 
 def load(name: str, root: Path) -> Profile:
@@ -74,9 +101,11 @@ def experiment(path: Path, overrides: list[str], profile: Profile | None) -> cfg
         return cfg.load(path, overrides)
     raw = cfg.apply_overrides(cfg.read_config(path), overrides)
     plant = (raw.get("plant") or {}).get("name")
-    if plant not in profile.plants:
-        return cfg.build(cfg.interpolate(raw))
-    return apply(raw, profile.as_hypothesis(), profile.values)
+    if plant in profile.plants:
+        return apply(raw, profile.as_hypothesis(), profile.values)
+    if plant in CHAPTER5_PLANTS and (profile.chapter5.hypothesis or profile.chapter5.values):
+        return apply(raw, _as_hypothesis(profile.chapter5.hypothesis), profile.chapter5.values)
+    return cfg.build(cfg.interpolate(raw))
 
 
 def plant_inputs(raw: dict[str, Any]) -> list[str]:

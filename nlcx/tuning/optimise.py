@@ -71,12 +71,16 @@ def evolve(
     executor: Executor | None = None,
     chunks: int = 1,
     callback: Callable[[int, float], None] | None = None,
+    start: np.ndarray | None = None,
 ) -> OptimResult:
-    """Minimise ``objective`` over the box [lower, upper] with pymoo's GA."""
+    """Minimise ``objective`` over the box [lower, upper] with pymoo's GA. ``start`` (rows of
+    candidates) seeds the first population; the rest of it is drawn uniformly in the box from
+    the seed (without ``start``, pymoo's own random sampling)."""
     from pymoo.algorithms.soo.nonconvex.ga import GA
     from pymoo.core.problem import Problem
     from pymoo.operators.crossover.sbx import SBX
     from pymoo.operators.mutation.pm import PM
+    from pymoo.operators.sampling.rnd import FloatRandomSampling
     from pymoo.optimize import minimize
 
     history: list[tuple[int, int, float]] = []
@@ -99,6 +103,7 @@ def evolve(
 
     algorithm = GA(
         pop_size=settings.pop_size,
+        sampling=_first_population(start, lower, upper, settings) if start is not None else FloatRandomSampling(),
         crossover=SBX(eta=settings.crossover_eta, prob=settings.crossover_prob),
         mutation=PM(eta=settings.mutation_eta),
         eliminate_duplicates=True,
@@ -109,3 +114,11 @@ def evolve(
     return OptimResult(
         x=np.atleast_1d(res.X).astype(float), f=float(np.atleast_1d(res.F)[0]), history=history, evaluations=count[0]
     )
+
+
+def _first_population(start: np.ndarray, lower: np.ndarray, upper: np.ndarray, settings: GASettings) -> np.ndarray:
+    """The rows of ``start`` (clipped to the box), then uniform draws in the box from the seed."""
+    start = np.clip(np.atleast_2d(np.asarray(start, dtype=float)), lower, upper)[: settings.pop_size]
+    rng = np.random.default_rng(settings.seed)
+    drawn = rng.uniform(lower, upper, size=(settings.pop_size - len(start), len(lower)))
+    return np.vstack([start, drawn])

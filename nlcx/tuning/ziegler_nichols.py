@@ -30,11 +30,20 @@ RULES: dict[str, tuple[float, float | None, float | None]] = {
     "pi": (0.45, 1 / 1.2, None),
     "pid": (0.6, 0.5, 0.125),
 }
+#: Other published ultimate-gain rules, same columns (not in the thesis): Pessen's integral
+#: rule, Ziegler-Nichols "some overshoot" and "no overshoot", Tyreus-Luyben's PID.
+VARIANT_RULES: dict[str, tuple[float, float | None, float | None]] = {
+    "pessen": (0.7, 0.4, 0.15),
+    "some_overshoot": (0.33, 0.5, 0.33),
+    "no_overshoot": (0.2, 0.5, 0.33),
+    "tyreus_luyben": (1 / 2.2, 2.2, 1 / 6.3),
+}
+ALL_RULES = {**RULES, **VARIANT_RULES}
 
 
 class ZieglerNicholsConfig(TunerConfig):
     kind: Literal["ziegler_nichols"] = "ziegler_nichols"
-    rule: Literal["p", "pi", "pid"] = "pid"
+    rule: Literal["p", "pi", "pid", "pessen", "some_overshoot", "no_overshoot", "tyreus_luyben"] = "pid"
     #: For a fuzzy schedule: the gain ranges [low x ZN gain, high x ZN gain] of eqs. 5.12-5.14.
     range_factors: tuple[float, float] = (0.5, 1.5)
     #: Cross-check K_u and T_u by simulating the P loop at K_u (recorded in tuning.csv).
@@ -65,7 +74,7 @@ def ultimate(plant: Plant) -> tuple[float, float]:
 
 def zn_gains(ku: float, tu: float, rule: str) -> tuple[float, float, float]:
     """(k_p, k_i, k_d) by Table 5.1."""
-    a, ti, td = RULES[rule]
+    a, ti, td = ALL_RULES[rule]
     kp = a * ku
     ki = kp / (ti * tu) if ti is not None else 0.0
     kd = kp * td * tu if td is not None else 0.0

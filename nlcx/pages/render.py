@@ -1,0 +1,80 @@
+"""Render a directory's report: detect its kind, gather its numbers, fill the templates."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import jinja2
+
+from nlcx import report
+from nlcx.errors import ConfigError
+
+TEMPLATES = Path(__file__).parent / "templates"
+
+
+def kind_of(directory: Path) -> str:
+    """reproduction, sweep or run, by the files the directory holds."""
+    if (directory / "claims.csv").is_file() or (directory / "tables").is_dir():
+        return "reproduction"
+    if (directory / "sweep.csv").is_file() and (directory / "metrics.csv").is_file():
+        return "sweep"
+    if (directory / "metrics.csv").is_file():
+        return "run"
+    raise ConfigError(
+        "DIR", str(directory), "an nlcx output directory: a reproduction, a sweep or a run (none of their files found)"
+    )
+
+
+def number(value: Any, digits: int = 4) -> str:
+    """A number as the page prints it (— for missing, inf, otherwise ``digits`` significant)."""
+    if value is None or value == "":
+        return "—"
+    if isinstance(value, (int, float)):
+        if isinstance(value, float) and math.isnan(value):
+            return "—"
+        if isinstance(value, float) and math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+def environment() -> jinja2.Environment:
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader(TEMPLATES),
+        autoescape=jinja2.select_autoescape(["html"]),
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+    )
+    env.filters["num"] = number
+    return env
+
+
+def repository() -> Path | None:
+    """The nlcx checkout (for links into docs/), or None for an installed package."""
+    root = Path(__file__).resolve().parents[2]
+    return root if (root / "docs").is_dir() else None
+
+
+def write_report(directory: Path, configs: Path | None = None) -> tuple[Path, Path]:
+    """Write DIR/report.html and DIR/report.md (atomically) for whatever DIR holds."""
+    from nlcx.pages import reproduction, run, sweep
+
+    directory = directory.resolve()
+    kind = kind_of(directory)
+    configs = configs or (repository() or Path.cwd()) / "configs" / "thesis"
+    if kind == "reproduction":
+        ctx = reproduction.context(directory, configs, repository())
+        report.write_csv(directory / "report_summary.csv", reproduction.summary_frame(ctx))
+    elif kind == "sweep":
+        ctx = sweep.context(directory)
+    else:
+        ctx = run.context(directory)
+    env = environment()
+    html, md = directory / "report.html", directory / "report.md"
+    report.write_text(html, env.get_template(f"{kind}.html.j2").render(**ctx))
+    report.write_text(md, env.get_template(f"{kind}.md.j2").render(**ctx))
+    return html, md

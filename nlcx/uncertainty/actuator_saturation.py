@@ -1,0 +1,60 @@
+"""Actuator saturation |u_j| <= u_max on the applied inputs: an ACTUATOR loop element.
+
+Unlike the PID's own ``saturation`` (which also guards its integrators against windup), this
+element limits what any controller commands (a single neuron's, a preview controller's), as
+a physical actuator does: the controller does not see the clipped value.
+
+    u_j <- min(max(u_j, -u_max), u_max)   for every limited input j
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numba import njit
+from pydantic import Field
+
+from nlcx.errors import ConfigError
+from nlcx.kernel.abi import ELEMENT_SIG
+from nlcx.layout import Layout
+from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
+from nlcx.validation import join
+
+#: Per input: its limit u_max (inf: not limited).
+LIMIT = Layout("ActuatorLimit", ("u_max",))
+M = LIMIT.at
+
+
+class ActuatorSaturationConfig(UncertaintyConfig):
+    kind: Literal["actuator_saturation"] = "actuator_saturation"
+    #: Limit u_max of each limited input, in the input's unit.
+    limit: float = Field(gt=0)
+    #: Inputs that are limited, by name; default: every input.
+    inputs: list[str] | None = None
+
+
+@njit(ELEMENT_SIG, cache=True, error_model="numpy")
+def saturate_inputs(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
+    """Clip every limited input of every row to [-u_max, u_max]."""
+    for b in range(signal.shape[0]):
+        v_id = vid[b]
+        for j in range(signal.shape[1]):
+            u_max = ep[v_id, p_off + len(M) * j + M.u_max]
+            signal[b, j] = min(max(signal[b, j], -u_max), u_max)
+
+
+class ActuatorSaturation(UncertaintyModel):
+    """Saturation |u| <= u_max of the plant's inputs, whatever controller drives them."""
+
+    Config = ActuatorSaturationConfig
+
+    def apply(self, cfg: ActuatorSaturationConfig, hooks: Hooks, path: str) -> None:
+        names = hooks.plant.input_names
+        limits = np.full(len(names), np.inf)
+        for i, name in enumerate(cfg.inputs if cfg.inputs is not None else names):
+            if name not in names:
+                raise ConfigError(join(path, "inputs", i), name, f"not an input; allowed: {', '.join(names)}")
+            limits[names.index(name)] = cfg.limit
+        params = np.concatenate([LIMIT.pack(u_max=u) for u in limits])
+        hooks.add_element(Element("actuator", saturate_inputs, params, np.zeros(0), None, "saturation"))

@@ -1,0 +1,110 @@
+"""`nlcx report`: the numbers on each page equal the CSVs it summarises, verdicts follow the
+declared tolerances, and run, sweep and reproduce write their page at the end."""
+
+from __future__ import annotations
+
+import math
+import re
+from html import unescape
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from nlcx.cli import app
+from nlcx.pages.tables import cells_of
+from nlcx.pages.tolerances import load as load_tolerances
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = ROOT / "configs"
+TOLERANCES = CONFIGS / "thesis" / "tolerances.yaml"
+runner = CliRunner()
+
+
+def test_a_run_writes_a_page_whose_metrics_are_metrics_csv(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    args = ["run", str(CONFIGS / "x_error_ags.yaml"), "simulation.t_end=8", "--out", str(out)]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    html = (out / "report.html").read_text()
+    metrics = pd.read_csv(out / "metrics.csv")
+    shown = [float(v) if v else math.nan for v in re.findall(r'data-value="([^"]*)"', html)]
+    np.testing.assert_array_equal(np.array(shown), metrics.value.to_numpy())
+    assert '<img class="figure" src="figure.png"' in html and "Resolved config" in html
+    assert (out / "report.md").read_text().count("\n| conventional |") == (metrics.controller == "conventional").sum()
+    skipped = tmp_path / "quiet"
+    result = runner.invoke(app, [*args[:-1], str(skipped), "--no-report"])
+    assert result.exit_code == 0 and not (skipped / "report.html").exists()
+
+
+def test_the_robustness_sweeps_page_is_its_metrics_aggregated(tmp_path: Path) -> None:
+    out = tmp_path / "sweep"
+    cfg = str(CONFIGS / "sweeps" / "robustness.yaml")
+    result = runner.invoke(app, ["sweep", cfg, "sweep.random.n=8", "--out", str(out), "--jobs", "2"])
+    assert result.exit_code == 0, result.output
+    metrics = pd.read_csv(out / "metrics.csv")
+    summary = pd.read_csv(out / "summary.csv")
+    for row in summary.itertuples(index=False):
+        values = metrics[(metrics.controller == row.controller) & (metrics.signal == row.signal)
+                         & (metrics.metric == row.metric)]  # fmt: skip
+        assert row.unstable == (values.status != "ok").sum()
+        assert row.undefined == ((values.status == "ok") & values.value.isna()).sum()
+        values = values[values.status == "ok"].value.dropna()
+        assert row.n == len(values)
+        assert row.median == pytest.approx(values.median(), rel=1e-12, nan_ok=True)
+        assert row.q25 == pytest.approx(values.quantile(0.25), rel=1e-12, nan_ok=True)
+        assert (row.min, row.max) == (values.min(), values.max()) or len(values) == 0
+    html = (out / "report.html").read_text()
+    medians = [float(v) for v in re.findall(r'data-median="([^"]*)"', html)]
+    np.testing.assert_array_equal(np.array(medians), summary["median"].to_numpy())
+    assert html.count('src="report_files/parameter_') == 4  # friction model, M, m, l
+    assert "| conventional | x | rise_time |" in (out / "report.md").read_text()
+
+
+def test_cells_are_judged_by_their_metrics_declared_tolerance() -> None:
+    tolerances = load_tolerances(TOLERANCES)
+    frame = pd.DataFrame(
+        {
+            "signal": ["x", "x", "x", "x"],
+            "metric": ["tr", "tr", "Mp", "kp_min"],
+            "controller": ["conventional"] * 4,
+            "thesis": [2.0, 2.0, 0.5, 24.0],
+            "nlcx": [2.39, 2.41, np.nan, 24.0],
+        }
+    )
+    within = [c.within for c in cells_of(frame, tolerances)]
+    assert within == [True, False, False, True]  # 20 % of 2.0 s; a failed cell is never within
+    assert tolerances.verdict(9, 10) == "reproduced" and tolerances.verdict(5, 10) == "partly"
+    assert tolerances.verdict(4, 10) == "not" and tolerances.verdict(0, 0) == "n/a"
+    paired = pd.DataFrame({"set": ["NB"], "nlcx_lower": [-0.36], "thesis_lower": [-0.36], "nlcx_upper": [0.2],
+                           "thesis_upper": [0.168]})  # fmt: skip
+    assert [(c.label, c.within) for c in cells_of(paired, tolerances)] == [("NB · lower", True), ("NB · upper", False)]
+
+
+def test_a_reproductions_page_and_twin_carry_the_claims_and_the_table_verdicts(reproduction: Path) -> None:
+    claims = pd.read_csv(reproduction / "claims.csv").reproduced.value_counts()
+    html = unescape((reproduction / "report.html").read_text())
+    for verdict in ("yes", "partly", "no"):
+        assert f'data-claims="{verdict}">{verdict} {claims.get(verdict, 0)}<' in html
+    summary = pd.read_csv(reproduction / "report_summary.csv")
+    tolerances = load_tolerances(TOLERANCES)
+    table = pd.read_csv(reproduction / "tables" / "table_2_3.csv")
+    cells = cells_of(table, tolerances)
+    row = summary[summary.table == "Table 2.3"].iloc[0]
+    assert (row.cells, row.within_tolerance) == (len(cells), sum(c.within for c in cells))
+    assert row.verdict == tolerances.verdict(row.within_tolerance, row.cells)
+    md = (reproduction / "report.md").read_text()
+    assert f"| Table 2.3 | {row.cells} | {row.within_tolerance} | {row.verdict} |" in md
+    assert "Claims: " in md and f"yes {claims.get('yes', 0)}" in md
+    assert html.count("<figure id=") == 95 and "missing 0" in html
+    manifest = (reproduction / "manifest.json").read_text()
+    assert '"profile": "literal"' in manifest and '"wall_s"' in manifest
+
+
+def test_report_on_a_directory_that_is_none_of_ours_is_a_one_line_error(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["report", str(tmp_path)])
+    assert result.exit_code == 2
+    assert "DIR" in result.output and "an nlcx output directory" in result.output
+    assert "Traceback" not in result.output
