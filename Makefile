@@ -74,7 +74,7 @@ bench: install
 	$(BIN)/python benchmarks/run.py | tee benchmarks/latest.txt
 
 ## identify: the identification studies and docs/fidelity.md (every number on it): fit every loop hypothesis on
-## the train tables (pendulums: ~25 min on 2 cores; chapter 5), reproduce under the literal and selected profiles
+## the train tables (pendulums ~25 min, chapter 5 ~20 min on 2 cores), reproduce under the literal and selected profiles
 identify: install
 	$(BIN)/nlcx identify configs/identify/pendulum_all.yaml --jobs $(JOBS) --out results/identify/pendulum_all
 	$(BIN)/nlcx identify configs/identify/cstr.yaml --jobs $(JOBS) --out results/identify/cstr

@@ -79,9 +79,10 @@ def compare_frames(name: str, base: pd.DataFrame, new: pd.DataFrame, tol: Tolera
         frame["_occurrence"] = frame.groupby("_key").cumcount()
     merged = b.merge(n, on=["_key", "_occurrence"], how="outer", suffixes=("_base", "_new"), indicator=True)
     drifts = []
-    for row in merged[merged["_merge"] != "both"].itertuples():
-        side = "missing in NEW" if row._merge == "left_only" else "extra in NEW"
-        drifts.append(Drift(name, row._key, "(row)", side if row._merge == "left_only" else "", side))
+    unmatched = merged[merged["_merge"] != "both"]
+    for key, merge in zip(unmatched["_key"], unmatched["_merge"], strict=True):
+        side = "missing in NEW" if merge == "left_only" else "extra in NEW"
+        drifts.append(Drift(name, key, "(row)", side if merge == "left_only" else "", side))
     both = merged[merged["_merge"] == "both"]
     metric_names = both["metric_base"] if "metric" in keys else None
     for col in numeric:

@@ -142,6 +142,14 @@ def context(results: Path) -> dict[str, Any]:
     }
 
 
+def claims_cell(row: Any) -> str:
+    """'yes / partly / no' of a ranking row with claims, — otherwise."""
+    values = [row.get(f"claims_{v}") for v in ("yes", "partly", "no")]
+    if any(v is None or (isinstance(v, float) and math.isnan(v)) for v in values):
+        return "—"
+    return " / ".join(str(int(v)) for v in values)
+
+
 def render(results: Path) -> str:
     env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(Path(__file__).parent / "templates"),
@@ -152,6 +160,7 @@ def render(results: Path) -> str:
     )
     env.filters["f"] = fmt
     env.filters["from_json"] = json.loads
+    env.globals["claims_cell"] = claims_cell
     return env.get_template("fidelity.md.j2").render(**context(results))
 
 

@@ -35,6 +35,18 @@ def test_diff_catches_injected_drift(tmp_path: Path) -> None:
     assert "missing" in runner.invoke(app, ["diff", str(BASELINE), str(new), "--rtol", "1"]).output
 
 
+def test_a_changed_verdict_is_a_missing_and_an_extra_row(tmp_path: Path) -> None:
+    """A report_summary.csv whose verdict (a text column, part of a row's key) changed."""
+    base, new = tmp_path / "base.csv", tmp_path / "new.csv"
+    rows = {"table": ["Table 2.3", "Table 2.4"], "cells": [14, 14], "within_tolerance": [7, 3]}
+    pd.DataFrame(rows | {"verdict": ["partly", "not"]}).to_csv(base, index=False)
+    pd.DataFrame(rows | {"verdict": ["not", "not"]}).to_csv(new, index=False)
+    result = runner.invoke(app, ["diff", str(base), str(new), "--rtol", "0", "--atol", "0"])
+    assert result.exit_code == 1, result.output
+    assert "Table 2.3 | partly" in result.output and "missing in NEW" in result.output
+    assert "Table 2.3 | not" in result.output and "extra in NEW" in result.output
+
+
 def test_committed_baselines_still_reproduce(tmp_path: Path) -> None:
     """The fast subset of thesis tables (chapters 2-5) regenerates to the committed numbers.
 

@@ -101,6 +101,7 @@ def _spec(tmp_path: Path, split: Path) -> Path:
         "free": {k: [v * 0.8, v * 1.2] if v > 0 else [v * 1.2, v * 0.8] for k, v in GAINS.items()}
         | {"vars.conventional.z.kp": [60, 100], "vars.conventional.z.ki": [20, 30], "vars.conventional.z.kd": [25, 35]},
         "optimiser": {"kind": "ga", "pop_size": 4, "generations": 1, "seed": 3},
+        "claims_top": None,
     }
     path = tmp_path / "spec.yaml"
     path.write_text(yaml.safe_dump(raw))
@@ -161,6 +162,8 @@ def test_a_diverged_cell_counts_as_a_failure_not_as_missing() -> None:
     )
     got = scores(fit)
     assert got["validation_median_rel_error"] == np.inf and got["validation_measured_share"] == 1 / 3
+    assert got["validation_conventional_Mp_median_rel_error"] == 0.0  # per controller and metric
+    assert got["validation_conventional_tr_median_rel_error"] == np.inf
 
 
 def test_a_warm_start_seeds_the_first_population_and_the_fit_never_loses_to_it(tmp_path: Path) -> None:
@@ -192,3 +195,36 @@ def test_the_first_population_is_the_start_then_seeded_draws_in_the_box() -> Non
     assert pop.shape == (5, 2) and list(pop[0]) == [0.5, 1.0]  # clipped into the box
     assert np.all((pop >= lower) & (pop <= upper))
     assert np.array_equal(pop, _first_population(np.array([[0.5, 3.0]]), lower, upper, settings))
+
+
+def test_claims_come_from_a_reproduction_under_each_top_fit_and_are_reused(tmp_path: Path, monkeypatch) -> None:
+    """add_claims reproduces the thesis under the top fits (options and fitted values as a
+    profile) and the literal loop, merges the counts into ranking.csv, and reuses them."""
+    import nlcx.thesis.reproduce as reproduce_module
+    from nlcx.thesis.identify import add_claims
+
+    calls = []
+
+    def fake_reproduce(root: Path, out: Path, jobs: int, profile: profiles.Profile) -> None:
+        calls.append(profile)
+        verdicts = ["yes"] * (3 + len(calls)) + ["no"] * 2
+        out.mkdir(parents=True, exist_ok=True)
+        pd.DataFrame({"reproduced": verdicts}).to_csv(out / "claims.csv", index=False)
+
+    monkeypatch.setattr(reproduce_module, "reproduce", fake_reproduce)
+    ranking = pd.DataFrame(
+        {
+            "hypothesis": ["saturation=plain", "lag=first_order", "literal"],
+            "options": ['{"saturation": "plain"}', '{"lag": "first_order"}', "{}"],
+            "values": ['{"F_max": 9.0}', '{"tau": 0.02}', '{"vars.conventional.angle.kp": 70.0}'],
+        }
+    )
+    out = add_claims(tmp_path, THESIS, ranking, 1, 1)
+    assert [(p.hypothesis, p.values) for p in calls] == [
+        ({"saturation": "plain"}, {"F_max": 9.0}),
+        ({}, {"vars.conventional.angle.kp": 70.0}),
+    ]
+    assert list(out.claims_yes.fillna(-1)) == [4, -1, 5] and list(out.claims_no.fillna(-1)) == [2, -1, 2]
+    assert pd.read_csv(tmp_path / "ranking.csv").claims_yes.iloc[0] == 4
+    add_claims(tmp_path, THESIS, ranking, 1, 1)
+    assert len(calls) == 2  # unchanged fits: the reproductions are reused

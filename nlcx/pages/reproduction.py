@@ -79,6 +79,34 @@ def docs_links(directory: Path, repo: Path | None) -> list[dict[str, str]]:
     ]
 
 
+def sections(path: Path) -> list[dict[str, str]]:
+    """The ``## `` sections of a Markdown document: heading and first paragraph (plain text)."""
+    if not path.is_file():
+        return []
+    out: list[dict[str, str]] = []
+    for block in path.read_text(encoding="utf-8").split("\n## ")[1:]:
+        heading, _, body = block.partition("\n")
+        paragraphs = [p.strip() for p in body.split("\n\n") if p.strip() and not p.lstrip().startswith(("|", "```"))]
+        first = " ".join(paragraphs[0].split()) if paragraphs else ""
+        out.append({"heading": heading.strip(), "summary": first})
+    return out
+
+
+def deviations(repo: Path | None) -> dict[str, list[dict[str, str]]]:
+    """What the deviations section lists: every documented assumption (unprinted parameters
+    and choices), the errata of the printed equations, the calibration, and what was difficult
+    (the identification study's conclusion)."""
+    if repo is None:
+        return {"assumptions": [], "errata": [], "calibration": [], "difficult": []}
+    fidelity = sections(repo / "docs" / "fidelity.md")
+    return {
+        "assumptions": sections(repo / "docs" / "assumptions.md"),
+        "errata": sections(repo / "docs" / "errata.md"),
+        "calibration": [s for s in sections(repo / "docs" / "calibration.md") if s["heading"].startswith("What")],
+        "difficult": [s for s in fidelity if s["heading"].startswith(("Conclusion", "What the studies say"))],
+    }
+
+
 def context(directory: Path, configs: Path, repo: Path | None) -> dict[str, Any]:
     """Everything the reproduction page shows."""
     tolerances: Tolerances = load_tolerances(configs / "tolerances.yaml")
@@ -105,6 +133,7 @@ def context(directory: Path, configs: Path, repo: Path | None) -> dict[str, Any]
             "missing": sum(not f.generated for f in figures),
         },
         "docs": docs_links(directory, repo),
+        "deviations": deviations(repo),
     }
 
 

@@ -71,6 +71,10 @@ class IdentifySpec(BaseModel):
     #: loop (:data:`nlcx.thesis.hypotheses.NEUTRAL`): each GA then starts from the literal
     #: fit, and its elitism keeps the best candidate. None: every GA starts at random.
     warm_start: GASettings | None = None
+    #: How many of the top-ranked hypotheses (besides the literal loop) get a full
+    #: reproduction for their claims (claims.csv, the claims_* columns of ranking.csv);
+    #: None: no reproduction.
+    claims_top: int | None = Field(5, ge=0)
 
     @field_validator("families")
     @classmethod
@@ -162,8 +166,9 @@ def relative_errors(fit: pd.DataFrame) -> pd.Series:
 
 
 def scores(fit: pd.DataFrame) -> dict[str, float]:
-    """Per part: median relative error per controller and overall (failed cells count as
-    infinitely wrong), the share of cells we measured, and direction agreement."""
+    """Per part: median relative error overall, per controller and per controller and metric
+    (failed cells count as infinitely wrong), the share of cells we measured, and direction
+    agreement."""
     out: dict[str, float] = {}
     fit = fit.assign(rel_error=relative_errors(fit))
     for part, rows in fit.groupby("part", sort=False):
@@ -172,6 +177,10 @@ def scores(fit: pd.DataFrame) -> dict[str, float]:
         for c in CONTROLLERS:
             mine = rel[rel.controller == c]
             out[f"{part}_{c}_median_rel_error"] = float(np.median(mine.rel_error)) if len(mine) else math.nan
+            for metric in FLOORS:
+                cells = mine[mine.metric == metric]
+                key = f"{part}_{c}_{metric}_median_rel_error"
+                out[key] = float(np.median(cells.rel_error)) if len(cells) else math.nan
         out[f"{part}_measured_share"] = float(rows.nlcx.notna().mean())
         out[f"{part}_direction_agreement"] = direction_agreement(rows)
     return out
@@ -241,7 +250,7 @@ def load_spec(path: Path) -> IdentifySpec:
 def spec_digest(spec: BaseModel, spec_split: split.Split) -> str:
     """What a finished fit depends on: the spec (but ``only``; ``warm_start`` when set, so
     the fits of a spec written before it existed stay valid) and the split."""
-    exclude = {"only"} | (set() if getattr(spec, "warm_start", None) is not None else {"warm_start"})
+    exclude = {"only", "claims_top"} | (set() if getattr(spec, "warm_start", None) is not None else {"warm_start"})
     text = json.dumps([spec.model_dump(exclude=exclude), spec_split.model_dump()], sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -275,6 +284,35 @@ def identify(path: Path, out_dir: Path, jobs: int = 1, root: Path | None = None,
     ranking = write_ranking(out_dir, [h.name for h in family])
     chosen = list(dict.fromkeys(["literal", str(ranking.hypothesis.iloc[0])]))
     write_definitions(out_dir, root, cells, [n for n in chosen if n in set(ranking.hypothesis)])
+    return ranking if spec.claims_top is None else add_claims(out_dir, root, ranking, spec.claims_top, jobs)
+
+
+def add_claims(out_dir: Path, root: Path, ranking: pd.DataFrame, top: int, jobs: int) -> pd.DataFrame:
+    """The thesis's claims under the ``top`` first-ranked hypotheses and the literal loop, each
+    with its fitted values (a full reproduction each, kept in claims/<hypothesis>/ and reused
+    while its fitted values are unchanged): claims.csv, and claims_yes / partly / no in
+    ranking.csv (empty for the others)."""
+    from nlcx.thesis.reproduce import reproduce
+
+    names = [n for n in dict.fromkeys([*ranking.hypothesis.head(top), "literal"]) if n in set(ranking.hypothesis)]
+    rows = []
+    for name in names:
+        fitted = ranking[ranking.hypothesis == name].iloc[0]
+        target = out_dir / "claims" / name
+        stamp = json.dumps([fitted["options"], fitted["values"]])
+        done = (target / "fit.json").is_file() and (target / "fit.json").read_text() == stamp
+        if not done or not (target / "claims.csv").is_file():
+            profile = profiles.Profile(
+                name=name, hypothesis=json.loads(fitted["options"]), values=json.loads(fitted["values"])
+            )
+            reproduce(root, target, jobs=jobs, profile=profile)
+            report.write_text(target / "fit.json", stamp)
+        counts = pd.read_csv(target / "claims.csv").reproduced.value_counts()
+        rows.append({"hypothesis": name, **{f"claims_{v}": int(counts.get(v, 0)) for v in ("yes", "partly", "no")}})
+    claims = pd.DataFrame(rows, columns=["hypothesis", "claims_yes", "claims_partly", "claims_no"])
+    report.write_csv(out_dir / "claims.csv", claims)
+    ranking = ranking.drop(columns=[c for c in claims.columns[1:] if c in ranking]).merge(claims, how="left")
+    report.write_csv(out_dir / "ranking.csv", ranking)
     return ranking
 
 
