@@ -74,7 +74,8 @@ bench: install
 	$(BIN)/python benchmarks/run.py | tee benchmarks/latest.txt
 
 ## identify: the identification studies and docs/fidelity.md (every number on it): fit every loop hypothesis on
-## the train tables (pendulums ~25 min, chapter 5 ~20 min on 2 cores), reproduce under the literal and selected profiles
+## the train tables, reproduce under the literal and selected profiles, ask of each printed conventional column
+## whether any loop gives it (times on 2 cores in docs/fidelity.md)
 identify: install
 	$(BIN)/nlcx identify configs/identify/pendulum_all.yaml --jobs $(JOBS) --out results/identify/pendulum_all
 	$(BIN)/nlcx identify configs/identify/cstr.yaml --jobs $(JOBS) --out results/identify/cstr
@@ -82,10 +83,11 @@ identify: install
 	cp results/identify/selected.yaml configs/thesis/profiles/selected.yaml
 	$(BIN)/nlcx reproduce --profile literal --jobs $(JOBS) --out results/identify/reproduce_literal
 	$(BIN)/nlcx reproduce --profile selected --jobs $(JOBS) --out results/identify/reproduce_selected
-	$(BIN)/nlcx sweep configs/identify/consistency_x.yaml --out results/identify/consistency_x
-	$(BIN)/python scripts/consistency.py results/identify/consistency_x > results/identify/consistency_x/consistency.md
+	$(BIN)/nlcx identify configs/identify/consistency.yaml --jobs $(JOBS) --out results/identify/consistency
 	$(BIN)/python scripts/fidelity_report.py doc results/identify > results/identify/fidelity.md
 	cp results/identify/fidelity.md docs/fidelity.md
+	cp results/identify/consistency/consistency.png docs/img/consistency.png
+	cp results/identify/pendulum_all/ranking.png docs/img/identify_ranking.png
 
 ## calibrate: refit the unprinted conventional gains (writes configs/thesis/gains/conventional.yaml)
 calibrate: install

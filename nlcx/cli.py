@@ -369,9 +369,11 @@ def identify(
     ] = None,
 ) -> None:
     """Fit loop hypotheses to the train tables, rank them on validation (resumable).
-    A spec with ``chapter: 5`` is chapter 5's study (Table 5.8), ranked by train loss."""
+    A spec with ``chapter: 5`` is chapter 5's study (Table 5.8), ranked by train loss; one with
+    ``kind: consistency`` asks of each printed conventional column whether any loop gives it."""
     import yaml
 
+    from nlcx.thesis.consistency import consistency
     from nlcx.thesis.identify import identify as run_identify
     from nlcx.thesis.identify_cstr import identify_cstr
 
@@ -384,6 +386,12 @@ def identify(
     def progress(done: int, total: int, name: str) -> None:
         typer.echo(f"  [{done}/{total}] {name}")
 
+    if raw.get("kind") == "consistency":
+        columns_table = consistency(spec, out_dir, jobs=jobs, progress=progress)
+        shown = columns_table[["table", "definition", "loops", "most_cells_hit", "cells", "reproduced"]]
+        typer.echo(shown.to_string(index=False))
+        typer.echo(f"results in {out_dir}/")
+        return
     if raw.get("chapter") == 5:
         ranking = identify_cstr(spec, out_dir, jobs=jobs, progress=progress)
         columns = ["rank", "hypothesis", "train_loss", "test_median_rel_error"]

@@ -11,6 +11,7 @@ the tuners (through :class:`LoopSimulator`) all use it.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import json
 import math
@@ -673,6 +674,20 @@ def evaluate(
         p.tuning = [*p.tuning, *(row for run in rs for row in _controller_records(run))]
         results.append(Result(prepared=p, runs=rs, rows=block, timings=timing))
     return results
+
+
+def remeasure(results: Sequence[Result], metrics: Mapping[str, Any]) -> list[Result]:
+    """The runs of ``results`` (one :func:`evaluate` call) measured again under other metric
+    definitions, without simulating them again: ``metrics`` updates the metrics section of
+    every experiment (e.g. ``{"rise_limits": [0, 1], "settling_band": 0.05}``)."""
+    prepared = []
+    for r in results:
+        section = r.prepared.experiment.section
+        defined = MetricsSection.model_validate({**section.metrics.model_dump(), **metrics})
+        experiment = dataclasses.replace(r.prepared.experiment, section=section.model_copy(update={"metrics": defined}))
+        prepared.append(dataclasses.replace(r.prepared, experiment=experiment))
+    rows = _measure_all(prepared, [r.runs for r in results])
+    return [dataclasses.replace(r, prepared=p, rows=block) for r, p, block in zip(results, prepared, rows, strict=True)]
 
 
 def run_experiment(exp: Experiment) -> Result:

@@ -4,9 +4,9 @@
     python scripts/fidelity_report.py profile results/identify > configs/thesis/profiles/selected.yaml
 
 `make identify` runs the studies, the two reproductions (literal and selected profiles) and
-the consistency sweep, then this. Every number on the page comes from those outputs (the
+the consistency study, then this. Every number on the page comes from those outputs (the
 ranking CSVs, the fits' JSON files, study.json, claims.csv and the tables of each
-reproduction, the consistency sweep); the narrative is the template
+reproduction, the consistency study); the narrative is the template
 scripts/templates/fidelity.md.j2.
 """
 
@@ -24,12 +24,13 @@ import pandas as pd
 import yaml
 
 from nlcx.thesis import hypotheses, split
-from nlcx.thesis.identify import scores
+from nlcx.thesis.identify import DEFINITIONS, scores
 
 ROOT = Path(__file__).resolve().parents[1]
 SPLIT = ROOT / "configs" / "identify" / "split.yaml"
 PENDULUM_SPEC = ROOT / "configs" / "identify" / "pendulum_all.yaml"
 CSTR_SPEC = ROOT / "configs" / "identify" / "cstr.yaml"
+CONSISTENCY_SPEC = ROOT / "configs" / "identify" / "consistency.yaml"
 #: The issue's targets (test set, selected profile): measure -> (goal, bound, sense, value before the study).
 TARGETS = {
     "proposed, median relative error": ("≤ 0.25", 0.25, -1, 0.66),
@@ -138,7 +139,36 @@ def context(results: Path) -> dict[str, Any]:
         "literal": literal_rep,
         "selected": selected_rep,
         "targets": targets(literal_rep, selected_rep),
-        "consistency": (results / "consistency_x" / "consistency.md").read_text(encoding="utf-8"),
+        **consistency(results / "consistency"),
+    }
+
+
+def consistency(study: Path) -> dict[str, Any]:
+    """What the page shows of the consistency study (nlcx/thesis/consistency.py)."""
+    spec = yaml.safe_load(CONSISTENCY_SPEC.read_text())
+    definitions = spec.get("definitions") or list(DEFINITIONS)
+    columns = pd.read_csv(study / "columns.csv", dtype={"table": str, "also_printed_in": str}).fillna(
+        {"also_printed_in": ""}
+    )
+    rows = []
+    for _, group in columns.groupby("table", sort=False):
+        first = group.iloc[0].to_dict()
+        others = group.iloc[1:]
+        rows.append({**first, "others": " / ".join(str(v) for v in others.most_cells_hit) or "—",
+                     "reproduced_any": bool(group.reproduced.any())})  # fmt: skip
+    cells = pd.read_csv(study / "cells.csv", dtype={"table": str})
+    train = split.load(SPLIT).pendulum.train
+    train_cells = cells[cells.table.isin(train) & (cells.definition == definitions[0])]
+    subsets = pd.read_csv(study / "subsets.csv", dtype={"table": str})
+    return {
+        "consistency_spec": {**spec, "definitions": definitions, "cloud": spec.get("cloud", {"n": 1500})},
+        "consistency_study": json.loads((study / "study.json").read_text()),
+        "consistency_hypotheses": len(hypotheses.family(spec["families"], spec["max_options"])),
+        "consistency_columns": rows,
+        "consistency_reproduced": [r["table"] for r in rows if r["reproduced_any"]],
+        "consistency_train_cells": train_cells.to_dict("records"),
+        "consistency_sets_total": len(subsets),
+        "consistency_robust": subsets[subsets.least_miss >= 0.2].to_dict("records"),
     }
 
 

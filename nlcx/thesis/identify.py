@@ -94,9 +94,10 @@ class IdentifySpec(BaseModel):
 class TableRuns:
     """The experiment of each thesis table, with candidate values and a hypothesis applied."""
 
-    def __init__(self, root: Path, tables: list[str]) -> None:
+    def __init__(self, root: Path, tables: list[str], controllers: tuple[str, ...] | None = None) -> None:
+        """``controllers``: keep only these controllers of each experiment (default: all)."""
         paths = {t.table: t.configs[0] for t in catalog.tables(root) if t.kind == "metrics"}
-        self.raw = {table: cfg.read_config(paths[table]) for table in tables}
+        self.raw = {table: _keep(cfg.read_config(paths[table]), controllers) for table in tables}
         self.inputs = {table: profiles.plant_inputs(raw) for table, raw in self.raw.items()}
 
     def experiment(
@@ -105,6 +106,12 @@ class TableRuns:
         """Table ``table``'s experiment with the free values set and the hypothesis applied
         (the same path as a reproduction profile, :func:`nlcx.thesis.profiles.apply`)."""
         return profiles.apply(self.raw[table], hyp, values, self.inputs[table], metrics)
+
+
+def _keep(raw: dict[str, Any], controllers: tuple[str, ...] | None) -> dict[str, Any]:
+    if controllers is None:
+        return raw
+    return {**raw, "controllers": {k: v for k, v in raw["controllers"].items() if k in controllers}}
 
 
 def measure_cells(
@@ -118,10 +125,16 @@ def measure_cells(
     or the metric is undefined. All candidates' experiments go through one pipeline call."""
     tables = list(dict.fromkeys(cells.table))
     exps = [runs.experiment(t, hyp, c, metrics) for c in candidates for t in tables]
-    results = engine.evaluate(exps, record_logs=False)
-    out = np.full((len(cells), len(candidates)), np.nan)
+    return cell_values(engine.evaluate(exps, record_logs=False), cells, len(candidates))
+
+
+def cell_values(results: list[engine.Result], cells: pd.DataFrame, n_candidates: int) -> np.ndarray:
+    """The cells (rows) of each candidate (columns) from the results of its tables' experiments
+    (candidate-major, tables in the order of ``cells``)."""
+    tables = list(dict.fromkeys(cells.table))
+    out = np.full((len(cells), n_candidates), np.nan)
     of_table = {t: [(i, c) for i, c in enumerate(cells.itertuples(index=False)) if c.table == t] for t in tables}
-    for k in range(len(candidates)):
+    for k in range(n_candidates):
         for t_index, table in enumerate(tables):
             result = results[k * len(tables) + t_index]
             ok = {run.label for run in result.runs if run.status == "ok"}
