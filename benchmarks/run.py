@@ -96,31 +96,101 @@ def bench_a() -> dict[str, float]:
     return {"simulate_s": sim, "warmup_in_process_s": warmup, "end_to_end_s": end_to_end, "cold_compile_run_s": cold}
 
 
-def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
+def sweep_config(n: int) -> dict[str, Any]:
+    """Benchmark (b)'s sweep: the error-AGS PID of configs/x_error_ags.yaml on the x pendulum,
+    M, m, l uniform within +-20 %, batches of 100."""
     raw = yaml.safe_load((ROOT / "configs" / "x_error_ags.yaml").read_text())
     del raw["controllers"]["conventional"]
     raw.update(name="bench_sweep", outputs={"figure": False, "timeseries": False, "gains_figure": False})
-    raw["sweep"] = {
-        "seed": 1,
-        "random": {
-            "n": n,
-            "params": {
-                k: {"dist": "uniform", "relative": 0.2} for k in ("plant.params.M", "plant.params.m", "plant.params.l")
-            },
-        },
-        "batch_size": 100,
-    }
+    params = {k: {"dist": "uniform", "relative": 0.2} for k in ("plant.params.M", "plant.params.m", "plant.params.l")}
+    raw["sweep"] = {"seed": 1, "random": {"n": n, "params": params}, "batch_size": 100}
+    return raw
+
+
+def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
+    """nlcx's sweep and the hand-written limit reference (benchmarks/reference.py) of the same
+    variants on two processes each, alternated, in one run: wall times and their ratio."""
+    raw = sweep_config(n)
     work = Path(tempfile.mkdtemp())
     path = work / "sweep.yaml"
     path.write_text(yaml.safe_dump(raw))
-    walls, peaks = [], []
+    walls, peaks, limits = [], [], []
     for repeat in range(repeats):  # a fresh output directory each time: nothing is resumed
-        cmd = [*NLCX, "sweep", str(path), "--jobs", "2", "--out", str(work / f"out{repeat}")]
+        cmd = [*NLCX, "sweep", str(path), "--jobs", "2", "--out", str(work / f"out{repeat}"), "--no-report"]
         wall, peak_kb, out = run_measured(cmd, ROOT)
         walls.append(wall)
         peaks.append(peak_kb / 1024)
+        limit = limit_reference(raw)
+        limits.append(limit)
     summary = out.strip().splitlines()[-1]
-    return {"variants": n, "wall_s": min(walls), "walls_s": walls, "peak_memory_mb": max(peaks), "summary": summary}
+    steps = limits[0]["variant_steps"]
+    nlcx_s, limit_s = min(walls), min(x["wall_s"] for x in limits)
+    simulated = steps * raw["simulation"]["dt"]
+    return {
+        "variants": n, "wall_s": nlcx_s, "walls_s": walls, "peak_memory_mb": max(peaks), "summary": summary,
+        "limit_s": limit_s, "limit_walls_s": [x["wall_s"] for x in limits], "limit_kernel_s": limits[0]["kernel_s"],
+        "variant_steps": steps, "ns_per_step": 1e9 * nlcx_s / steps * 2, "limit_ns_per_step": 1e9 * limit_s / steps * 2,
+        "sim_per_wall": simulated / nlcx_s, "limit_sim_per_wall": simulated / limit_s, "ratio": nlcx_s / limit_s,
+        "max_dev": limits[0]["max_dev"],
+    }  # fmt: skip
+
+
+def _reference_batch(task: tuple[np.ndarray, np.ndarray, np.ndarray, float, int, bool]) -> tuple[int, float]:
+    """One batch of the limit reference in a worker: (variant-steps simulated, seconds)."""
+    import reference
+
+    p, theta_loop, x_loop, dt, n_steps, record = task
+    start = time.perf_counter()
+    X = np.empty((len(p), n_steps + 1, 4))
+    U = np.empty((len(p), n_steps + 1))
+    n_valid = np.empty(len(p), dtype=np.int64)
+    reference.simulate(p, theta_loop, x_loop, dt, n_steps, np.pi / 2, X, U, n_valid, record)
+    return int(np.sum(n_valid - 1)), time.perf_counter() - start
+
+
+def limit_reference(raw: dict[str, Any], jobs: int = 2) -> dict[str, Any]:
+    """The hand-written closed loop (benchmarks/reference.py) over the sweep's variants (the
+    same draws of M, m, l), batches of 100 on ``jobs`` processes, recording X and U as nlcx
+    does; its trajectories checked against nlcx's on the first variants (max |difference|)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    import reference
+
+    from nlcx import config, engine, sweep
+
+    base = config.interpolate({k: v for k, v in raw.items() if k != "sweep"})
+    spec = sweep.SweepSection.model_validate(raw["sweep"])
+    variants = sweep.expand(spec, base)
+    g = base["plant"]["params"]["g"]
+    p = np.array([[v.values["plant.params.M"], v.values["plant.params.m"], v.values["plant.params.l"], g]
+                  for v in variants])  # fmt: skip
+    loops = base["controllers"]["proposed"]["loops"]
+    theta_loop = reference.loop_parameters(loops["theta"]["schedule"])
+    x_loop = reference.loop_parameters(loops["x"]["schedule"])
+    dt, n_steps = base["simulation"]["dt"], round(base["simulation"]["t_end"] / base["simulation"]["dt"])
+    tasks = [(p[k : k + 100], theta_loop, x_loop, dt, n_steps, True) for k in range(0, len(p), 100)]
+    _reference_batch((*tasks[0][:4], 10, True))  # compiled (or loaded) here, not in the timing
+    with ProcessPoolExecutor(max_workers=jobs, initializer=_import_reference) as pool:
+        list(pool.map(_reference_batch, [(*t[:4], 10, True) for t in tasks[:jobs]]))  # workers warm
+        start = time.perf_counter()
+        done = list(pool.map(_reference_batch, tasks))
+        wall = time.perf_counter() - start
+    first = [config.build(sweep.Variant(0, v.values, v.seed).resolve({k: x for k, x in raw.items() if k != "sweep"}))
+             for v in variants[:20]]  # fmt: skip
+    ours = engine.evaluate(first, record_logs=False)
+    X = np.empty((20, n_steps + 1, 4))
+    U = np.empty((20, n_steps + 1))
+    n_valid = np.empty(20, dtype=np.int64)
+    reference.simulate(p[:20], theta_loop, x_loop, dt, n_steps, np.pi / 2, X, U, n_valid, True)
+    dev = max(float(np.max(np.abs(r.runs[0].x - X[b, : n_valid[b]]))) for b, r in enumerate(ours))
+    return {
+        "wall_s": wall, "variant_steps": sum(s for s, _ in done), "kernel_s": sum(t for _, t in done), "max_dev": dev,
+    }  # fmt: skip
+
+
+def _import_reference() -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import reference  # noqa: F401
 
 
 def bench_c() -> dict[str, float]:
@@ -215,6 +285,7 @@ def bench_d() -> dict[str, float]:
 
 def main() -> None:
     sys.path.insert(0, str(ROOT))
+    sys.path.insert(0, str(ROOT / "benchmarks"))
     os.chdir(ROOT)
     print(
         f"nlcx benchmarks, {time.strftime('%Y-%m-%d')}, {platform.processor() or platform.machine()}, "

@@ -1,0 +1,105 @@
+"""The limit reference of benchmark (b): the same closed loop, hand-written.
+
+The x inverted pendulum (eqs. 2.8-2.11 as nlcx derives them from the Lagrangian) under two
+error-AGS PID loops (eqs. 2.20-2.22 on |e|; F = -PID_theta + PID_x), the unit step in x at
+t = 0, classic RK4 at dt with the force held over the step, every variant of a batch
+integrated on its own in plain scalar code: the state, the loop states and the parameters
+live in local variables, the right-hand side and the schedules are written out, sin, cos and
+exp are libm's. A run stops when |theta| exceeds its bound or a state is not finite, as
+nlcx's does. Like nlcx, it records the state and the input at every sample (the metrics are
+computed from them); ``record=False`` measures the loop alone.
+
+It is not part of nlcx: it exists to say how fast this one loop can be simulated on this
+machine, so that nlcx's speed is quoted as a ratio to it, measured in the same run.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: An error-AGS loop's parameters, in this order (Table 2.2 ranges, section 2.3 rates).
+AGS = ("kp_min", "kp_max", "ki_min", "ki_max", "kd_min", "kd_max", "kp_rate", "ki_rate", "kd_rate")
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _ags(s, a):  # pragma: no cover - compiled
+    """(k_p, k_i, k_d) of eqs. 2.20-2.22 at s = |e|; one exponential per distinct rate."""
+    a_p = math.exp(-a[6] * s)
+    a_i = a_p if a[7] == a[6] else math.exp(-a[7] * s)
+    if a[8] == a[6]:
+        a_d = a_p
+    elif a[8] == a[7]:
+        a_d = a_i
+    else:
+        a_d = math.exp(-a[8] * s)
+    return a[1] - (a[1] - a[0]) * a_p, a[2] - (a[2] - a[3]) * a_i, a[5] - (a[5] - a[4]) * a_d
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _rhs(M, m, l, g, th, thd, F):  # pragma: no cover - compiled
+    """(x'', theta'') of the x pendulum, the mass matrix solved as nlcx's generated code does."""
+    w0 = l * m
+    w1 = w0 * math.sin(th)
+    m00 = M + m
+    m10 = w0 * math.cos(th)
+    m11 = l**2 * m
+    b0 = F + thd**2 * w1
+    b1 = g * w1
+    r0 = 1.0 / m00
+    L10 = m10 * r0
+    r1 = 1.0 / (m11 - L10 * L10 * m00)
+    a1 = (b1 - L10 * b0) * r1
+    return b0 * r0 - L10 * a1, a1
+
+
+@njit(cache=True, error_model="numpy")
+def simulate(p, theta_loop, x_loop, dt, n_steps, bound, X, U, n_valid, record):  # pragma: no cover - compiled
+    """Every variant b (p[b] = M, m, l, g) from rest to t = n_steps dt; X (B, K+1, 4) and U
+    (B, K+1) written when ``record``; n_valid[b] the samples before the run stopped."""
+    for b in range(p.shape[0]):
+        M, m, l, g = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        x, xd, th, thd = 0.0, 0.0, 0.0, 0.0
+        i_th, i_x, e_th_prev, e_x_prev = 0.0, 0.0, 0.0, 0.0
+        n_valid[b] = n_steps + 1
+        for k in range(n_steps + 1):
+            e_th = 0.0 - th
+            e_x = 1.0 - x
+            if k == 0:
+                e_th_prev, e_x_prev = e_th, e_x
+            d_th = (e_th - e_th_prev) / dt
+            d_x = (e_x - e_x_prev) / dt
+            kp, ki, kd = _ags(abs(e_th), theta_loop)
+            i_th += e_th * dt
+            F = -(kp * e_th + i_th * ki + kd * d_th)
+            kp, ki, kd = _ags(abs(e_x), x_loop)
+            i_x += e_x * dt
+            F += kp * e_x + i_x * ki + kd * d_x
+            e_th_prev, e_x_prev = e_th, e_x
+            if record:
+                X[b, k, 0], X[b, k, 1], X[b, k, 2], X[b, k, 3] = x, xd, th, thd
+                U[b, k] = F
+            if k == n_steps:
+                break
+            a1, t1 = _rhs(M, m, l, g, th, thd, F)
+            a2, t2 = _rhs(M, m, l, g, th + 0.5 * dt * thd, thd + 0.5 * dt * t1, F)
+            a3, t3 = _rhs(M, m, l, g, th + 0.5 * dt * (thd + 0.5 * dt * t1), thd + 0.5 * dt * t2, F)
+            th4 = th + dt * (thd + 0.5 * dt * t2)
+            a4, t4 = _rhs(M, m, l, g, th4, thd + dt * t3, F)
+            v2, v3, v4 = xd + 0.5 * dt * a1, xd + 0.5 * dt * a2, xd + dt * a3
+            w2, w3, w4 = thd + 0.5 * dt * t1, thd + 0.5 * dt * t2, thd + dt * t3
+            x += dt / 6.0 * (xd + 2.0 * (v2 + v3) + v4)
+            th += dt / 6.0 * (thd + 2.0 * (w2 + w3) + w4)
+            xd += dt / 6.0 * (a1 + 2.0 * (a2 + a3) + a4)
+            thd += dt / 6.0 * (t1 + 2.0 * (t2 + t3) + t4)
+            if not (abs(th) <= bound and math.isfinite(x) and math.isfinite(xd) and math.isfinite(thd)):
+                n_valid[b] = k + 1
+                break
+
+
+def loop_parameters(schedule: dict) -> np.ndarray:
+    """An error-AGS schedule of a config (kp/ki/kd ranges, rate) as :data:`AGS`."""
+    ends = [schedule[g][end] for g in ("kp", "ki", "kd") for end in ("min", "max")]
+    return np.array([*ends, *(schedule["rate"][g] for g in ("kp", "ki", "kd"))], dtype=float)
