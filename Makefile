@@ -4,35 +4,46 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.nlcx-installed
+DEV_STAMP := $(VENV)/.nlcx-dev-installed
 JOBS ?= 2
 
 BASELINE_TABLES := table-2.3,table-2.5,table-3.2,table-3.7,table-4.2,table-4.4,table-5.1,table-5.8
 
-.PHONY: install run test lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
+.PHONY: install dev-install run test lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
 	baseline baseline-diff sweep-demo bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,dask]"
+	$(BIN)/python -m pip install --quiet -e .
 	# byte-compile nlcx as a regular install does (an editable one leaves it to the first import,
 	# which cannot write it where PYTHONDONTWRITEBYTECODE is set)
 	$(BIN)/python -m compileall -q nlcx
+	# compile the main job's kernels into numba's disk cache and build matplotlib's font cache
+	# now, so that the first nlcx run does not wait for them (a short run of the main job)
+	$(BIN)/nlcx run configs/xyz_error_ags.yaml simulation.t_end=0.1 --out $(VENV)/warm-up --no-report -q
 	touch $(STAMP)
 
-## install: create .venv and install nlcx with its test tools
+# the test tools (pytest, ruff, sympy, scikit-fuzzy, Playwright) and the dask extra, for
+# make test and the developer targets; make run does not wait for them
+$(DEV_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,dask]"
+	touch $(DEV_STAMP)
+
+## install: create .venv and install nlcx (make dev-install adds the test tools)
 install: $(STAMP)
+
+dev-install: $(DEV_STAMP)
 
 ## run: the main job, the x-y-z pendulum under conventional vs error-AGS PID
 run: install
 	$(BIN)/nlcx run configs/xyz_error_ags.yaml
 
 ## test: the whole test suite, ruff included (what CI runs)
-test: install
+test: dev-install
 	$(BIN)/python -m pytest -q
 
 ## lint: ruff on the package, tests and scripts
-lint: install
+lint: dev-install
 	$(BIN)/ruff check nlcx tests scripts
 
 ## reproduce-pendulums: every figure and table of chapters 2-4, and claims.csv, in results/thesis/
@@ -48,7 +59,7 @@ reproduce: install
 	$(BIN)/nlcx reproduce --jobs $(JOBS)
 
 ## screenshots: docs/img/report_*.png from results/thesis/report.html (after make reproduce; needs chromium)
-screenshots: install
+screenshots: dev-install
 	$(BIN)/python scripts/report_screenshots.py results/thesis/report.html docs/img
 
 ## tables / figures: every thesis table / figure (both come from one reproduce run)
@@ -99,7 +110,7 @@ configs: install
 	$(BIN)/python scripts/make_thesis_configs.py
 
 ## errata: regenerate the derived models and docs/errata.md
-errata: install
+errata: dev-install
 	$(BIN)/python scripts/derive_pendulums.py
 	$(BIN)/python scripts/errata.py
 

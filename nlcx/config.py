@@ -107,9 +107,9 @@ class ExperimentSection(Section):
     uncertainty: dict[str, dict[str, Any]] = {}
     #: References by signal name; outputs not listed are regulated to 0.
     reference: dict[str, dict[str, Any]] = {}
-    simulation: SimulationSection = SimulationSection()
-    metrics: MetricsSection = MetricsSection()
-    outputs: OutputsSection = OutputsSection()
+    simulation: SimulationSection = Field(default_factory=SimulationSection)
+    metrics: MetricsSection = Field(default_factory=MetricsSection)
+    outputs: OutputsSection = Field(default_factory=OutputsSection)
 
 
 @dataclass(frozen=True)

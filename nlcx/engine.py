@@ -29,7 +29,7 @@ from nlcx.config import Experiment, MetricsSection, build, controller_section
 from nlcx.controllers.base import ControllerInstance
 from nlcx.errors import ConfigError
 from nlcx.kernel.abi import ELEMENT_ENTRY, HOOKS, STATUS_BOUND, STATUS_NONFINITE, callback_slots, element_slots
-from nlcx.kernel.friction import FRICTION_AXIS
+from nlcx.kernel.friction import FA, FRICTION_AXIS, FRICTION_NONE, FRICTIONAL, FRICTIONLESS
 from nlcx.kernel.integrator import simulate
 from nlcx.plants.base import Plant, check_rows
 from nlcx.references.base import MetricPlan
@@ -330,6 +330,12 @@ def _stack(arrays: list[np.ndarray | None], empty_shape: tuple[int, ...]) -> np.
     return np.ascontiguousarray(np.stack([np.broadcast_to(a, shape) for a in filled]))
 
 
+def _has_friction(axes: np.ndarray | None) -> bool:
+    """Whether an item's friction axes (FRICTION_AXIS rows) hold a friction model (as the kernel's
+    :func:`nlcx.kernel.friction.has_friction` decides which rows take the friction path)."""
+    return axes is not None and bool(np.any(axes[:, FA.model].astype(np.int64) != FRICTION_NONE))
+
+
 def _group_key(item: Item) -> tuple[Any, ...]:
     c, plant = item.controller, item.plant
     elements = tuple((e.hook, id(e.function), e.params.size, e.state.size) for e in item.elements)
@@ -396,6 +402,7 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_lo
             grid.dt,
             (X, U, LOG, FRIC),
             (status, n_valid, fail_index),
+            FRICTIONAL if any(_has_friction(g.friction) for g in group) else FRICTIONLESS,
         )
         for j, i in enumerate(indices):
             k = int(n_valid[j])
@@ -468,6 +475,16 @@ def _outputs(xs: list[np.ndarray], c_row: np.ndarray) -> np.ndarray:
     return np.stack([x @ c_row for x in xs])
 
 
+def _reference_rows(columns: list[np.ndarray]) -> np.ndarray:
+    """The references of runs as rows (B, T); one row (T,), broadcast, when every run reads the
+    same samples (the variants of a sweep share their reference array)."""
+    first = columns[0]
+    key = (first.__array_interface__["data"][0], first.shape, first.strides)
+    if all((c.__array_interface__["data"][0], c.shape, c.strides) == key for c in columns[1:]):
+        return first
+    return np.stack(columns)
+
+
 def _measured_outputs(run: Run, plant: Plant) -> list[str]:
     """Outputs of ``run`` that follow a reference (measured against it)."""
     return [s for s in dict.fromkeys(run.controller.reference_signals) if s in plant.output_names]
@@ -491,7 +508,7 @@ def _tracking_values(
     for (s, plan, _), members in groups.items():
         j = plant.output_names.index(s)
         y = _outputs([runs[i].x for i in members], plant.C[j])
-        r = np.stack([runs[i].r[:, runs[i].controller.reference_signals.index(s)] for i in members])
+        r = _reference_rows([runs[i].r[:, runs[i].controller.reference_signals.index(s)] for i in members])
         batch = _signal_metrics(runs[members[0]].t, y, r, plan, cfg)
         values.update({(i, s): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)})
     return values

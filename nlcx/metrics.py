@@ -1,13 +1,16 @@
-"""Time-domain performance metrics of simulated or measured responses (pure numpy, batched).
+"""Time-domain performance metrics of simulated or measured responses (batched).
 
 Every function takes a strictly increasing, not necessarily uniform, time grid ``t`` of
 shape ``(T,)`` and a signal of shape ``(T,)`` or ``(B, T)``.  It returns a
 ``dict[str, np.ndarray]`` whose values have shape ``()`` for a 1-D signal and ``(B,)`` for
-a 2-D one (:func:`step_info` returns floats for a 1-D signal).  Nothing loops over the
-time axis; the batch axis is processed in blocks of rows (about ``_CHUNK_ELEMENTS``
-samples each) so that temporaries stay bounded when ``B * T`` is large.  Each row is
-computed by the same row-wise operations whatever the block it falls in, so a batched
-call equals the corresponding 1-D calls exactly.
+a 2-D one (:func:`step_info` returns floats for a 1-D signal).  The searches along a row
+(crossings, last exits, extremes) and the terms of the trapezoidal sums are compiled row
+scans, each one pass that stops as early as it can; the sums are numpy's (pairwise), so
+every value is the numpy formulation's to the last bit (tests/test_metrics_scans.py).  The
+batch axis is processed in blocks of rows (about ``_CHUNK_ELEMENTS`` samples each) so that
+temporaries stay bounded when ``B * T`` is large.  Each row is computed by the same
+row-wise operations whatever the block it falls in, so a batched call equals the
+corresponding 1-D calls exactly.
 
 Crossing times are interpolated linearly between samples (the signal is treated as
 piecewise linear), so they are not quantised to the grid.  Peaks are sample values.
@@ -23,6 +26,7 @@ from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
@@ -176,31 +180,63 @@ def _trapz(t: FloatArray, y: FloatArray) -> FloatArray:
     return np.sum(s, axis=-1)
 
 
-def _first_crossing(tau: FloatArray, sy: FloatArray, s_level: FloatArray) -> tuple[FloatArray, NDArray[np.intp]]:
-    """First time each row of ``sy`` reaches ``s_level`` (i.e. ``sy >= s_level``), interpolated.
-
-    ``sy`` is ``s * y`` and ``s_level`` is ``s * level``, so the condition is
-    ``s * (y - level) >= 0``.  If the first sample already satisfies it the result is
-    ``tau[0]``; otherwise the crossing is interpolated linearly between the last sample
-    before and the first sample that satisfies it.  NaN if it is never reached.  Also
-    returns the index of that first sample (meaningless where the time is NaN).
-    """
-    rows = np.arange(sy.shape[0])
-    cond = sy >= s_level[:, np.newaxis]
-    found = cond.any(axis=1)
-    idx = np.argmax(cond, axis=1)
-    prev = np.maximum(idx - 1, 0)
-    sy_prev = sy[rows, prev]
-    num = s_level - sy_prev
-    den = sy[rows, idx] - sy_prev
-    with np.errstate(divide="ignore", invalid="ignore"):
-        frac = np.where(idx > 0, num / den, 0.0)
-    frac = np.clip(frac, 0.0, 1.0)
-    t_cross = tau[prev] + frac * (tau[idx] - tau[prev])
-    return np.where(found, t_cross, np.nan), idx
+@njit(cache=True, error_model="numpy")
+def _argmax(a):  # pragma: no cover - compiled
+    """numpy's argmax of a row: the first maximum, or the first NaN."""
+    best, at = a[0], 0
+    if best != best:
+        return 0
+    for i in range(1, a.shape[0]):
+        v = a[i]
+        if v != v:
+            return i
+        if v > best:
+            best, at = v, i
+    return at
 
 
-def _last_exit(tau: FloatArray, y: FloatArray, center: FloatArray, band_abs: FloatArray) -> FloatArray:
+@njit(cache=True, error_model="numpy")
+def _clip01(x):  # pragma: no cover - compiled
+    """np.clip(x, 0, 1): NaN stays NaN, -0.0 stays -0.0."""
+    if x < 0.0:
+        return 0.0
+    if x > 1.0:
+        return 1.0
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _first_crossing_row(tau, y, s, s_level):  # pragma: no cover - compiled
+    """(time, index) of the first sample of the row ``y`` with s*y >= s_level, the time
+    interpolated linearly from the sample before; (NaN, 0) if none."""
+    for i in range(y.shape[0]):
+        if s * y[i] >= s_level:
+            if i == 0:
+                return tau[0] + 0.0 * (tau[0] - tau[0]), 0
+            prev = s * y[i - 1]
+            frac = _clip01((s_level - prev) / (s * y[i] - prev))
+            return tau[i - 1] + frac * (tau[i] - tau[i - 1]), i
+    return np.nan, 0
+
+
+@njit(cache=True, error_model="numpy")
+def _first_crossing(tau, y, s, s_level):  # pragma: no cover - compiled
+    """First time each row of ``y`` reaches its level: s*y >= s_level, with s = ``s[b]`` and
+    s_level = ``s_level[b]`` (s = sign of the step, so s*(y - level) >= 0).  If the first
+    sample already satisfies it the result is ``tau[0]``; otherwise the crossing is
+    interpolated linearly between the last sample before and the first sample that satisfies
+    it.  NaN if it is never reached.  Also returns the index of that first sample (0 where
+    the time is NaN)."""
+    n_rows = y.shape[0]
+    t_cross = np.empty(n_rows)
+    index = np.zeros(n_rows, dtype=np.intp)
+    for b in range(n_rows):
+        t_cross[b], index[b] = _first_crossing_row(tau, y[b], s[b], s_level[b])
+    return t_cross, index
+
+
+@njit(cache=True, error_model="numpy")
+def _last_exit(tau, y, center, band_abs):  # pragma: no cover - compiled
     """Time of the last exit of each row from ``|y - center| <= band_abs`` (last-exit rule).
 
     With k the last index where ``|y_k - center| > band_abs``: no such k gives 0, k the last
@@ -208,21 +244,109 @@ def _last_exit(tau: FloatArray, y: FloatArray, center: FloatArray, band_abs: Flo
     linear signal between samples k and k+1 meets the band edge on the side of ``y_k``,
     ``center + sign(y_k - center) * band_abs``.
     """
-    n = y.shape[1]
-    rows = np.arange(y.shape[0])
-    dev = y - center[:, np.newaxis]
-    outside = np.abs(dev) > band_abs[:, np.newaxis]
-    any_out = outside.any(axis=1)
-    k = (n - 1) - np.argmax(outside[:, ::-1], axis=1)
-    k1 = np.minimum(k + 1, n - 1)
-    d_k = dev[rows, k]
-    d_k1 = dev[rows, k1]
-    edge = np.sign(d_k) * band_abs
-    with np.errstate(divide="ignore", invalid="ignore"):
-        frac = np.clip((d_k - edge) / (d_k - d_k1), 0.0, 1.0)
-    t_exit = tau[k] + frac * (tau[k1] - tau[k])
-    t_exit = np.where(k == n - 1, np.nan, t_exit)
-    return np.where(any_out, t_exit, 0.0)
+    n_rows, n = y.shape
+    out = np.empty(n_rows)
+    for b in range(n_rows):
+        c, band = center[b], band_abs[b]
+        k = n - 1
+        while k >= 0 and not abs(y[b, k] - c) > band:
+            k -= 1
+        if k < 0:
+            out[b] = 0.0
+        elif k == n - 1:
+            out[b] = np.nan
+        else:
+            d_k, d_k1 = y[b, k] - c, y[b, k + 1] - c
+            edge = (1.0 if d_k > 0.0 else -1.0) * band
+            out[b] = tau[k] + _clip01((d_k - edge) / (d_k - d_k1)) * (tau[k + 1] - tau[k])
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _extremes(y, s, s_final, s_initial):  # pragma: no cover - compiled
+    """Per row b: max(s*y - s_final) and max(s_initial - s*y), each NaN if a term is NaN (as
+    np.max), and the index of the first maximum of s*y (as np.argmax); s = ``s[b]``."""
+    n_rows, n = y.shape
+    over, under = np.empty(n_rows), np.empty(n_rows)
+    peak = np.zeros(n_rows, dtype=np.intp)
+    sy = np.empty(n)
+    for b in range(n_rows):
+        hi, lo, hi_nan, lo_nan = -np.inf, -np.inf, False, False
+        for i in range(n):
+            v = s[b] * y[b, i]
+            sy[i] = v
+            a, c = v - s_final[b], s_initial[b] - v
+            hi_nan, lo_nan = hi_nan or a != a, lo_nan or c != c
+            hi = a if a > hi else hi
+            lo = c if c > lo else lo
+        over[b] = np.nan if hi_nan else hi
+        under[b] = np.nan if lo_nan else lo
+        peak[b] = _argmax(sy)
+    return over, under, peak
+
+
+@njit(cache=True, error_model="numpy")
+def _deviation_peak(y, reference):  # pragma: no cover - compiled
+    """Per row b: the index of the first maximum of |y - reference[b]| (or of its first NaN,
+    as np.argmax) and that deviation."""
+    n_rows, n = y.shape
+    index = np.zeros(n_rows, dtype=np.intp)
+    peak = np.empty(n_rows)
+    dev = np.empty(n)
+    for b in range(n_rows):
+        for i in range(n):
+            dev[i] = abs(y[b, i] - reference[b])
+        index[b] = _argmax(dev)
+        peak[b] = dev[index[b]]
+    return index, peak
+
+
+@njit(cache=True, error_model="numpy")
+def _max_abs(y, b):  # pragma: no cover - compiled
+    """max |y[b]|, NaN if the row holds a NaN (as np.max)."""
+    m = -np.inf
+    for i in range(y.shape[1]):
+        a = abs(y[b, i])
+        if a != a:
+            return np.nan
+        m = a if a > m else m
+    return m
+
+
+@njit(cache=True, error_model="numpy")
+def _error_terms(t, e, start):  # pragma: no cover - compiled
+    """The terms of the trapezoidal sums of e^2, |e| and (t - start) |e| over each row of e
+    (samples at t), as :func:`_trapz` forms them, and max |e| per row. Summed by numpy
+    (pairwise), they are the integrals of :func:`error_integrals` to the last bit."""
+    n_rows, n = e.shape
+    squared, absolute, weighted = np.empty((n_rows, n - 1)), np.empty((n_rows, n - 1)), np.empty((n_rows, n - 1))
+    max_abs = np.empty(n_rows)
+    for b in range(n_rows):
+        for k in range(n - 1):
+            dt = t[k + 1] - t[k]
+            e0, e1 = e[b, k], e[b, k + 1]
+            a0, a1 = abs(e0), abs(e1)
+            squared[b, k] = ((e1 * e1 + e0 * e0) * 0.5) * dt
+            absolute[b, k] = ((a1 + a0) * 0.5) * dt
+            weighted[b, k] = (((t[k + 1] - start) * a1 + (t[k] - start) * a0) * 0.5) * dt
+        max_abs[b] = _max_abs(e, b)
+    return squared, absolute, weighted, max_abs
+
+
+@njit(cache=True, error_model="numpy")
+def _input_terms(t, u):  # pragma: no cover - compiled
+    """The terms of the trapezoidal sum of u^2 and of the total variation sum |u_k - u_{k-1}|
+    over each row of u, and max |u| per row (numpy sums them)."""
+    n_rows, n = u.shape
+    squared, steps = np.empty((n_rows, n - 1)), np.empty((n_rows, n - 1))
+    peak = np.empty(n_rows)
+    for b in range(n_rows):
+        for k in range(n - 1):
+            u0, u1 = u[b, k], u[b, k + 1]
+            squared[b, k] = ((u1 * u1 + u0 * u0) * 0.5) * (t[k + 1] - t[k])
+            steps[b, k] = abs(u1 - u0)
+        peak[b] = _max_abs(u, b)
+    return squared, steps, peak
 
 
 def _window_mean(t: FloatArray, y: FloatArray, window: float) -> FloatArray:
@@ -300,7 +424,7 @@ class _StepCore(NamedTuple):
     """The metrics both step functions share, and what the rest of each is computed from."""
 
     metrics: MetricDict  # rise_time, settling_time, overshoot, undershoot (NaN where delta == 0)
-    sy: FloatArray  # s * y, s = sign(final - initial)
+    peak_index: NDArray[np.intp]  # first maximum of s * y, s = sign(final - initial)
     valid: NDArray[np.bool_]  # delta != 0
     risen: NDArray[np.bool_]  # the upper rise level is reached (and delta != 0)
     hi_index: NDArray[np.intp]  # first sample at or past the upper rise level (where risen)
@@ -320,12 +444,10 @@ def _step_core(
     s = np.sign(delta)
     mag = np.abs(delta)
     valid = delta != 0
-    sy = s[:, np.newaxis] * yc
-    t_lo, _ = _first_crossing(tau, sy, s * (initial + lo * delta))
-    t_hi, hi_index = _first_crossing(tau, sy, s * (initial + hi * delta))
+    t_lo, _ = _first_crossing(tau, yc, s, s * (initial + lo * delta))
+    t_hi, hi_index = _first_crossing(tau, yc, s, s * (initial + hi * delta))
     settling = _last_exit(tau, yc, final, band * mag)
-    over = np.max(sy - (s * final)[:, np.newaxis], axis=1)
-    under = np.max((s * initial)[:, np.newaxis] - sy, axis=1)
+    over, under, peak_index = _extremes(yc, s, s * final, s * initial)
     with np.errstate(divide="ignore", invalid="ignore"):
         overshoot = 100.0 * np.maximum(over, 0.0) / mag
         undershoot = 100.0 * np.maximum(under, 0.0) / mag
@@ -336,7 +458,7 @@ def _step_core(
         "overshoot": np.where(valid, overshoot, nan),
         "undershoot": np.where(valid, undershoot, nan),
     }
-    return _StepCore(metrics, sy, valid, valid & ~np.isnan(t_hi), hi_index)
+    return _StepCore(metrics, peak_index, valid, valid & ~np.isnan(t_hi), hi_index)
 
 
 def _abs_peak(tau: FloatArray, yc: FloatArray) -> MetricDict:
@@ -410,7 +532,7 @@ def step_response_metrics(
             initial = _value_at_step(yb, g)
         yc = yb[:, g.i0 :]
         core = _step_core(g.tau, yc, initial, final, limits, b)
-        ipk = np.argmax(core.sy, axis=1)
+        ipk = core.peak_index
         return {
             **core.metrics,
             "peak": np.where(core.valid, yc[np.arange(yc.shape[0]), ipk], np.nan),
@@ -534,10 +656,7 @@ def regulation_metrics(
     params = {"reference": _per_row(reference, y2.shape[0], "reference")}
 
     def block(yb: FloatArray, reference: FloatArray) -> MetricDict:
-        rows = np.arange(yb.shape[0])
-        absdev = np.abs(yb - reference[:, np.newaxis])
-        ipk = np.argmax(absdev, axis=1)
-        peak_dev = absdev[rows, ipk]
+        ipk, peak_dev = _deviation_peak(yb, reference)
         band_abs = np.maximum(b * peak_dev, tol)
         return {
             "peak_deviation": peak_dev,
@@ -567,18 +686,16 @@ def error_integrals(t: ArrayLike, e: ArrayLike, *, t0: float = 0.0) -> MetricDic
     if t_arr.size - i0 < 2:
         raise ValueError(f"need at least two samples at or after t0 = {start}")
     t_c = t_arr[i0:]
-    weight = t_c - start
     duration = t_c[-1] - t_c[0]
 
     def block(eb: FloatArray) -> MetricDict:
-        ec = eb[:, i0:]
-        ae = np.abs(ec)
-        ise = _trapz(t_c, ec * ec)
+        squared, absolute, weighted, max_abs = _error_terms(t_c, eb[:, i0:], start)
+        ise = np.sum(squared, axis=-1)
         return {
             "ise": ise,
-            "iae": _trapz(t_c, ae),
-            "itae": _trapz(t_c, weight * ae),
-            "max_abs_error": np.max(ae, axis=1),
+            "iae": np.sum(absolute, axis=-1),
+            "itae": np.sum(weighted, axis=-1),
+            "max_abs_error": max_abs,
             "rms_error": np.sqrt(ise / duration),
         }
 
@@ -596,10 +713,11 @@ def input_metrics(t: ArrayLike, u: ArrayLike) -> MetricDict:
     t_arr, u2, squeeze = _prepare(t, u, "u")
 
     def block(ub: FloatArray) -> MetricDict:
+        squared, steps, peak = _input_terms(t_arr, ub)
         return {
-            "control_effort": _trapz(t_arr, ub * ub),
-            "peak_input": np.max(np.abs(ub), axis=1),
-            "total_variation": np.sum(np.abs(np.diff(ub, axis=1)), axis=1),
+            "control_effort": np.sum(squared, axis=-1),
+            "peak_input": peak,
+            "total_variation": np.sum(steps, axis=-1),
         }
 
     return _run_batched(block, u2, INPUT_METRICS, squeeze)

@@ -8,8 +8,10 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import os
+import time
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -57,7 +59,14 @@ def check_references(
 
 
 def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation (MemAvailable on Linux), None if unknown."""
+    """Bytes of memory available to a new allocation (MemAvailable on Linux), None if unknown;
+    read at most once a second (a sweep prepares hundreds of variants a second)."""
+    return _available_memory(int(time.monotonic()))
+
+
+@functools.lru_cache(maxsize=1)
+def _available_memory(second: int) -> int | None:
+    """:func:`available_memory` read in the given second of the monotonic clock."""
     try:
         with open("/proc/meminfo", encoding="ascii") as fh:
             for line in fh:

@@ -29,7 +29,6 @@ from numba import njit
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nlcx.controllers.schedules import GainRange, ScheduleConfig, ScheduleModel
-from nlcx.kernel.abi import CALLBACK_SIG
 from nlcx.layout import Layout
 from nlcx.tuning.anfis import CONSEQUENT, MODEL, N_INPUTS, AnfisModel
 
@@ -157,7 +156,7 @@ def _anfis_gain(p, o, which, e, edot, clip):  # pragma: no cover - compiled
     return g
 
 
-@njit(CALLBACK_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def anfis_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     """Eq. 5.12-5.14's gains from three TS models: p[row, o:] = an :data:`ANFIS_HEAD` (its
     model offsets relative to o), then the three packed models (:data:`MODEL` layout)."""

@@ -21,7 +21,6 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.errors import ConfigError
-from nlcx.kernel.abi import CONTROLLER_SIG
 from nlcx.layout import Layout
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join
@@ -110,7 +109,7 @@ def _neuron_row(t, dt, y, r, cp, cs, u, log):  # pragma: no cover - compiled
     log[3] = cs[S.u1]
 
 
-@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def neuron_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """The single-neuron adaptive PID (eqs. 5.15-5.19), every row."""
     for b in range(y.shape[0]):

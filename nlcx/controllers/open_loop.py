@@ -8,7 +8,6 @@ import numpy as np
 from numba import njit
 
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
-from nlcx.kernel.abi import CONTROLLER_SIG
 from nlcx.plants.base import Plant
 
 
@@ -16,7 +15,7 @@ class OpenLoopConfig(ControllerConfig):
     kind: Literal["open_loop"] = "open_loop"
 
 
-@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def open_loop_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """u_j(t) = r_j(t): the reference channels are the plant inputs (every row)."""
     for b in range(u.shape[0]):

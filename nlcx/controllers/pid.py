@@ -132,7 +132,7 @@ class SaturationConfig(BaseModel):
 class PIDConfig(ControllerConfig):
     kind: Literal["pid"] = "pid"
     loops: dict[str, LoopConfig] = Field(min_length=1)
-    derivative: DerivativeConfig = DerivativeConfig()
+    derivative: DerivativeConfig = Field(default_factory=DerivativeConfig)
     #: "outside": u = k_i(t) * integral(e) as eqs. 2.17-2.22 write it;
     #: "inside": u = integral(k_i(t) e), bumpless when k_i varies.
     integral: Literal["outside", "inside"] = "outside"
@@ -323,7 +323,7 @@ class MultiLoopPID(ControllerModel):
             log_names=tuple(log_names),
             log_units=tuple(log_units),
             config=cfg.model_dump(),
-            callbacks=schedule_slots(),
+            callbacks=schedule_slots(loop.schedule.kind for _, loop, _, _ in loops if _via_slot(loop)),
         )
 
     @staticmethod
@@ -406,6 +406,11 @@ class MultiLoopPID(ControllerModel):
                 f"{', '.join(outputs)}); got {len(signals)} loop(s) on {', '.join(signals)}",
             )
         return resolved
+
+
+def _via_slot(loop: LoopConfig) -> bool:
+    """Whether the PID calls the loop's schedule through its callback slot (not a built-in)."""
+    return registry.schedules.get(loop.schedule.kind).gains not in _DIRECT
 
 
 def input_blocks(cp: np.ndarray) -> list[dict[str, float]]:

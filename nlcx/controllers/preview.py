@@ -48,7 +48,6 @@ from pydantic import Field
 
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.errors import ConfigError
-from nlcx.kernel.abi import CONTROLLER_SIG
 from nlcx.layout import Layout
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join
@@ -448,7 +447,7 @@ def _preview_row(t, dt, x, r, cp, cs, u, log):  # pragma: no cover - compiled
     log[LOG_SIZE * m] = cs[S.integral]
 
 
-@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def preview_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """The preview servo (eq. 5.21), every row (full state information: it reads x)."""
     for b in range(x.shape[0]):

@@ -15,6 +15,7 @@ printed end points, so a "min" above "max" simply reverses the direction of trav
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from functools import cache
 from typing import Any, ClassVar, Literal
 
@@ -24,7 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from nlcx import registry
 from nlcx.errors import ConfigError
-from nlcx.kernel.abi import CALLBACK_SIG, CALLBACK_SLOTS, callback_slots
+from nlcx.kernel.abi import CALLBACK_SIG, CALLBACK_SLOTS, callback_slots, no_callback
 from nlcx.layout import Layout
 
 #: Conventional PID: the three constant gains.
@@ -210,16 +211,21 @@ class ErrorAGS(ScheduleModel):
 
 
 @cache
-def _slots(names: tuple[str, ...]) -> tuple[Any, ...]:
-    return callback_slots(tuple(registry.schedules.get(name).gains for name in names))
+def _slots(names: tuple[str, ...], used: frozenset[str] | None) -> tuple[Any, ...]:
+    return callback_slots(tuple(
+        registry.schedules.get(name).gains if used is None or name in used else no_callback for name in names
+    ))  # fmt: skip
 
 
-def schedule_slots() -> tuple[Any, ...]:
-    """The PID's callback table: every registered schedule's compiled function, in registry order."""
+def schedule_slots(used: Iterable[str] | None = None) -> tuple[Any, ...]:
+    """The PID's callback table: the compiled function of each registered schedule in ``used``
+    (default: every one) in its slot, registry order, the others padded. A schedule is compiled
+    when its slot first reaches the kernel, so a table holding only the schedules a controller
+    calls through it compiles nothing else."""
     names = tuple(registry.schedules.names())
     if len(names) > CALLBACK_SLOTS:
         raise ConfigError("schedules", len(names), f"at most {CALLBACK_SLOTS} gain schedules can be registered")
-    return _slots(names)
+    return _slots(names, None if used is None else frozenset(used))
 
 
 def schedule_index(name: str) -> int:

@@ -69,6 +69,29 @@ ElementTuple = types.UniTuple(types.FunctionType(ELEMENT_SIG), ELEMENT_SLOTS)
 RhsFn = types.FunctionType(RHS_SIG)
 ControllerFn = types.FunctionType(CONTROLLER_SIG)
 
+#: Arrays of the batch the kernel and the friction path share (see
+#: :mod:`nlcx.kernel.integrator`): plant forces (disturbance terms, their map, friction axes),
+#: records (X, U, LOG, FRICTION), the friction modes (mode, direction, hold, stopped) and the
+#: one-variant work space of the friction path (:func:`nlcx.kernel.integrator._friction_scratch`).
+ForceArrays = types.Tuple((ARR4, MAT, ARR3))
+Records = types.UniTuple(ARR3, 4)
+FrictionState = types.Tuple((types.int64[:, ::1], MAT, MAT, types.boolean[::1]))
+OnePath = types.Tuple(
+    (types.UniTuple(VEC, 4), types.Tuple((MAT, VEC, VEC, VEC, VEC, MAT, VEC, VEC, VEC, types.UniTuple(MAT, 4))))
+)
+Tableau = types.Tuple((MAT, VEC))
+#: The friction path (Appendix A), called through two compiled-function values so that a
+#: batch without friction never compiles it: at sample k, the breakaway of the frictional
+#: rows ``frictional_sample(rhs, t, k, nb, n_free, vid, x, u, p, axes, state, forces,
+#: one_path, records)``; over the step, their integration ``frictional_step(rhs, t, dt, kd,
+#: nb, n_free, vid, x, x_new, u, p, axes, state, forces, one_path, tableau, c)``. Rows
+#: n_free..nb-1 are the frictional ones.
+FRICTION_SAMPLE_SIG = types.void(RhsFn, F64, I64, I64, I64, IVEC, MAT, MAT, MAT, ARR3, FrictionState, ForceArrays,
+                                 OnePath, Records)  # fmt: skip
+FRICTION_STEP_SIG = types.void(RhsFn, F64, F64, I64, I64, I64, IVEC, MAT, MAT, MAT, MAT, ARR3, FrictionState,
+                               ForceArrays, OnePath, Tableau, VEC)  # fmt: skip
+FrictionPath = types.Tuple((types.FunctionType(FRICTION_SAMPLE_SIG), types.FunctionType(FRICTION_STEP_SIG)))
+
 #: Hook points of the signal path where loop elements act.
 SENSOR = 0
 ACTUATOR = 1
@@ -85,6 +108,12 @@ MAX_STAGES = 4
 STATUS_OK = 0
 STATUS_NONFINITE = 1
 STATUS_BOUND = 2
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def shared_row(axis_length: int, b: int) -> int:  # pragma: no cover - compiled
+    """Index into an axis that is either per-variant (length B) or broadcast (length 1)."""
+    return b if axis_length > 1 else 0
 
 
 @njit(CALLBACK_SIG, cache=True, error_model="numpy")

@@ -19,6 +19,7 @@ import math
 
 from numba import njit
 
+from nlcx.kernel.abi import FRICTION_SAMPLE_SIG, FRICTION_STEP_SIG, shared_row
 from nlcx.layout import Layout
 
 #: Friction parameters of one input's axis: model (FRICTION_NONE, _SIMPLE, _EXPONENTIAL),
@@ -205,7 +206,8 @@ def _rk_step_one(
     n_stage = rk_b.shape[0]
     partial = frac0 != 0.0 or h_frac != 1.0
     for s in range(n_stage):
-        xs[:] = x_in
+        for i in range(x_in.shape[0]):
+            xs[i] = x_in[i]
         for j in range(s):
             if rk_a[s, j] != 0.0:
                 for i in range(n):
@@ -220,7 +222,8 @@ def _rk_step_one(
         for j in range(u.shape[0]):
             u_total[j] = u[j] + f[j]
         _derivative(rhs, ts, xs, u_total, d_s, dist_map, k_stage[s], one)
-    x_out[:] = x_in
+    for i in range(x_in.shape[0]):
+        x_out[i] = x_in[i]
     for s in range(n_stage):
         for i in range(n):
             x_out[i] += h * rk_b[s] * k_stage[s, i]
@@ -303,3 +306,97 @@ def initial_modes(axes, x, mode, direction, hold):  # pragma: no cover - compile
             mode[j] = STUCK if v0 == 0.0 else SLIP
             direction[j] = 1.0 if v0 > 0.0 else -1.0
             hold[j] = x[int(axes[j, FA.position_index])]
+
+
+# ----------------------------------------------------------------------------- the kernel's friction path
+# (:data:`nlcx.kernel.abi.FrictionPath`: compiled when a batch with friction first reaches the kernel)
+
+
+@njit(cache=True, error_model="numpy")
+def frictional_sample(
+    rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records
+):  # pragma: no cover - compiled
+    """Breakaway at t_k for the frictional rows (Appendix A's static case), and the friction
+    force on each axis at t_k when it is recorded (the step evaluates its own)."""
+    mode, direction, _, stopped = state
+    dist, dist_map, _ = forces
+    FRICTION = records[3]
+    record = FRICTION.shape[1] > 1
+    (xo, _, _, uo), scratch = one_path
+    _, _, f, _, work, A, rhs_s, dxo, _, one = scratch
+    kd = shared_row(dist.shape[1], k)
+    for b in range(nb):
+        if stopped[b]:
+            continue
+        v = vid[b]
+        if b < n_free:
+            if record:
+                for j in range(u.shape[1]):
+                    FRICTION[v, k, j] = 0.0
+            continue
+        _load_one(b, x, u, pw, xo, uo, one)
+        drow = dist[shared_row(dist.shape[0], v), kd]
+        update_friction_modes(
+            rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
+        )
+        if record:
+            friction_forces(
+                rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
+            )
+            for j in range(u.shape[1]):
+                FRICTION[v, k, j] = f[j]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _load_one(b, x, u, pw, xo, uo, one):  # pragma: no cover - compiled
+    """Copy row b's state, input and plant parameters into the one-variant work space."""
+    for i in range(x.shape[1]):
+        xo[i] = x[b, i]
+    for j in range(u.shape[1]):
+        uo[j] = u[b, j]
+    for i in range(pw.shape[1]):
+        one[2][0, i] = pw[b, i]
+
+
+@njit(cache=True, error_model="numpy")
+def frictional_step(
+    rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path, tableau, c
+):  # pragma: no cover - compiled
+    """One sampling step of each frictional row, one variant at a time."""
+    mode, direction, hold, stopped = state
+    dist, dist_map, _ = forces
+    (xo, xo_new, xo_mid, uo), scratch = one_path
+    one = scratch[9]
+    rk_a, rk_b = tableau
+    for b in range(n_free, nb):
+        if stopped[b]:
+            continue
+        v = vid[b]
+        _load_one(b, x, u, pw, xo, uo, one)
+        step_with_friction(
+            rhs, t, dt, xo, xo_new, xo_mid, uo, dist[shared_row(dist.shape[0], v), kd], c, dist_map,
+            fw[b], mode[b], direction[b], hold[b], rk_a, rk_b, scratch,
+        )  # fmt: skip
+        for i in range(x.shape[1]):
+            x_new[b, i] = xo_new[i]
+
+
+@njit(FRICTION_SAMPLE_SIG, cache=True, error_model="numpy")
+def no_frictional_sample(
+    rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records
+):  # pragma: no cover
+    """The friction path of a batch without friction: never called."""
+    return
+
+
+@njit(FRICTION_STEP_SIG, cache=True, error_model="numpy")
+def no_frictional_step(
+    rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path, tableau, c
+):  # pragma: no cover - compiled
+    """The friction path of a batch without friction: never called."""
+    return
+
+
+#: The friction path handed to the kernel, with and without friction.
+FRICTIONAL = (frictional_sample, frictional_step)
+FRICTIONLESS = (no_frictional_sample, no_frictional_step)

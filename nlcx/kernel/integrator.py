@@ -21,7 +21,6 @@ from numba import njit, types
 from nlcx.kernel.abi import (
     ACTUATOR,
     ARR3,
-    ARR4,
     ELEMENT_ENTRY,
     F64,
     IVEC,
@@ -34,16 +33,13 @@ from nlcx.kernel.abi import (
     CallbackTuple,
     ControllerFn,
     ElementTuple,
+    ForceArrays,
+    FrictionPath,
+    Records,
     RhsFn,
+    shared_row,
 )
-from nlcx.kernel.friction import (
-    FA,
-    friction_forces,
-    has_friction,
-    initial_modes,
-    step_with_friction,
-    update_friction_modes,
-)
+from nlcx.kernel.friction import FA, has_friction, initial_modes
 
 EE = ELEMENT_ENTRY.at
 
@@ -55,12 +51,11 @@ PlantArrays = types.UniTuple(MAT, 4)
 ControlArrays = types.Tuple((MAT, MAT, ARR3))
 #: elements (table (n_el, ELEMENT_ENTRY), ep (B, n_ep), es0 (B, n_es), data (B|1, K+1|1, n_data))
 ElementArrays = types.Tuple((MAT, MAT, MAT, ARR3))
-#: plant forces (dist (B|1, K|1, s, n_d) derivative terms at the stage times, dist_map (n, n_d):
-#: dx += dist_map @ d, friction (B|1, n_u, FRICTION_AXIS) of each input's axis)
-ForceArrays = types.Tuple((ARR4, MAT, ARR3))
-#: records, written (X (B, K+1, n), U (B, K+1, n_u), LOG (B, K+1|1, n_log), FRICTION (B, K+1|1, n_u));
-#: a time length of 1 for LOG and FRICTION: not recorded
-Records = types.UniTuple(ARR3, 4)
+#: plant forces (:data:`~nlcx.kernel.abi.ForceArrays`: dist (B|1, K|1, s, n_d) derivative terms
+#: at the stage times, dist_map (n, n_d): dx += dist_map @ d, friction (B|1, n_u, FRICTION_AXIS)
+#: of each input's axis)
+#: records, written (:data:`~nlcx.kernel.abi.Records`: X (B, K+1, n), U (B, K+1, n_u), LOG
+#: (B, K+1|1, n_log), FRICTION (B, K+1|1, n_u)); a time length of 1 for LOG and FRICTION: not recorded
 #: outcome, written (status (B,), n_valid (B,), fail_index (B,): i < n state i, n + j input j, -1 none)
 Outcome = types.UniTuple(IVEC, 3)
 
@@ -77,13 +72,8 @@ SIMULATE_SIG = types.void(
     F64,  # dt
     Records,
     Outcome,
+    FrictionPath,
 )
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _row(arr_len: int, b: int) -> int:
-    """Index into an axis that is either per-variant (length B) or broadcast (length 1)."""
-    return b if arr_len > 1 else 0
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -94,7 +84,7 @@ def _add_disturbances(dx, dist, vid, kd, stage, dist_map):  # pragma: no cover -
         return
     n = dx.shape[1]
     for b in range(dx.shape[0]):
-        bd = _row(dist.shape[0], vid[b])
+        bd = shared_row(dist.shape[0], vid[b])
         for i in range(n):
             acc = 0.0
             for j in range(n_d):
@@ -201,12 +191,12 @@ def _row_order(friction, n_batch):  # pragma: no cover - compiled
     vid = np.empty(n_batch, dtype=np.int64)
     n_free = 0
     for v in range(n_batch):
-        if not has_friction(friction[_row(friction.shape[0], v)]):
+        if not has_friction(friction[shared_row(friction.shape[0], v)]):
             vid[n_free] = v
             n_free += 1
     b = n_free
     for v in range(n_batch):
-        if has_friction(friction[_row(friction.shape[0], v)]):
+        if has_friction(friction[shared_row(friction.shape[0], v)]):
             vid[b] = v
             b += 1
     return vid, n_free
@@ -226,13 +216,23 @@ def _working_rows(vid, plant, control, friction, n_u):  # pragma: no cover - com
     bw = np.empty((n_batch, n))
     for b in range(n_batch):
         v = vid[b]
-        x[b] = x0[v]
-        pw[b] = p[_row(p.shape[0], v)]
-        cpw[b] = cp[v]
-        cs[b] = cs0[v]
-        fw[b] = friction[_row(friction.shape[0], v)]
-        bw[b] = bounds[_row(bounds.shape[0], v)]
+        _copy_row(x0, v, x, b)
+        _copy_row(p, shared_row(p.shape[0], v), pw, b)
+        _copy_row(cp, v, cpw, b)
+        _copy_row(cs0, v, cs, b)
+        _copy_row(bounds, shared_row(bounds.shape[0], v), bw, b)
+        fr = shared_row(friction.shape[0], v)
+        for j in range(n_u):
+            for c in range(len(FA)):
+                fw[b, j, c] = friction[fr, j, c]
     return x, pw, cpw, cs, fw, bw
+
+
+@njit(cache=True, error_model="numpy")
+def _copy_row(src, i, dst, j):  # pragma: no cover - compiled
+    """dst[j, :] = src[i, :] element by element (a slice assignment compiles a shape check)."""
+    for c in range(src.shape[1]):
+        dst[j, c] = src[i, c]
 
 
 @njit(cache=True, error_model="numpy")
@@ -278,7 +278,7 @@ def _hook_counts(table):  # pragma: no cover - compiled
 def _sample(k, nb, vid, x, C, picked, y, ref, r, u, X):  # pragma: no cover - compiled
     """At t_k, for every active row: record x_k, measure y_k = C x_k, read r_k, clear u."""
     n = x.shape[1]
-    kr = _row(ref.shape[1], k)
+    kr = shared_row(ref.shape[1], k)
     for b in range(nb):
         v = vid[b]
         for i in range(n):
@@ -291,7 +291,7 @@ def _sample(k, nb, vid, x, C, picked, y, ref, r, u, X):  # pragma: no cover - co
                 for j in range(n):
                     acc += C[i, j] * x[b, j]
                 y[b, i] = acc
-        br = _row(ref.shape[0], vid[b])
+        br = shared_row(ref.shape[0], vid[b])
         for i in range(r.shape[1]):
             r[b, i] = ref[br, kr, i]
         for j in range(u.shape[1]):
@@ -321,75 +321,6 @@ def _record_inputs(k, nb, n, vid, u, log, stopped, U, LOG, status, n_valid, fail
             stopped[b] = True
             n_stop += 1
     return n_stop
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _friction_at_sample(
-    rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records
-):  # pragma: no cover - compiled
-    """Breakaway at t_k for the frictional rows (Appendix A's static case), and the friction
-    force on each axis at t_k when it is recorded (the step evaluates its own)."""
-    mode, direction, _, stopped = state
-    dist, dist_map, _ = forces
-    FRICTION = records[3]
-    record = FRICTION.shape[1] > 1
-    (xo, _, _, uo), scratch = one_path
-    _, _, f, _, work, A, rhs_s, dxo, _, one = scratch
-    kd = _row(dist.shape[1], k)
-    for b in range(nb):
-        if stopped[b]:
-            continue
-        v = vid[b]
-        if b < n_free:
-            if record:
-                for j in range(u.shape[1]):
-                    FRICTION[v, k, j] = 0.0
-            continue
-        _load_one(b, x, u, pw, xo, uo, one)
-        drow = dist[_row(dist.shape[0], v), kd]
-        update_friction_modes(
-            rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
-        )
-        if record:
-            friction_forces(
-                rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
-            )
-            for j in range(u.shape[1]):
-                FRICTION[v, k, j] = f[j]
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _load_one(b, x, u, pw, xo, uo, one):  # pragma: no cover - compiled
-    """Copy row b's state, input and plant parameters into the one-variant work space."""
-    for i in range(x.shape[1]):
-        xo[i] = x[b, i]
-    for j in range(u.shape[1]):
-        uo[j] = u[b, j]
-    for i in range(pw.shape[1]):
-        one[2][0, i] = pw[b, i]
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _step_frictional_rows(
-    rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path, tableau, c
-):  # pragma: no cover - compiled
-    """One sampling step of each frictional row, one variant at a time."""
-    mode, direction, hold, stopped = state
-    dist, dist_map, _ = forces
-    (xo, xo_new, xo_mid, uo), scratch = one_path
-    one = scratch[9]
-    rk_a, rk_b = tableau
-    for b in range(n_free, nb):
-        if stopped[b]:
-            continue
-        v = vid[b]
-        _load_one(b, x, u, pw, xo, uo, one)
-        step_with_friction(
-            rhs, t, dt, xo, xo_new, xo_mid, uo, dist[_row(dist.shape[0], v), kd], c, dist_map,
-            fw[b], mode[b], direction[b], hold[b], rk_a, rk_b, scratch,
-        )  # fmt: skip
-        for i in range(x.shape[1]):
-            x_new[b, i] = xo_new[i]
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -517,7 +448,7 @@ def _no_friction_recorded(k, nb, vid, stopped, FRICTION):  # pragma: no cover - 
 
 @njit(SIMULATE_SIG, cache=True, error_model="numpy")
 def simulate(
-    rhs, controller, callbacks, element_fns, tableau, plant, control, elements, forces, dt, records, outcome
+    rhs, controller, callbacks, element_fns, tableau, plant, control, elements, forces, dt, records, outcome, frictional
 ):  # pragma: no cover - compiled
     """Integrate a batch of closed loops in lock step (see the module docstring): at t_k = k dt
     y_k = C x_k, SENSOR elements, controller -> u_k, ACTUATOR elements; u_k held while the
@@ -557,11 +488,11 @@ def simulate(
             _apply_elements(ACTUATOR, t, dt, k, uv, vid, element_fns, table, ep, es, data)
         n_stop = _record_inputs(k, nb, n, vid, u, log, stopped, U, LOG, status, n_valid, fail_index)
         if nb > n_free:
-            _friction_at_sample(rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records)
+            frictional[0](rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records)
         elif FRICTION.shape[1] > 1:
             _no_friction_recorded(k, nb, vid, stopped, FRICTION)
         if k < n_steps and nb > n_stop:
-            kd = _row(dist.shape[1], k)
+            kd = shared_row(dist.shape[1], k)
             if n_free > 0 and classic:  # written out here: as a helper it cost 60 % of a step
                 m = n_free * n
                 rhs(t, xr, ur, pr, k1r)
@@ -584,8 +515,8 @@ def simulate(
                 _rk_step_batch(rhs, t, dt, xr, xnr, ur, pr, dist, vid, kd, dist_map, rk_a, rk_b, c,
                                (k1r, k2r, k3r, k4r), xsr)  # fmt: skip
             if nb > n_free:
-                _step_frictional_rows(rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces,
-                                      one_path, tableau, c)  # fmt: skip
+                frictional[1](rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path,
+                              tableau, c)  # fmt: skip
             n_stop += _accept_states(k, nb, vid, x, x_new, bw, stopped, status, n_valid, fail_index)
         if n_stop > 0:
             nb, n_free = _compact(nb, n_free, vid, (x, pw, cpw, cs, log, bw), fw, state)

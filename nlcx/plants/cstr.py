@@ -19,7 +19,6 @@ import numpy as np
 from numba import njit
 from pydantic import Field
 
-from nlcx.kernel.abi import RHS_SIG
 from nlcx.layout import Layout
 from nlcx.plants.base import PlantModel, PlantParams, Signal
 
@@ -37,7 +36,7 @@ PARAMS = Layout("cstr", ("k1", "k2", "k3", "CAf"))
 K = PARAMS.at
 
 
-@njit(RHS_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def cstr_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 5.1-5.2 for every row b: p[b] a :data:`PARAMS` block, u[b] = (F/V,)."""
     for b in range(x.shape[0]):

@@ -8,7 +8,6 @@ import numpy as np
 from numba import njit
 from pydantic import Field, field_validator, model_validator
 
-from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.base import (
     Plant,
     PlantModel,
@@ -47,7 +46,7 @@ class TransferFunctionParams(PlantParams):
         return self
 
 
-@njit(RHS_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def companion_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """Controllable canonical form for every row b: x_i' = x_{i+1},
     x_n' = -sum_j a_j x_{j+1} + u, p[b] = a_0..a_{n-1}."""

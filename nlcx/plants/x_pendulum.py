@@ -17,7 +17,6 @@ from types import MappingProxyType
 
 from numba import njit
 
-from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import x_derived_rhs, x_energy
 from nlcx.plants.pendulum import (
     ANGLE_BOUND,
@@ -35,7 +34,7 @@ class XPendulumParams(PendulumParams):
     """Table 2.1 parameters."""
 
 
-@njit(RHS_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def x_pendulum_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """Eqs. 2.8-2.11 as printed, for every row b: p[b] = (M, m, l, g), u[b] = (F_x,)."""
     for b in range(x.shape[0]):

@@ -17,7 +17,6 @@ from types import MappingProxyType
 
 from numba import njit
 
-from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import xy_derived_rhs, xy_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
 
@@ -74,7 +73,7 @@ def _xy_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
     ) / den
 
 
-@njit(RHS_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def xy_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The printed equations for every row (variant) b of x (one row: :func:`_xy_printed_row`)."""
     for b in range(x.shape[0]):

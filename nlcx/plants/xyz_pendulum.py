@@ -18,7 +18,6 @@ from types import MappingProxyType
 
 from numba import njit
 
-from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import xyz_derived_rhs, xyz_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
 
@@ -94,7 +93,7 @@ def _xyz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
     ) / (M**2 * l * c7)
 
 
-@njit(RHS_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def xyz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The printed equations for every row (variant) b of x (one row: :func:`_xyz_printed_row`)."""
     for b in range(x.shape[0]):

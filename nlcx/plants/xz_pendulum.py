@@ -18,7 +18,6 @@ from types import MappingProxyType
 
 from numba import njit
 
-from nlcx.kernel.abi import RHS_SIG
 from nlcx.plants.generated.pendulums import xz_derived_rhs, xz_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
 
@@ -47,7 +46,7 @@ def _xz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
     dx[5] = (-c * F_x + s * F_z) / (M * l)  # eq. 3.47
 
 
-@njit(RHS_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def xz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The printed equations for every row (variant) b of x (one row: :func:`_xz_printed_row`)."""
     for b in range(x.shape[0]):

@@ -19,7 +19,6 @@ from numba import njit
 from pydantic import Field
 
 from nlcx.errors import ConfigError
-from nlcx.kernel.abi import ELEMENT_SIG
 from nlcx.layout import Layout
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
@@ -40,7 +39,7 @@ class ActuatorLagConfig(UncertaintyConfig):
     inputs: list[str] | None = None
 
 
-@njit(ELEMENT_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def first_order_lag(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
     """v = v + alpha (u - v) on every lagged input of every row; u becomes v."""
     for b in range(signal.shape[0]):

@@ -16,7 +16,6 @@ from numba import njit
 from pydantic import Field
 
 from nlcx.errors import ConfigError
-from nlcx.kernel.abi import ELEMENT_SIG
 from nlcx.layout import Layout
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
@@ -34,7 +33,7 @@ class ActuatorSaturationConfig(UncertaintyConfig):
     inputs: list[str] | None = None
 
 
-@njit(ELEMENT_SIG, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def saturate_inputs(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
     """Clip every limited input of every row to [-u_max, u_max]."""
     for b in range(signal.shape[0]):
