@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+from markdown_it import MarkdownIt
 
 from nlcx.pages import charts
 from nlcx.pages.tables import TableComparison, compare
@@ -79,30 +80,48 @@ def docs_links(directory: Path, repo: Path | None) -> list[dict[str, str]]:
     ]
 
 
-def sections(path: Path) -> list[dict[str, str]]:
-    """The ``## `` sections of a Markdown document: heading and first paragraph (plain text)."""
+def _relative_links(tokens: list[Any], document: Path, directory: Path) -> None:
+    """Point the relative links of a document's tokens (e.g. ``metrics.md``) from the page
+    in ``directory`` to the file beside the document; anchors and absolute links unchanged."""
+    for token in tokens:
+        if token.children:
+            _relative_links(token.children, document, directory)
+        href = token.attrGet("href") if token.type == "link_open" else None
+        if href and not href.startswith("#") and ":" not in href:
+            target, _, fragment = href.partition("#")
+            relative = Path(os.path.relpath(document.parent / target, directory)).as_posix()
+            token.attrSet("href", relative + (f"#{fragment}" if fragment else ""))
+
+
+def sections(path: Path, directory: Path) -> list[dict[str, str]]:
+    """The ``## `` sections of a Markdown document: heading, a link to the document and the
+    body as HTML (markdown-it-py, CommonMark with tables, raw HTML escaped), its relative links
+    pointing from the page in ``directory`` to the document's neighbours."""
     if not path.is_file():
         return []
+    md = MarkdownIt("commonmark", {"html": False}).enable("table")
+    href = Path(os.path.relpath(path, directory)).as_posix()
     out: list[dict[str, str]] = []
     for block in path.read_text(encoding="utf-8").split("\n## ")[1:]:
         heading, _, body = block.partition("\n")
-        paragraphs = [p.strip() for p in body.split("\n\n") if p.strip() and not p.lstrip().startswith(("|", "```"))]
-        first = " ".join(paragraphs[0].split()) if paragraphs else ""
-        out.append({"heading": heading.strip(), "summary": first})
+        tokens = md.parse(body)
+        _relative_links(tokens, path, directory)
+        out.append({"heading": heading.strip(), "href": href, "html": md.renderer.render(tokens, md.options, {})})
     return out
 
 
-def deviations(repo: Path | None) -> dict[str, list[dict[str, str]]]:
-    """What the deviations section lists: every documented assumption (unprinted parameters
-    and choices), the errata of the printed equations, the calibration, and what was difficult
-    (the identification study's conclusion)."""
+def deviations(directory: Path, repo: Path | None) -> dict[str, list[dict[str, str]]]:
+    """What the deviations section shows: every documented assumption (unprinted parameters
+    and choices), the errata of the printed equations, the calibration's findings, and what
+    was difficult (the identification study's findings and conclusion)."""
     if repo is None:
         return {"assumptions": [], "errata": [], "calibration": [], "difficult": []}
-    fidelity = sections(repo / "docs" / "fidelity.md")
+    docs = repo / "docs"
+    fidelity = sections(docs / "fidelity.md", directory)
     return {
-        "assumptions": sections(repo / "docs" / "assumptions.md"),
-        "errata": sections(repo / "docs" / "errata.md"),
-        "calibration": [s for s in sections(repo / "docs" / "calibration.md") if s["heading"].startswith("What")],
+        "assumptions": sections(docs / "assumptions.md", directory),
+        "errata": sections(docs / "errata.md", directory),
+        "calibration": [s for s in sections(docs / "calibration.md", directory) if s["heading"].startswith("What")],
         "difficult": [s for s in fidelity if s["heading"].startswith(("Conclusion", "What the studies say"))],
     }
 
@@ -133,7 +152,7 @@ def context(directory: Path, configs: Path, repo: Path | None) -> dict[str, Any]
             "missing": sum(not f.generated for f in figures),
         },
         "docs": docs_links(directory, repo),
-        "deviations": deviations(repo),
+        "deviations": deviations(directory, repo),
     }
 
 

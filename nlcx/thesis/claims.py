@@ -647,7 +647,10 @@ def lyapunov_figure(spec: FigureSpec, records: list[Any]) -> Figure:
         ax.set_xlabel("Time (s)")
         ax.set_ylabel("V̇ (W)")
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+        else:  # both runs diverged (possible under a loop profile): nothing to draw
+            ax.text(0.5, 0.5, "no run completed", transform=ax.transAxes, ha="center", va="center")
     fig.suptitle(spec.title, fontsize=9)
     fig.tight_layout()
     return fig
