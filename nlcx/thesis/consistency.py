@@ -528,7 +528,9 @@ def figure(clouds: dict[str, pd.DataFrame], path: Path) -> None:
         ax.set_ylabel("x M_p", fontsize=8)
     for ax in list(axes.flat)[n:]:
         ax.set_visible(False)
-    axes.flat[0].legend(fontsize=7, markerscale=4)
+    legend = axes.flat[0].legend(fontsize=7)
+    for handle in legend.legend_handles:  # the same modest marker for the dots and the star
+        handle.set_sizes([30.0])
     fig.tight_layout()
     tmp = path.with_suffix(".tmp.png")
     fig.savefig(tmp, dpi=110)

@@ -443,29 +443,26 @@ def write_profile(out_dir: Path, best: pd.Series) -> None:
 
 
 def ranking_figure(ranking: pd.DataFrame, path: Path, top: int = 8) -> None:
-    """Train, validation and test median relative error of the top hypotheses beside the literal one."""
+    """Train, validation and test median relative error of the top hypotheses beside the
+    literal one, as horizontal bars (the hypotheses' names are long)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     shown = pd.concat([ranking.head(top), ranking[ranking.hypothesis == "literal"]]).drop_duplicates("hypothesis")
-    x = np.arange(len(shown))
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(shown)), 4.0))
+    y = np.arange(len(shown))[::-1]
+    fig, ax = plt.subplots(figsize=(11.0, 1.0 + 0.55 * len(shown)))
     for i, part in enumerate(split.PARTS):
-        ax.bar(x + (i - 1) * 0.27, shown[f"{part}_median_rel_error"], width=0.27, label=part)
-    ax.set_xticks(
-        x,
-        [f"{r}. {h}" for r, h in zip(shown["rank"], shown.hypothesis, strict=True)],
-        rotation=30,
-        ha="right",
-        fontsize=7,
-    )
-    ax.set_ylabel("median |nlcx - thesis| / |thesis|")
-    ax.set_title("Hypotheses ranked by validation error (M_p, t_r, t_s)")
-    ax.legend()
+        ax.barh(y + (1 - i) * 0.27, shown[f"{part}_median_rel_error"], height=0.27, label=part)
+    ax.set_yticks(y, [f"{r}. {h.replace('+', ' + ')}" for r, h in zip(shown["rank"], shown.hypothesis, strict=True)],
+                  fontsize=8)  # fmt: skip
+    ax.set_xlabel("median |nlcx - thesis| / |thesis| of M_p, t_r, t_s")
+    ax.set_title("Hypotheses ranked by validation error, beside the literal loop")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    ax.grid(True, axis="x", alpha=0.3)
     fig.tight_layout()
     tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=120)
+    fig.savefig(tmp, dpi=110)
     plt.close(fig)
     tmp.replace(path)
