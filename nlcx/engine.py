@@ -13,6 +13,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
+import hashlib
 import json
 import math
 import time
@@ -347,16 +348,51 @@ def _group_key(item: Item) -> tuple[Any, ...]:
     )  # fmt: skip
 
 
+def _kernel_arrays(item: Item) -> tuple[np.ndarray | None, ...]:
+    """Every array of an item the kernel reads (its functions are in :func:`_group_key`)."""
+    c, plant = item.controller, item.plant
+    elements = (a for e in item.elements for a in (e.params, e.state, e.data))
+    return (plant.x0, plant.p, plant.bounds, c.cp, c.cs0, item.ref, item.dist, item.element_data, item.friction,
+            *elements)  # fmt: skip
+
+
+def _first_of_same_loop(items: list[Item]) -> list[int]:
+    """``first[i]``: the first item whose closed loop is item i's (the same compiled functions
+    and, bit for bit, the same arrays). The kernel's result for a variant does not depend on
+    the batch around it, so such a loop is simulated once (an identification study's
+    candidates share their proposed controller, a reproduction's figures their conventional
+    runs). Arrays are compared by a SHA-1 of their bytes, each array object hashed once."""
+    digests: dict[int, tuple[Any, ...] | None] = {}
+
+    def digest(a: np.ndarray | None) -> tuple[Any, ...] | None:
+        if a is None:
+            return None
+        if id(a) not in digests:
+            data = np.ascontiguousarray(a)
+            digests[id(a)] = (a.shape, a.dtype.str, hashlib.sha1(data, usedforsecurity=False).digest())
+        return digests[id(a)]
+
+    first: dict[tuple[Any, ...], int] = {}
+    return [
+        first.setdefault((_group_key(item), tuple(item.controller.log_names), *map(digest, _kernel_arrays(item))), i)
+        for i, item in enumerate(items)
+    ]
+
+
 def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_logs: bool = True) -> list[Run]:
     """Integrate every item; items sharing plant equations and controller kind go through one
-    batched kernel call (per-item parameters, states, references and perturbations).
+    batched kernel call (per-item parameters, states, references and perturbations), and an
+    item whose closed loop equals an earlier one's shares that one's trajectory
+    (:func:`_first_of_same_loop`; the trajectories are read-only).
 
     ``record_logs=False`` skips the controller logs and friction forces (``Run.log`` and
     ``Run.friction`` are None): a sweep that keeps only metrics does not need them."""
     a, b = TABLEAUS[integrator]
+    first = _first_of_same_loop(items)
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i, item in enumerate(items):
-        groups.setdefault(_group_key(item), []).append(i)
+        if first[i] == i:
+            groups.setdefault(_group_key(item), []).append(i)
     runs: list[Run | None] = [None] * len(items)
     n_k = grid.t.size
     for indices in groups.values():
@@ -404,6 +440,8 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_lo
             (status, n_valid, fail_index),
             FRICTIONAL if any(_has_friction(g.friction) for g in group) else FRICTIONLESS,
         )
+        for records in (X, U, LOG, FRIC):  # runs of identical loops share them
+            records.flags.writeable = False
         for j, i in enumerate(indices):
             k = int(n_valid[j])
             t_fail = float(grid.t[k - 1] + grid.dt) if status[j] else math.nan
@@ -419,7 +457,22 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_lo
                 friction=FRIC[j, :k] if record_logs else None,
                 t_fail=t_fail,
             )
-    return [r for r in runs if r is not None]
+    return _with_repeats(runs, items, first)
+
+
+def _with_repeats(runs: list[Run | None], items: list[Item], first: list[int]) -> list[Run]:
+    """Every item's run: an item repeating the loop of item ``first[i]`` gets that run's
+    trajectory under its own controller (label) and reference."""
+    out = []
+    for i, j in enumerate(first):
+        source = runs[j]
+        assert source is not None
+        out.append(
+            source
+            if j == i
+            else dataclasses.replace(source, controller=items[i].controller, r=items[i].ref[: source.t.size])
+        )
+    return out
 
 
 METRIC_COLUMNS = ["controller", "signal", "metric", "value", "unit", "status", "note"]

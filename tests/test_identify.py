@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from nlcx import config, engine
 from nlcx.cli import app
 from nlcx.thesis import hypotheses, profiles
 from nlcx.thesis.identify import TableRuns, direction_agreement, train_loss
+from nlcx.thesis.tables import ANGLE_METRICS, POSITION_METRICS, lookup_value, metric_lookup
 from nlcx.uncertainty.actuator_lag import first_order_lag
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -228,3 +230,23 @@ def test_claims_come_from_a_reproduction_under_each_top_fit_and_are_reused(tmp_p
     assert pd.read_csv(tmp_path / "ranking.csv").claims_yes.iloc[0] == 4
     add_claims(tmp_path, THESIS, ranking, 1, 1)
     assert len(calls) == 2  # unchanged fits: the reproductions are reused
+
+
+def test_the_cell_lookup_reads_what_a_filter_of_the_metrics_reads() -> None:
+    """Every thesis (controller, signal, metric) read through the one-pass lookup equals the
+    first matching row of a boolean filter of the run's metrics (M_p of a position: overshoot
+    / 100; a metric the thesis does not define, or a missing signal: NaN)."""
+    metrics = engine.evaluate([built(hypotheses.Hypothesis())])[0].metrics
+    values = metric_lookup(metrics)
+    checked = 0
+    for controller in ("conventional", "proposed", "absent"):
+        for signal in ("x", "theta", "nowhere"):
+            for metric in ("Mp", "tr", "ts", "ess", "IAE"):
+                name = (ANGLE_METRICS if signal == "theta" else POSITION_METRICS).get(metric)
+                match = (metrics.controller == controller) & (metrics.signal == signal) & (metrics.metric == name)
+                scale = 100.0 if name == "overshoot" else 1.0
+                expected = math.nan if not match.any() else float(metrics[match].value.iloc[0]) / scale
+                ours = lookup_value(values, controller, signal, metric)
+                assert ours == expected or (math.isnan(ours) and math.isnan(expected)), (controller, signal, metric)
+                checked += not math.isnan(expected)
+    assert checked == 14  # both controllers: M_p, t_r, t_s, e_ss of x and M_p, t_s, e_ss of theta

@@ -36,7 +36,7 @@ from nlcx import config as cfg
 from nlcx import engine
 from nlcx.errors import ConfigError
 from nlcx.thesis import catalog
-from nlcx.thesis.tables import thesis_value
+from nlcx.thesis.tables import lookup_value, metric_lookup
 from nlcx.tuning.optimise import GASettings, check_search_box, evolve
 from nlcx.validation import validate_model
 
@@ -119,8 +119,9 @@ class Objective:
         out = np.empty(len(self.cells))
         rows = table[table.controller == label]
         unstable = (rows.run_status != "ok").any()
+        values = metric_lookup(rows)
         for k, cell in enumerate(self.cells.itertuples(index=False)):
-            ours = thesis_value(rows, label, cell.signal, cell.metric)
+            ours = lookup_value(values, label, cell.signal, cell.metric)
             scale = max(abs(cell.value), FLOORS.get(cell.metric, 0.05))
             out[k] = PENALTY if unstable or math.isnan(ours) else (ours - cell.value) / scale
         return out
@@ -158,7 +159,8 @@ def calibrate(
     table = objective.measure(best[None])
     residuals = objective.residuals(table, "c0")
     fit = objective.cells.copy()
-    fit["nlcx"] = [thesis_value(table, "c0", c.signal, c.metric) for c in objective.cells.itertuples()]
+    values = metric_lookup(table)
+    fit["nlcx"] = [lookup_value(values, "c0", c.signal, c.metric) for c in objective.cells.itertuples()]
     fit["residual"] = residuals
     fit = fit.rename(columns={"value": "thesis"})
     tuning = pd.DataFrame(

@@ -46,7 +46,7 @@ from nlcx import config as cfg
 from nlcx import engine, report
 from nlcx.errors import ConfigError
 from nlcx.thesis import catalog, hypotheses, profiles, split
-from nlcx.thesis.tables import thesis_value
+from nlcx.thesis.tables import lookup_value, metric_lookup
 from nlcx.tuning.optimise import GASettings, check_search_box, evolve
 from nlcx.validation import validate_model
 
@@ -138,9 +138,10 @@ def cell_values(results: list[engine.Result], cells: pd.DataFrame, n_candidates:
         for t_index, table in enumerate(tables):
             result = results[k * len(tables) + t_index]
             ok = {run.label for run in result.runs if run.status == "ok"}
+            values = metric_lookup(result.metrics)
             for i, cell in of_table[table]:
                 if cell.controller in ok:
-                    out[i, k] = thesis_value(result.metrics, cell.controller, cell.signal, cell.metric)
+                    out[i, k] = lookup_value(values, cell.controller, cell.signal, cell.metric)
     return out
 
 

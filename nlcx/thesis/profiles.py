@@ -123,8 +123,8 @@ def apply(
     """``raw`` (a config before interpolation) with the fitted ``values`` set and ``hyp``'s
     options applied, validated; ``inputs``: the plant's inputs if known (a saturation limits
     them), ``metrics``: other metric definitions (e.g. the rise limits)."""
-    gains = [f"{k}={v!r}" for k, v in values.items() if k.startswith("vars.")]
-    resolved = cfg.interpolate(cfg.apply_overrides(raw, gains))
+    gains = [(k.split("."), float(v)) for k, v in values.items() if k.startswith("vars.")]
+    resolved = cfg.interpolate(cfg.set_values(raw, gains))
     changed = hyp.apply(resolved, values, inputs if inputs is not None else plant_inputs(raw))
     if metrics:
         changed["metrics"] = {**changed.get("metrics", {}), **metrics}

@@ -22,17 +22,27 @@ POSITION_METRICS = {"Mp": "overshoot", "tr": "rise_time", "ts": "settling_time",
 ANGLE_METRICS = {"Mp": "peak_deviation", "ts": "settling_time", "ess": "steady_state_error"}
 
 
-def thesis_value(metrics: pd.DataFrame, controller: str, signal: str, metric: str) -> float:
-    """Our number for a thesis (signal, metric): M_p of a position is overshoot/100."""
+def metric_lookup(metrics: pd.DataFrame) -> dict[tuple[str, str, str], float]:
+    """(controller, signal, nlcx metric) -> value of a run's metrics, the first row of each:
+    one pass over the frame, so a table of cells is read without one filter per cell."""
+    out: dict[tuple[str, str, str], float] = {}
+    for key in zip(metrics.controller, metrics.signal, metrics.metric, metrics.value, strict=True):
+        out.setdefault(key[:3], float(key[3]))
+    return out
+
+
+def lookup_value(values: dict[tuple[str, str, str], float], controller: str, signal: str, metric: str) -> float:
+    """Our number for a thesis (signal, metric) from :func:`metric_lookup`: M_p of a position
+    is overshoot/100."""
     mapping = ANGLE_METRICS if signal in ANGLES else POSITION_METRICS
     name = mapping.get(metric)
-    if name is None:
-        return math.nan
-    rows = metrics[(metrics.controller == controller) & (metrics.signal == signal) & (metrics.metric == name)]
-    if rows.empty:
-        return math.nan
-    value = float(rows.value.iloc[0])
+    value = math.nan if name is None else values.get((controller, signal, name), math.nan)
     return value / 100.0 if name == "overshoot" else value
+
+
+def thesis_value(metrics: pd.DataFrame, controller: str, signal: str, metric: str) -> float:
+    """Our number for a thesis (signal, metric) of one run's metrics (:func:`lookup_value`)."""
+    return lookup_value(metric_lookup(metrics), controller, signal, metric)
 
 
 def improvement(conventional: float, proposed: float) -> float:
