@@ -126,7 +126,7 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
         peaks.append(peak_kb / 1024)
         limit = limit_reference(raw)
         limits.append(limit)
-    summary = out.strip().splitlines()[-1]
+    summary = out.strip().splitlines()[-1].replace(str(work), "<tmp>")
     steps = limits[0]["variant_steps"]
     nlcx_s, limit_s = min(walls), min(x["wall_s"] for x in limits)
     simulated = steps * raw["simulation"]["dt"]
@@ -200,7 +200,8 @@ def _import_reference() -> None:
 def bench_c() -> dict[str, float]:
     out = Path(tempfile.mkdtemp()) / "thesis"
     wall, peak_kb, text = run_measured([*NLCX, "reproduce", "--jobs", "2", "--out", str(out)], ROOT)
-    return {"wall_s": wall, "peak_memory_mb": peak_kb / 1024, "summary": " | ".join(text.strip().splitlines()[-3:])}
+    summary = " | ".join(text.strip().splitlines()[-3:]).replace(str(out.parent), "<tmp>")
+    return {"wall_s": wall, "peak_memory_mb": peak_kb / 1024, "summary": summary}
 
 
 def bench_d() -> dict[str, float]:
