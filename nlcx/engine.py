@@ -362,15 +362,15 @@ def _first_of_same_loop(items: list[Item]) -> list[int]:
     the batch around it, so such a loop is simulated once (an identification study's
     candidates share their proposed controller, a reproduction's figures their conventional
     runs). Arrays are compared by a SHA-1 of their bytes, each array object hashed once."""
-    digests: dict[int, tuple[Any, ...] | None] = {}
+    digests: dict[int, tuple[np.ndarray, tuple[Any, ...]]] = {}  # the array kept: its id stays its own
 
     def digest(a: np.ndarray | None) -> tuple[Any, ...] | None:
         if a is None:
             return None
         if id(a) not in digests:
             data = np.ascontiguousarray(a)
-            digests[id(a)] = (a.shape, a.dtype.str, hashlib.sha1(data, usedforsecurity=False).digest())
-        return digests[id(a)]
+            digests[id(a)] = (a, (a.shape, a.dtype.str, hashlib.sha1(data, usedforsecurity=False).digest()))
+        return digests[id(a)][1]
 
     first: dict[tuple[Any, ...], int] = {}
     return [
