@@ -356,9 +356,9 @@ def _kernel_arrays(item: Item) -> tuple[np.ndarray | None, ...]:
             *elements)  # fmt: skip
 
 
-def _first_of_same_loop(items: list[Item]) -> list[int]:
-    """``first[i]``: the first item whose closed loop is item i's (the same compiled functions
-    and, bit for bit, the same arrays). The kernel's result for a variant does not depend on
+def _first_of_same_loop(items: list[Item], group_keys: list[tuple[Any, ...]]) -> list[int]:
+    """``first[i]``: the first item whose closed loop is item i's (the same compiled functions,
+    ``group_keys[i]``, and, bit for bit, the same arrays). The kernel's result for a variant does not depend on
     the batch around it, so such a loop is simulated once (an identification study's
     candidates share their proposed controller, a reproduction's figures their conventional
     runs). Arrays are compared by a SHA-1 of their bytes, each array object hashed once."""
@@ -374,8 +374,8 @@ def _first_of_same_loop(items: list[Item]) -> list[int]:
 
     first: dict[tuple[Any, ...], int] = {}
     return [
-        first.setdefault((_group_key(item), tuple(item.controller.log_names), *map(digest, _kernel_arrays(item))), i)
-        for i, item in enumerate(items)
+        first.setdefault((key, tuple(item.controller.log_names), *map(digest, _kernel_arrays(item))), i)
+        for i, (item, key) in enumerate(zip(items, group_keys, strict=True))
     ]
 
 
@@ -388,11 +388,12 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_lo
     ``record_logs=False`` skips the controller logs and friction forces (``Run.log`` and
     ``Run.friction`` are None): a sweep that keeps only metrics does not need them."""
     a, b = TABLEAUS[integrator]
-    first = _first_of_same_loop(items)
+    keys = [_group_key(item) for item in items]
+    first = _first_of_same_loop(items, keys)
     groups: dict[tuple[Any, ...], list[int]] = {}
-    for i, item in enumerate(items):
+    for i, key in enumerate(keys):
         if first[i] == i:
-            groups.setdefault(_group_key(item), []).append(i)
+            groups.setdefault(key, []).append(i)
     runs: list[Run | None] = [None] * len(items)
     n_k = grid.t.size
     for indices in groups.values():

@@ -272,10 +272,11 @@ def _extremes(y, s, s_final, s_initial):  # pragma: no cover - compiled
     sy = np.empty(n)
     for b in range(n_rows):
         hi, lo, hi_nan, lo_nan = -np.inf, -np.inf, False, False
+        s_b, final_b, initial_b = s[b], s_final[b], s_initial[b]
         for i in range(n):
-            v = s[b] * y[b, i]
+            v = s_b * y[b, i]
             sy[i] = v
-            a, c = v - s_final[b], s_initial[b] - v
+            a, c = v - final_b, initial_b - v
             hi_nan, lo_nan = hi_nan or a != a, lo_nan or c != c
             hi = a if a > hi else hi
             lo = c if c > lo else lo
@@ -314,6 +315,15 @@ def _max_abs(y, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
+def _steps(t):  # pragma: no cover - compiled
+    """t[k + 1] - t[k]: the grid's steps, formed once for every row of a scan."""
+    dt = np.empty(t.shape[0] - 1)
+    for k in range(t.shape[0] - 1):
+        dt[k] = t[k + 1] - t[k]
+    return dt
+
+
+@njit(cache=True, error_model="numpy")
 def _error_terms(t, e, start):  # pragma: no cover - compiled
     """The terms of the trapezoidal sums of e^2, |e| and (t - start) |e| over each row of e
     (samples at t), as :func:`_trapz` forms them, and max |e| per row. Summed by numpy
@@ -321,14 +331,14 @@ def _error_terms(t, e, start):  # pragma: no cover - compiled
     n_rows, n = e.shape
     squared, absolute, weighted = np.empty((n_rows, n - 1)), np.empty((n_rows, n - 1)), np.empty((n_rows, n - 1))
     max_abs = np.empty(n_rows)
+    dt, elapsed = _steps(t), t - start
     for b in range(n_rows):
         for k in range(n - 1):
-            dt = t[k + 1] - t[k]
             e0, e1 = e[b, k], e[b, k + 1]
             a0, a1 = abs(e0), abs(e1)
-            squared[b, k] = ((e1 * e1 + e0 * e0) * 0.5) * dt
-            absolute[b, k] = ((a1 + a0) * 0.5) * dt
-            weighted[b, k] = (((t[k + 1] - start) * a1 + (t[k] - start) * a0) * 0.5) * dt
+            squared[b, k] = ((e1 * e1 + e0 * e0) * 0.5) * dt[k]
+            absolute[b, k] = ((a1 + a0) * 0.5) * dt[k]
+            weighted[b, k] = ((elapsed[k + 1] * a1 + elapsed[k] * a0) * 0.5) * dt[k]
         max_abs[b] = _max_abs(e, b)
     return squared, absolute, weighted, max_abs
 
@@ -340,10 +350,11 @@ def _input_terms(t, u):  # pragma: no cover - compiled
     n_rows, n = u.shape
     squared, steps = np.empty((n_rows, n - 1)), np.empty((n_rows, n - 1))
     peak = np.empty(n_rows)
+    dt = _steps(t)
     for b in range(n_rows):
         for k in range(n - 1):
             u0, u1 = u[b, k], u[b, k + 1]
-            squared[b, k] = ((u1 * u1 + u0 * u0) * 0.5) * (t[k + 1] - t[k])
+            squared[b, k] = ((u1 * u1 + u0 * u0) * 0.5) * dt[k]
             steps[b, k] = abs(u1 - u0)
         peak[b] = _max_abs(u, b)
     return squared, steps, peak
