@@ -17,7 +17,7 @@ import hashlib
 import json
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -379,15 +379,64 @@ def _first_of_same_loop(items: list[Item], group_keys: list[tuple[Any, ...]]) ->
     ]
 
 
-def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_logs: bool = True) -> list[Run]:
+class RecordArena:
+    """Record arrays (X, U, logs, friction) handed out again once their runs are done with.
+
+    A sweep batch's records are tens of MB. Fresh from ``np.empty`` for every batch, each of
+    their pages costs the kernel a page fault and the operating system's zeroing when first
+    written (in a profile of benchmark (b), 6 % of all samples were the kernel clearing pages;
+    1.7 % with the arena). A sweep worker lends a batch's records from its arena and, once the
+    batch's metrics are written, :meth:`release` returns them: the next batch writes into the
+    same memory. Only what the last batch used is kept."""
+
+    def __init__(self) -> None:
+        self._free: list[np.ndarray] = []
+        self._lent: list[np.ndarray] = []
+
+    def take(self, shape: tuple[int, ...]) -> np.ndarray:
+        """An array of ``shape`` (its values undefined, as ``np.empty``'s)."""
+        for i, a in enumerate(self._free):
+            if a.shape == shape:
+                a = self._free.pop(i)
+                a.flags.writeable = True
+                break
+        else:
+            a = np.empty(shape)
+        self._lent.append(a)
+        return a
+
+    def release(self) -> None:
+        """Every array lent so far may be handed out again: no run reading it is used after this."""
+        self._free, self._lent = self._lent, []
+
+
+def _record_arrays(
+    group: list[Item], n_k: int, n_rec: int, empty: Callable[[tuple[int, ...]], np.ndarray]
+) -> tuple[np.ndarray, ...]:
+    """(X, U, LOG, FRIC) of a group of items: states and inputs at the n_k samples, controller
+    logs and friction forces at n_rec (1: not recorded). The kernel writes every sample up to
+    where a run stops; the rest is never read."""
+    plant, n_b = group[0].plant, len(group)
+    n_u = len(plant.inputs)
+    return (
+        empty((n_b, n_k, len(plant.states))), empty((n_b, n_k, n_u)),
+        empty((n_b, n_rec, len(group[0].controller.log_names))), empty((n_b, n_rec, n_u)),
+    )  # fmt: skip
+
+
+def simulate_items(
+    items: list[Item], grid: TimeGrid, integrator: str, record_logs: bool = True, arena: RecordArena | None = None
+) -> list[Run]:
     """Integrate every item; items sharing plant equations and controller kind go through one
     batched kernel call (per-item parameters, states, references and perturbations), and an
     item whose closed loop equals an earlier one's shares that one's trajectory
     (:func:`_first_of_same_loop`; the trajectories are read-only).
 
     ``record_logs=False`` skips the controller logs and friction forces (``Run.log`` and
-    ``Run.friction`` are None): a sweep that keeps only metrics does not need them."""
+    ``Run.friction`` are None): a sweep that keeps only metrics does not need them. With an
+    ``arena`` the records are its arrays (see :class:`RecordArena`)."""
     a, b = TABLEAUS[integrator]
+    empty = np.empty if arena is None else arena.take
     keys = [_group_key(item) for item in items]
     first = _first_of_same_loop(items, keys)
     groups: dict[tuple[Any, ...], list[int]] = {}
@@ -400,15 +449,9 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_lo
         group = [items[i] for i in indices]
         plant = group[0].plant
         check_rows(plant)
-        n, n_u = len(plant.states), len(plant.inputs)
-        n_b = len(group)
+        n_u, n_b = len(plant.inputs), len(group)
         plants = [g.plant for g in group]
-        # the kernel writes every sample up to where a run stops; the rest is never read
-        n_rec = n_k if record_logs else 1
-        X = np.empty((n_b, n_k, n))
-        U = np.empty((n_b, n_k, n_u))
-        LOG = np.empty((n_b, n_rec, len(group[0].controller.log_names)))
-        FRIC = np.empty((n_b, n_rec, n_u))
+        X, U, LOG, FRIC = _record_arrays(group, n_k, n_k if record_logs else 1, empty)
         status = np.zeros(n_b, dtype=np.int64)
         n_valid = np.zeros(n_b, dtype=np.int64)
         fail_index = np.zeros(n_b, dtype=np.int64)
@@ -708,7 +751,10 @@ def shared_metrics(results: list[Result]) -> pd.DataFrame:
 
 
 def evaluate(
-    experiments: Sequence[Experiment | Prepared], record_logs: bool = True, measure: bool = True
+    experiments: Sequence[Experiment | Prepared],
+    record_logs: bool = True,
+    measure: bool = True,
+    arena: RecordArena | None = None,
 ) -> list[Result]:
     """The pipeline: experiments (or prepared ones) to trajectories and metrics, batched.
 
@@ -717,7 +763,9 @@ def evaluate(
     ``nlcx run``, sweeps, tuners (through :class:`LoopSimulator`), the calibration and the
     thesis reproduction all come through here. ``record_logs=False`` skips controller logs and
     friction forces; ``measure=False`` leaves the metrics empty (a tuner scoring runs itself).
-    Timings are per experiment; a shared kernel call is split evenly between its experiments.
+    With an ``arena`` the runs' records are its arrays, lent until the caller releases them
+    (:class:`RecordArena`). Timings are per experiment; a shared kernel call is split evenly
+    between its experiments.
     """
     prepared, timings = [], []
     for exp in experiments:
@@ -732,7 +780,7 @@ def evaluate(
     for (_, _, integrator), members in grids.items():
         start = time.perf_counter()
         items = [(e, item) for e in members for item in items_of(prepared[e])]
-        done = simulate_items([item for _, item in items], prepared[members[0]].grid, integrator, record_logs)
+        done = simulate_items([item for _, item in items], prepared[members[0]].grid, integrator, record_logs, arena)
         for (e, _), run in zip(items, done, strict=True):
             runs[e].append(run)
         for e in members:

@@ -208,6 +208,36 @@ def test_identical_closed_loops_are_simulated_once_and_equal_runs_alone(x_error_
         proposed[1].x[0, 0] = 1.0
 
 
+def test_a_record_arena_lends_memory_again_only_after_release_and_changes_no_bit(x_error_raw: dict) -> None:
+    """Arrays lent by a :class:`~nlcx.engine.RecordArena` are not lent twice before
+    :meth:`release`; after it, the next call writes into the same memory, and its runs equal
+    runs simulated into fresh arrays bit for bit (stale samples of the earlier call are never
+    read). Only what the last call used is kept."""
+    arena = engine.RecordArena()
+    first = arena.take((2, 3))
+    assert not np.shares_memory(first, arena.take((2, 3)))
+    arena.release()
+    assert np.shares_memory(first, arena.take((2, 3)))
+    assert arena.take((4,)).shape == (4,)
+    raws = []
+    for M in (1.0, 3.0):  # the second batch's variants stop at other samples than the first's
+        raw = copy.deepcopy(x_error_raw)
+        raw["simulation"]["t_end"] = 3.0
+        raw["plant"]["params"]["M"] = M
+        raws.append(raw)
+    arena = engine.RecordArena()
+    before = engine.evaluate([config.build(raws[0])], measure=False, arena=arena)[0].runs
+    memory = [run.x for run in before]
+    arena.release()
+    reused = engine.evaluate([config.build(raws[1])], measure=False, arena=arena)[0].runs
+    assert any(np.shares_memory(run.x, m) for run in reused for m in memory)
+    fresh = engine.evaluate([config.build(raws[1])], measure=False)[0].runs
+    for a, b in zip(reused, fresh, strict=True):
+        assert a.status == b.status and a.t.size == b.t.size
+        for name in ("x", "u", "log", "friction"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+
+
 def test_a_right_hand_side_that_ignores_the_rows_is_refused() -> None:
     """A plant written for one state (RHS_SIG's rows are variants) is caught before it runs."""
     from numba import njit

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import signal
@@ -94,13 +95,23 @@ def test_batch_equals_single_runs_bit_for_bit(tmp_path: Path) -> None:
         for j, run in enumerate(alone):
             other = batched[2 * k + j]
             assert np.array_equal(run.x, other.x) and np.array_equal(run.u, other.u) and run.status == other.status
-    # and the metrics a sweep batch computes (vectorised over variants) equal single runs'
-    result = sweep.run_batch(sweep.Batch(base_raw, variants, hashes, tmp_path / "b", False))
-    for k in (0, 7, 11):
-        single = engine.evaluate([prepared[k]])[0].metrics
-        mine = result.metrics[result.metrics.variant == k].drop(columns="variant").reset_index(drop=True)
-        assert list(mine.metric) == list(single.metric)
-        assert np.array_equal(mine.value.to_numpy(), single.value.to_numpy(), equal_nan=True)
+    # and the metrics a sweep batch computes (vectorised over variants) equal single runs',
+    # also in a second batch, which writes its trajectories into the first one's records
+    half = len(variants) // 2
+    for collecting in (True, False):
+        (gc.enable if collecting else gc.disable)()
+        parts = [
+            sweep.run_batch(sweep.Batch(base_raw, variants[s], hashes[s], tmp_path / "b", False))
+            for s in (slice(0, half), slice(half, None))
+        ]
+        assert gc.isenabled() is collecting  # the batch held the collector off, then gave it back
+        gc.enable()
+        result = pd.concat([part.metrics for part in parts])
+        for k in (0, 7, half, len(variants) - 1):
+            single = engine.evaluate([prepared[k]])[0].metrics
+            mine = result[result.variant == k].drop(columns="variant").reset_index(drop=True)
+            assert list(mine.metric) == list(single.metric)
+            assert np.array_equal(mine.value.to_numpy(), single.value.to_numpy(), equal_nan=True)
 
 
 def test_failed_variant_is_recorded_the_rest_go_on(tmp_path: Path) -> None:
