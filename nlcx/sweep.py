@@ -36,7 +36,7 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -45,6 +45,9 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from nlcx import config as cfg
 from nlcx.errors import ConfigError, NlcxError
 from nlcx.validation import validate_model
+
+if TYPE_CHECKING:
+    from nlcx import engine
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 
@@ -216,7 +219,7 @@ def _set_threads() -> None:
 
 
 @functools.cache
-def _records() -> Any:
+def _records() -> engine.RecordArena:
     """This process's :class:`~nlcx.engine.RecordArena`: a worker's batches write their
     trajectories into the same memory, one batch after the other."""
     from nlcx import engine
@@ -243,8 +246,8 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
 
     ``return_metrics=False`` leaves the metrics out of the result (a pool worker's result
     travels back pickled; the sweep reads the metrics from the part files). The garbage
-    collector waits for the end of the batch (:func:`_settle_heap`): collecting while the
-    batch builds its configs found nothing to free and cost ~2 % of a worker's time."""
+    collector waits for the end of the batch (:func:`_settle_heap`): its collections while the
+    batch built its configs were ~2 % of a sweep's samples under ``perf``."""
     _set_threads()
     collecting = gc.isenabled()
     gc.disable()

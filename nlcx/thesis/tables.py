@@ -26,8 +26,10 @@ def metric_lookup(metrics: pd.DataFrame) -> dict[tuple[str, str, str], float]:
     """(controller, signal, nlcx metric) -> value of a run's metrics, the first row of each:
     one pass over the frame, so a table of cells is read without one filter per cell."""
     out: dict[tuple[str, str, str], float] = {}
-    for key in zip(metrics.controller, metrics.signal, metrics.metric, metrics.value, strict=True):
-        out.setdefault(key[:3], float(key[3]))
+    for controller, signal, metric, value in zip(
+        metrics.controller, metrics.signal, metrics.metric, metrics.value, strict=True
+    ):
+        out.setdefault((controller, signal, metric), float(value))
     return out
 
 
