@@ -333,20 +333,35 @@ def controller_section(label: str, data: Any, path: str) -> PluginSection:
     return PluginSection(c.label, c.kind, c.model, config, tuners)
 
 
-def build(raw: dict[str, Any]) -> Experiment:
-    """Validate a raw config mapping (after overrides)."""
-    section = validate_model(ExperimentSection, raw, "")
+def build(raw: dict[str, Any], like: Experiment | None = None) -> Experiment:
+    """Validate a raw config mapping (after overrides).
+
+    ``like`` is an experiment validated before, e.g. a sweep's base: its sections whose raw
+    mapping equals ``raw``'s (top-level sections; controllers, uncertainties and references one
+    by one) are taken over instead of validated again. Validation is deterministic, so the
+    result equals ``build(raw)``; a sweep variant that changes a few numbers re-validates only
+    the sections holding them.
+    """
+    same = _unchanged(raw, like)
+    section = validate_model(ExperimentSection, _with_validated_sections(raw, like, same), "")
     plant_model = registry.plants.get(section.plant.name, path="plant.name")
-    plant_params = validate_model(plant_model.Params, section.plant.params, "plant.params")
+    if like is not None and "plant" in same:
+        plant_params = like.plant_params
+    else:
+        plant_params = validate_model(plant_model.Params, section.plant.params, "plant.params")
+    before = _plugins_by_key(like) if like is not None else {}
     controllers = tuple(
-        controller_section(label, data, join("controllers", label)) for label, data in section.controllers.items()
+        _reused(before, raw, ("controllers", label)) or controller_section(label, data, join("controllers", label))
+        for label, data in section.controllers.items()
     )
     uncertainties = tuple(
-        _plugin(registry.uncertainties, label, data, join("uncertainty", label), default_kind=label)
+        _reused(before, raw, ("uncertainty", label))
+        or _plugin(registry.uncertainties, label, data, join("uncertainty", label), default_kind=label)
         for label, data in section.uncertainty.items()
     )
     references = {
-        signal: _plugin(registry.references, signal, data, join("reference", signal))
+        signal: _reused(before, raw, ("reference", signal))
+        or _plugin(registry.references, signal, data, join("reference", signal))
         for signal, data in section.reference.items()
     }
     return Experiment(
@@ -358,3 +373,45 @@ def build(raw: dict[str, Any]) -> Experiment:
         uncertainties=uncertainties,
         references=references,
     )
+
+
+#: Top-level sections validated as a model of their own, which ``build(like=...)`` takes over.
+_MODEL_SECTIONS = ("plant", "simulation", "metrics", "outputs")
+
+
+def _unchanged(raw: dict[str, Any], like: Experiment | None) -> set[str]:
+    """The top-level keys of ``raw`` whose value equals the one ``like`` was built from."""
+    if like is None:
+        return set()
+    return {key for key, value in raw.items() if key in like.raw and like.raw[key] == value}
+
+
+def _with_validated_sections(raw: dict[str, Any], like: Experiment | None, same: set[str]) -> dict[str, Any]:
+    """``raw`` with its unchanged model sections replaced by ``like``'s validated ones (pydantic
+    takes a validated instance as it is)."""
+    if like is None:
+        return raw
+    return {**raw, **{key: getattr(like.section, key) for key in _MODEL_SECTIONS if key in same}}
+
+
+def _plugins_by_key(exp: Experiment) -> dict[tuple[str, str], tuple[Any, PluginSection]]:
+    """(section, label) -> (the raw mapping it was validated from, the validated plugin)."""
+    found: dict[tuple[str, str], tuple[Any, PluginSection]] = {}
+    for key, plugins in (
+        ("controllers", exp.controllers),
+        ("uncertainty", exp.uncertainties),
+        ("reference", tuple(exp.references.values())),
+    ):
+        for plugin in plugins:
+            found[(key, plugin.label)] = (exp.raw.get(key, {}).get(plugin.label), plugin)
+    return found
+
+
+def _reused(
+    before: dict[tuple[str, str], tuple[Any, PluginSection]], raw: dict[str, Any], key: tuple[str, str]
+) -> PluginSection | None:
+    """The plugin validated before from a raw mapping equal to ``raw``'s at ``key``, if any."""
+    old = before.get(key)
+    if old is None or old[0] is None or raw[key[0]][key[1]] != old[0]:
+        return None
+    return old[1]

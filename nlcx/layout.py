@@ -34,6 +34,7 @@ class Layout:
             raise ValueError(f"layout {name}: duplicate field names in {list(fields)}")
         self.name = name
         self.fields: tuple[str, ...] = tuple(fields)
+        self._names = frozenset(self.fields)
         #: The offset of each field, as a namedtuple the compiled code reads (``at.sign``).
         self.at = namedtuple(name, self.fields)(*range(len(self.fields)))  # type: ignore[misc]
 
@@ -45,9 +46,9 @@ class Layout:
     def pack(self, values: Mapping[str, Any] | None = None, **kwargs: Any) -> np.ndarray:
         """One block from every field by name (bools become 1.0/0.0); missing or unknown names are errors."""
         given = {**(values or {}), **kwargs}
-        unknown = sorted(set(given) - set(self.fields))
-        missing = [f for f in self.fields if f not in given]
-        if unknown or missing:
+        if given.keys() != self._names:
+            unknown = sorted(set(given) - self._names)
+            missing = [f for f in self.fields if f not in given]
             raise ValueError(f"layout {self.name}: unknown fields {unknown}, missing fields {missing}")
         return np.array([float(given[f]) for f in self.fields], dtype=float)
 

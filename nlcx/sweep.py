@@ -265,12 +265,13 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
 
     rows: list[dict[str, Any]] = []
     prepared_of: dict[int, Any] = {}
+    base = cfg.build(cfg.interpolate(batch.base_raw))  # valid: sweep.load built it
     for pos, (variant, digest) in enumerate(zip(batch.variants, batch.hashes, strict=True)):
         start = time.perf_counter()
         row: dict[str, Any] = {"variant": variant.index, "seed": variant.seed, "config_hash": digest}
         row.update({f"value:{k}": _cell(v) for k, v in variant.values.items()})
         try:
-            prepared_of[pos] = engine.prepare(cfg.build(variant.resolve(batch.base_raw)))
+            prepared_of[pos] = engine.prepare(cfg.build(variant.resolve(batch.base_raw), like=base))
             row.update(status="ok", message="")
         except Exception as exc:  # a bad variant is recorded; the others go on
             row.update(status="failed", message=str(exc).splitlines()[0])
