@@ -66,6 +66,17 @@ def _imported() -> None:
     gc.enable()
 
 
+def _painter(raw: dict[str, Any]) -> Any:
+    """A figure painter process (:class:`nlcx.drawing.Painter`) unless the config turns every
+    figure off."""
+    outputs = raw.get("outputs") if isinstance(raw.get("outputs"), dict) else {}
+    if outputs.get("figure", True) is False and outputs.get("gains_figure", False) is False:
+        return None
+    from nlcx.drawing import Painter
+
+    return Painter()
+
+
 def _fmt(value: float) -> str:
     return "—" if value is None or math.isnan(value) else f"{value:.4g}"
 
@@ -103,22 +114,28 @@ def run(
     no_report: NoReport = False,
 ) -> None:
     """Run an experiment: every controller of CONFIG on its plant, then write the run directory."""
-    import matplotlib.figure  # noqa: F401 - the run draws; imported while the collector is off
-
     from nlcx import config as cfg
+
+    raw = cfg.apply_overrides(cfg.read_config(config), overrides or [])
+    if "sweep" in raw:
+        _imported()
+        _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report)
+        return
+    painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
     from nlcx import engine, report
 
     _imported()
-    if "sweep" in cfg.apply_overrides(cfg.read_config(config), overrides or []):
-        _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report)
-        return
     start = time.perf_counter()
-    exp = cfg.load(config, overrides or [])
-    loaded = time.perf_counter()
-    result = engine.run_experiment(exp)
-    out_dir = out or Path(exp.section.outputs.dir or Path("results") / exp.name)
-    timings = {"load": loaded - start, **result.timings}
-    report.write_run(result, out_dir, timings, started=start)
+    try:
+        exp = cfg.load(config, overrides or [])
+        loaded = time.perf_counter()
+        result = engine.run_experiment(exp)
+        out_dir = out or Path(exp.section.outputs.dir or Path("results") / exp.name)
+        timings = {"load": loaded - start, **result.timings}
+        report.write_run(result, out_dir, timings, started=start, painter=painter)
+    finally:
+        if painter is not None:
+            painter.close()
     page = None if no_report else _write_report(out_dir)
     elapsed = time.perf_counter() - start
     if quiet:

@@ -7,15 +7,10 @@ so an interrupted run never leaves a half-written file behind.
 from __future__ import annotations
 
 import json
-import os
 import platform
 import subprocess
-import tempfile
-import textwrap
 import time
-from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import suppress
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -25,6 +20,7 @@ import pandas as pd
 import yaml
 
 import nlcx
+from nlcx.drawing import FigurePlan, Line, Painter, Panel, atomic_write, draw, draw_all
 from nlcx.engine import Result, Run
 
 if TYPE_CHECKING:  # matplotlib is imported by the commands that draw, not by sweeps and diffs
@@ -34,24 +30,7 @@ PACKAGES = (
     "numpy", "scipy", "numba", "llvmlite", "pandas", "pyarrow", "pydantic", "matplotlib", "PyYAML", "typer", "pymoo",
     "control",
 )  # fmt: skip
-_UMASK = os.umask(0)
-os.umask(_UMASK)
 LINE_STYLES = (("C0", "-"), ("C3", "--"), ("C2", "-."), ("C1", ":"), ("C4", "-"), ("C5", "--"))
-
-
-def atomic_write(path: Path, writer: Callable[[Path], None]) -> None:
-    """Call ``writer(tmp)`` on a temporary file beside ``path``, then rename it to ``path``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        writer(tmp)
-        os.chmod(tmp, 0o666 & ~_UMASK)
-        os.replace(tmp, path)
-    finally:
-        with suppress(FileNotFoundError):
-            tmp.unlink()
 
 
 def write_text(path: Path, text: str) -> None:
@@ -71,19 +50,6 @@ def write_csv(path: Path, frame: pd.DataFrame) -> None:
     table = pa.Table.from_pandas(frame, preserve_index=False)
     options = pacsv.WriteOptions(quoting_style="needed")
     atomic_write(path, lambda tmp: pacsv.write_csv(table, str(tmp), options))
-
-
-def new_figure(n_rows: int, n_cols: int, figsize: tuple[float, float]) -> tuple[Figure, np.ndarray]:
-    """A figure and its (n_rows, n_cols) axes, rendered by Agg without pyplot's global state."""
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=figsize)
-    axes = fig.subplots(n_rows, n_cols, squeeze=False)
-    return fig, axes
-
-
-def write_figure(path: Path, fig: Figure) -> None:
-    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
 
 
 def timeseries_frame(result: Result) -> pd.DataFrame:
@@ -148,60 +114,53 @@ def _run_label(run: Run, result: Result | None = None) -> str:
     return f"{run.label} ({', '.join(parts)})" if parts else run.label
 
 
-def output_figure(result: Result, title: str | None = None) -> Figure:
-    """One axes per regulated output, every controller overlaid, reference dotted (thesis layout)."""
+def _lines(run_values: list[tuple[Run, np.ndarray | None, str]], lw: float) -> tuple[Line, ...]:
+    """The curves of a panel, one per (run, values, legend entry) with values, in the style of
+    the run's position."""
+    out = []
+    for i, (run, values, label) in enumerate(run_values):
+        if values is not None:
+            color, ls = _style(i)
+            out.append(Line(*_thin(run.t, _finite(values)), color=color, ls=ls, lw=lw, label=label))
+    return tuple(out)
+
+
+def output_plan(result: Result, title: str | None = None) -> FigurePlan:
+    """One panel per regulated output, every controller overlaid, reference dotted (thesis
+    layout); then, with ``outputs.figure_inputs``, one panel per input."""
     plant = result.prepared.plant
     outputs = plant.outputs
     inputs = plant.inputs if result.prepared.experiment.section.outputs.figure_inputs else ()
-    n_axes = len(outputs) + len(inputs)
-    fig, axes = new_figure(n_axes, 1, (7.5, 2.9 * n_axes))
-    for j, (ax, sig) in enumerate(zip(axes[len(outputs) :, 0], inputs, strict=True)):
-        for i, run in enumerate(result.runs):
-            color, ls = _style(i)
-            ax.plot(*_thin(run.t, _finite(run.u[:, j])), color=color, ls=ls, lw=1.3, label=_run_label(run))
-        ax.set_title(f"({chr(ord('a') + len(outputs) + j)}) {sig.label or sig.name} vs time")
-        ax.set_xlabel("Time (s)")
-        ax.set_ylabel(sig.axis_label)
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize=8)
-    for k, (ax, sig) in enumerate(zip(axes[: len(outputs), 0], outputs, strict=True)):
+    panels = []
+    for k, sig in enumerate(outputs):
         j = plant.output_names.index(sig.name)
-        for i, run in enumerate(result.runs):
-            color, ls = _style(i)
-            ax.plot(
-                *_thin(run.t, _finite(run.x @ plant.C[j])), color=color, ls=ls, lw=1.3, label=_run_label(run, result)
-            )
+        lines = _lines([(run, run.x @ plant.C[j], _run_label(run, result)) for run in result.runs], lw=1.3)
         first = result.runs[0]
         if sig.name in first.controller.reference_signals:
             col = first.controller.reference_signals.index(sig.name)
-            ax.plot(*_thin(first.t, first.r[:, col]), color="k", ls=":", lw=1.0, label="reference")
-        ax.set_title(f"({chr(ord('a') + k)}) {sig.label or sig.name} vs time")
-        ax.set_xlabel("Time (s)")
-        ax.set_ylabel(sig.axis_label)
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize=8)
-    title_lines = textwrap.fill(title, 90).count("\n") + 1 if title else 0
-    if title:
-        fig.suptitle(textwrap.fill(title, 90), fontsize=9)
-    _column_layout(fig, n_axes, title_lines)
-    return fig
+            lines += (Line(*_thin(first.t, first.r[:, col]), color="k", ls=":", lw=1.0, label="reference"),)
+        panels.append(_time_panel(lines, k, sig))
+    for j, sig in enumerate(inputs):
+        lines = _lines([(run, run.u[:, j], _run_label(run)) for run in result.runs], lw=1.3)
+        panels.append(_time_panel(lines, len(outputs) + j, sig))
+    n_axes = len(panels)
+    return FigurePlan(n_axes, 1, (7.5, 2.9 * n_axes), tuple(panels), title=title or None, layout="column")
 
 
-def _column_layout(fig: Figure, n_axes: int, title_lines: int) -> None:
-    """Margins of a one-column figure in inches (the axes' labels, titles and the figure
-    title fit); fixed margins cost nothing, ``tight_layout`` draws the whole figure once more."""
-    width, height = fig.get_size_inches()
-    top = 0.5 + 0.2 * title_lines
-    bottom = 0.55
-    gap = 0.85  # x label of one axes + title of the next
-    axes_height = (height - top - bottom - gap * (n_axes - 1)) / n_axes
-    fig.subplots_adjust(
-        left=0.85 / width, right=1 - 0.25 / width, bottom=bottom / height, top=1 - top / height,
-        hspace=gap / axes_height,
+def _time_panel(lines: tuple[Line, ...], k: int, sig: Any) -> Panel:
+    """Panel (a), (b), ... of a signal against time."""
+    return Panel(
+        lines, f"({chr(ord('a') + k)}) {sig.label or sig.name} vs time", xlabel="Time (s)", ylabel=sig.axis_label,
+        legend_size=8,
     )  # fmt: skip
 
 
-def gains_figure(result: Result) -> Figure:
+def output_figure(result: Result, title: str | None = None) -> Figure:
+    """The figure of :func:`output_plan`."""
+    return draw(output_plan(result, title))
+
+
+def gains_plan(result: Result) -> FigurePlan:
     """Plant inputs and every logged controller quantity (gains, loop outputs) against time."""
     plant = result.prepared.plant
     names: list[str] = list(plant.input_names)
@@ -209,28 +168,24 @@ def gains_figure(result: Result) -> Figure:
         names += [n for n in run.controller.log_names if n not in names]
     n_cols = 4 if len(names) > 4 else len(names)
     n_rows = -(-len(names) // n_cols)
-    fig, axes = new_figure(n_rows, n_cols, (3.2 * n_cols, 2.3 * n_rows))
-    for ax, name in zip(axes.flat, names, strict=False):
-        for i, run in enumerate(result.runs):
-            color, ls = _style(i)
+    panels = []
+    for k, name in enumerate(names):
+        run_values: list[tuple[Run, np.ndarray | None, str]] = []
+        unit = ""
+        for run in result.runs:
+            values = None
             if name in plant.input_names:
-                values = run.u[:, plant.input_names.index(name)]
-                unit = plant.unit_of(name)
+                values, unit = run.u[:, plant.input_names.index(name)], plant.unit_of(name)
             elif name in run.controller.log_names:
-                k = run.controller.log_names.index(name)
-                values, unit = run.log[:, k], run.controller.log_units[k]
-            else:
-                continue
-            ax.plot(*_thin(run.t, _finite(values)), color=color, ls=ls, lw=1.0, label=run.label)
-        ax.set_title(f"{name} ({unit})" if unit else name, fontsize=9)
-        ax.tick_params(labelsize=7)
-        ax.grid(True, alpha=0.3)
-    for ax in list(axes.flat)[len(names) :]:
-        ax.set_visible(False)
-    axes.flat[0].legend(fontsize=7)
-    axes.flat[-1].set_xlabel("Time (s)")
-    fig.tight_layout()
-    return fig
+                i = run.controller.log_names.index(name)
+                values, unit = run.log[:, i], run.controller.log_units[i]
+            run_values.append((run, values, run.label))
+        last = k == n_rows * n_cols - 1  # the grid's last cell holds the time label
+        panels.append(Panel(
+            _lines(run_values, lw=1.0), f"{name} ({unit})" if unit else name, xlabel="Time (s)" if last else "",
+            title_size=9, tick_size=7, legend_size=7 if k == 0 else None,
+        ))  # fmt: skip
+    return FigurePlan(n_rows, n_cols, (3.2 * n_cols, 2.3 * n_rows), tuple(panels), layout="tight")
 
 
 def package_versions() -> dict[str, str]:
@@ -294,11 +249,18 @@ def manifest(result: Result, timings: dict[str, float]) -> dict[str, Any]:
     }
 
 
-def write_run(result: Result, out_dir: Path, timings: dict[str, float], started: float | None = None) -> list[Path]:
+def write_run(
+    result: Result,
+    out_dir: Path,
+    timings: dict[str, float],
+    started: float | None = None,
+    painter: Painter | None = None,
+) -> list[Path]:
     """Write a run directory; manifest.json last, listing the files and the timings.
 
     ``started`` (a ``time.perf_counter()`` value) makes the manifest record the wall time
-    from then until the manifest is written.
+    from then until the manifest is written. The figures are drawn by ``painter`` (another
+    process) if given, else here; either way while the time series is written.
     """
     write_start = time.perf_counter()
     exp = result.prepared.experiment
@@ -314,23 +276,20 @@ def write_run(result: Result, out_dir: Path, timings: dict[str, float], started:
         path = out_dir / "tuning.csv"
         write_csv(path, pd.DataFrame(result.prepared.tuning, columns=["controller", "tuner", "parameter", "value"]))
         written.append(path)
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        # the long CSV is encoded by pyarrow, which releases the GIL: it overlaps the figures
-        pending = None
+    figures: list[tuple[Path, FigurePlan]] = []
+    if outputs.figure:
+        figures.append((out_dir / "figure.png", output_plan(result, exp.section.title)))
+    if outputs.gains_figure:
+        figures.append((out_dir / "gains.png", gains_plan(result)))
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        # pyarrow encodes the long CSV and the painter draws, both without holding the GIL
+        drawn = pool.submit(painter.paint if painter is not None else draw_all, figures)
         if outputs.timeseries:
             path = out_dir / "timeseries.csv"
-            pending = pool.submit(write_csv, path, timeseries_frame(result))
+            pool.submit(write_csv, path, timeseries_frame(result)).result()
             written.append(path)
-        if outputs.figure:
-            path = out_dir / "figure.png"
-            write_figure(path, output_figure(result, exp.section.title))
-            written.append(path)
-        if outputs.gains_figure:
-            path = out_dir / "gains.png"
-            write_figure(path, gains_figure(result))
-            written.append(path)
-        if pending is not None:
-            pending.result()
+        drawn.result()
+    written += [path for path, _ in figures]
     timings = {**timings, "write": time.perf_counter() - write_start}
     if started is not None:
         timings["wall"] = time.perf_counter() - started

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from nlcx import report
+from nlcx import drawing, report
 
 FILES = "report_files"
 
@@ -82,7 +82,7 @@ def distribution_figure(metrics: pd.DataFrame, path: Path) -> None:
         ax.boxplot([d[np.isfinite(d)] for d in data], tick_labels=controllers)
         ax.set_title(f"{signal} {metric}", fontsize=9)
         ax.tick_params(labelsize=7)
-    report.write_figure(path, fig)
+    drawing.write_figure(path, fig)
     plt.close(fig)
 
 
@@ -106,7 +106,7 @@ def parameter_figure(metrics: pd.DataFrame, index: pd.DataFrame, column: str, pa
         ax.tick_params(labelsize=7)
     axes.flat[0].legend(fontsize=7)
     fig.suptitle(column.removeprefix("value:"), fontsize=10)
-    report.write_figure(path, fig)
+    drawing.write_figure(path, fig)
     plt.close(fig)
 
 

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from nlcx.report import new_figure
+from nlcx.drawing import new_figure
 from nlcx.thesis import catalog, cstr
 from nlcx.thesis.catalog import FigureSpec
 from nlcx.thesis.tables import thesis_value

@@ -73,7 +73,7 @@ def run_config(
     """Run one experiment (under ``profile``), write its run directory and (optionally) its figure."""
     import time
 
-    from nlcx import engine, report
+    from nlcx import drawing, engine, report
     from nlcx.thesis.lyapunov import lyapunov_rate
 
     start = time.perf_counter()
@@ -82,7 +82,7 @@ def run_config(
     report.write_run(result, out_dir / "runs" / exp.name, result.timings, started=start)
     if figure is not None:
         filename, title = figure
-        report.write_figure(out_dir / "figures" / filename, report.output_figure(result, title))
+        drawing.write_figure(out_dir / "figures" / filename, report.output_figure(result, title))
     lyap = {}
     plant = result.prepared.plant
     if plant.features.energy is not None and not exp.uncertainties:
@@ -172,7 +172,7 @@ def _run_all(
 
 def _write_figure(spec: FigureSpec, records: dict[Path, Record], out_dir: Path) -> None:
     """A figure drawn from finished runs: V-dot of Theorems 2.1-4.1, or Figs. 5.4-5.8's membership functions."""
-    from nlcx import report
+    from nlcx import drawing
     from nlcx.thesis import claims
 
     if spec.kind == "lyapunov":
@@ -182,7 +182,7 @@ def _write_figure(spec: FigureSpec, records: dict[Path, Record], out_dir: Path) 
 
         fig = membership_figure(cstr.fuzzy_schedule(records[spec.configs[0]]), spec.variable)
         fig.axes[0].set_title(spec.title, fontsize=10)
-    report.write_figure(out_dir / "figures" / spec.filename, fig)
+    drawing.write_figure(out_dir / "figures" / spec.filename, fig)
 
 
 def _table(spec: TableSpec, records: dict[Path, Record], root: Path) -> pd.DataFrame:

@@ -1,0 +1,68 @@
+"""Figures are planned from the runs and drawn from the plan alone: by the painter process
+``nlcx run`` starts, or in this process, to the same PNG bytes."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlcx import drawing, report
+from tests.conftest import run_raw
+
+
+def _result(raw: dict[str, Any]) -> Any:
+    raw = {
+        **raw,
+        "simulation": {**raw.get("simulation", {}), "t_end": 8.0},
+        "outputs": {"figure_inputs": True, "figure_metrics": ["ise"]},
+    }
+    return run_raw(raw)
+
+
+def _jobs(result: Any, directory: Path) -> list[tuple[Path, drawing.FigurePlan]]:
+    title = "A title long enough to be wrapped onto a second line by the figure, as the thesis's captions are"
+    return [
+        (directory / "figure.png", report.output_plan(result, title)),
+        (directory / "gains.png", report.gains_plan(result)),
+    ]
+
+
+def test_the_painter_process_draws_the_bytes_this_process_draws(tmp_path: Path, x_error_raw: dict) -> None:
+    result = _result(x_error_raw)
+    drawing.draw_all(_jobs(result, tmp_path / "here"))
+    assert drawing.Painter().paint(_jobs(result, tmp_path / "there")) is True
+    for name in ("figure.png", "gains.png"):
+        here = (tmp_path / "here" / name).read_bytes()
+        assert here[:8] == b"\x89PNG\r\n\x1a\n" and len(here) > 10_000
+        assert (tmp_path / "there" / name).read_bytes() == here
+
+
+def test_figures_are_drawn_here_when_the_painter_fails(tmp_path: Path, x_error_raw: dict) -> None:
+    result = _result(x_error_raw)
+    broken = drawing.Painter([sys.executable, "-c", "import sys; sys.exit(3)"])
+    assert broken.paint(_jobs(result, tmp_path / "fallback")) is False
+    drawing.draw_all(_jobs(result, tmp_path / "here"))
+    for name in ("figure.png", "gains.png"):
+        assert (tmp_path / "fallback" / name).read_bytes() == (tmp_path / "here" / name).read_bytes()
+    assert sorted(p.name for p in (tmp_path / "fallback").iterdir()) == ["figure.png", "gains.png"]
+
+
+def test_the_output_plan_holds_each_runs_output_and_the_reference(x_error_raw: dict) -> None:
+    result = _result(x_error_raw)
+    plant = result.prepared.plant
+    plan = report.output_plan(result)
+    assert len(plan.panels) == len(plant.outputs) + len(plant.inputs)
+    assert [p.title[:4] for p in plan.panels] == [f"({c}) " for c in "abc"[: len(plan.panels)]]
+    for k, sig in enumerate(plant.outputs):
+        lines = plan.panels[k].lines
+        j = plant.output_names.index(sig.name)
+        for run, line in zip(result.runs, lines, strict=False):
+            assert line.label.startswith(run.label) and "ise" in line.label
+            y = run.x @ plant.C[j]
+            assert line.t.size < run.t.size  # thinned for drawing ...
+            assert np.all(np.isin(line.y, y))  # ... to samples of the run
+            assert line.y.min() == y.min() and line.y.max() == y.max()  # keeping its envelope
+        assert lines[-1].label == "reference"
