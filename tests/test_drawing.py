@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import subprocess
 import sys
 from pathlib import Path
 from typing import Any
@@ -66,3 +67,19 @@ def test_the_output_plan_holds_each_runs_output_and_the_reference(x_error_raw: d
             assert np.all(np.isin(line.y, y))  # ... to samples of the run
             assert line.y.min() == y.min() and line.y.max() == y.max()  # keeping its envelope
         assert lines[-1].label == "reference"
+
+
+def test_nlcx_run_leaves_matplotlib_to_the_painter(tmp_path: Path) -> None:
+    root = Path(__file__).resolve().parent.parent
+    out = tmp_path / "run"
+    code = (
+        "import atexit, sys\n"
+        "atexit.register(lambda: print('matplotlib imported:', 'matplotlib' in sys.modules))\n"
+        "from nlcx.cli import main\n"
+        f"sys.argv = ['nlcx', 'run', 'configs/x_error_ags.yaml', 'simulation.t_end=2', '--out', {str(out)!r}, '-q']\n"
+        "main()\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "matplotlib imported: False" in done.stdout
+    assert (out / "figure.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
