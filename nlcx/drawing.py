@@ -187,11 +187,11 @@ class Painter:
         return drawn
 
     def close(self) -> None:
-        """End the painter without drawing (a run that wrote no figure, or failed)."""
+        """Stop the painter without drawing (a run that wrote no figure, or failed), at once."""
         process, self._process = self._process, None
         if process is not None:
-            with suppress(OSError):
-                process.communicate(pickle.dumps([]))
+            process.kill()
+            process.communicate()
 
 
 def _warm_up() -> None:

@@ -83,3 +83,12 @@ def test_nlcx_run_leaves_matplotlib_to_the_painter(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     assert "matplotlib imported: False" in done.stdout
     assert (out / "figure.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_painter_closed_without_figures_stops_at_once() -> None:
+    painter = drawing.Painter()
+    process = painter._process
+    assert process is not None and process.poll() is None
+    painter.close()
+    assert process.returncode is not None  # killed and reaped, not left importing matplotlib
+    painter.close()  # closing twice is harmless
