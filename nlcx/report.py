@@ -180,9 +180,9 @@ def gains_plan(result: Result) -> FigurePlan:
                 i = run.controller.log_names.index(name)
                 values, unit = run.log[:, i], run.controller.log_units[i]
             run_values.append((run, values, run.label))
-        last = k == n_rows * n_cols - 1  # the grid's last cell holds the time label
+        lowest = k + n_cols >= len(names)  # no panel below it in its column: the time label
         panels.append(Panel(
-            _lines(run_values, lw=1.0), f"{name} ({unit})" if unit else name, xlabel="Time (s)" if last else "",
+            _lines(run_values, lw=1.0), f"{name} ({unit})" if unit else name, xlabel="Time (s)" if lowest else "",
             title_size=9, tick_size=7, legend_size=7 if k == 0 else None,
         ))  # fmt: skip
     return FigurePlan(n_rows, n_cols, (3.2 * n_cols, 2.3 * n_rows), tuple(panels), layout="tight")

@@ -92,3 +92,11 @@ def test_a_painter_closed_without_figures_stops_at_once() -> None:
     painter.close()
     assert process.returncode is not None  # killed and reaped, not left importing matplotlib
     painter.close()  # closing twice is harmless
+
+
+def test_every_column_of_the_gains_figure_ends_in_a_time_axis(x_error_raw: dict) -> None:
+    plan = report.gains_plan(_result(x_error_raw))
+    assert plan.n_cols * plan.n_rows >= len(plan.panels) > plan.n_cols  # a grid whose last row is not full
+    for col in range(plan.n_cols):
+        column = plan.panels[col :: plan.n_cols]
+        assert [p.xlabel for p in column] == [""] * (len(column) - 1) + ["Time (s)"]
