@@ -9,12 +9,15 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
 
 from nlcx import registry
 from nlcx.errors import ConfigError, NlcxError
+
+if TYPE_CHECKING:
+    from nlcx.drawing import Painter
 
 app = typer.Typer(
     add_completion=False,
@@ -66,7 +69,7 @@ def _imported() -> None:
     gc.enable()
 
 
-def _painter(raw: dict[str, Any]) -> Any:
+def _painter(raw: dict[str, Any]) -> Painter | None:
     """A figure painter process (:class:`nlcx.drawing.Painter`) unless the config turns every
     figure off."""
     outputs = raw.get("outputs") if isinstance(raw.get("outputs"), dict) else {}
@@ -118,7 +121,6 @@ def run(
 
     raw = cfg.apply_overrides(cfg.read_config(config), overrides or [])
     if "sweep" in raw:
-        _imported()
         _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report)
         return
     painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
@@ -127,7 +129,7 @@ def run(
     _imported()
     start = time.perf_counter()
     try:
-        exp = cfg.load(config, overrides or [])
+        exp = cfg.build(cfg.interpolate(raw))  # cfg.load's steps on the config already read
         loaded = time.perf_counter()
         result = engine.run_experiment(exp)
         out_dir = out or Path(exp.section.outputs.dir or Path("results") / exp.name)

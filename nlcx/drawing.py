@@ -177,11 +177,9 @@ class Painter:
         process, self._process = self._process, None
         drawn = False
         if process is not None:
-            try:
+            with suppress(OSError, EOFError, pickle.UnpicklingError):
                 reply, _ = process.communicate(pickle.dumps(jobs, protocol=pickle.HIGHEST_PROTOCOL))
                 drawn = process.returncode == 0 and pickle.loads(reply) == "ok"
-            except (OSError, EOFError, pickle.UnpicklingError):
-                drawn = False
         if not drawn:
             draw_all(jobs)
         return drawn
