@@ -86,16 +86,17 @@ def _fmt(value: float) -> str:
 
 def _summary(result: Any) -> str:
     """Per controller and regulated output: the headline metrics of the thesis's tables."""
-    table = result.metrics
     lines = []
     for run in result.runs:
         if run.status != "ok":
             lines.append(f"  {run.label:<14} {run.status}: {run.reason}")
             continue
-        rows = table[(table.controller == run.label)]
+        by_signal: dict[str, dict[str, float]] = {}
+        for controller, signal, metric, value, *_ in result.metric_rows:
+            if controller == run.label:
+                by_signal.setdefault(signal, {})[metric] = value
         parts = []
-        for signal in dict.fromkeys(rows.signal):
-            sub = rows[rows.signal == signal].set_index("metric")["value"]
+        for signal, sub in by_signal.items():
             if "overshoot" in sub:
                 parts.append(
                     f"{signal}: Mp {_fmt(sub['overshoot'])}% tr {_fmt(sub['rise_time'])}s "

@@ -19,10 +19,9 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from nlcx import metrics as m
 from nlcx import preflight, registry
@@ -36,6 +35,9 @@ from nlcx.plants.base import Plant, check_rows
 from nlcx.references.base import MetricPlan
 from nlcx.tuning.base import TuneContext
 from nlcx.uncertainty.base import Element, Hooks
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: Butcher tableaus (A, b) of the fixed-step explicit Runge-Kutta methods.
 TABLEAUS: dict[str, tuple[np.ndarray, np.ndarray]] = {
@@ -113,6 +115,23 @@ class Prepared:
     tuning: list[dict[str, Any]] = field(default_factory=list)
 
 
+@dataclass(frozen=True)
+class MetricTable:
+    """The long-form metric rows of experiments measured together: the column ``experiment``
+    (an experiment's position in the measured list), then :data:`METRIC_COLUMNS`; each
+    experiment's rows contiguous. The rows are computed when the runs are measured; the
+    DataFrame (and the pandas import it needs) only when :attr:`frame` is first read, so
+    ``nlcx run`` builds it while its figures are being drawn."""
+
+    rows: list[list[Any]]
+
+    @functools.cached_property
+    def frame(self) -> pd.DataFrame:
+        import pandas as pd
+
+        return pd.DataFrame(self.rows, columns=["experiment", *METRIC_COLUMNS])
+
+
 @dataclass
 class Result:
     """One experiment's runs and metrics. The metrics are a block of rows of a table shared
@@ -121,16 +140,27 @@ class Result:
 
     prepared: Prepared
     runs: list[Run]
-    rows: tuple[pd.DataFrame, int, int] | None = None
+    rows: tuple[MetricTable, int, int] | None = None
     timings: dict[str, float] = field(default_factory=dict)
 
     @functools.cached_property
     def metrics(self) -> pd.DataFrame:
         """Long-form metrics of the runs (columns :data:`METRIC_COLUMNS`)."""
         if self.rows is None:
+            import pandas as pd
+
             return pd.DataFrame(columns=METRIC_COLUMNS)
         table, start, stop = self.rows
-        return table.iloc[start:stop][METRIC_COLUMNS].reset_index(drop=True)
+        return table.frame.iloc[start:stop][METRIC_COLUMNS].reset_index(drop=True)
+
+    @property
+    def metric_rows(self) -> list[list[Any]]:
+        """The rows of :attr:`metrics` as lists of their :data:`METRIC_COLUMNS` values, without
+        building a DataFrame."""
+        if self.rows is None:
+            return []
+        table, start, stop = self.rows
+        return [row[1:] for row in table.rows[start:stop]]
 
 
 def _reference_models(exp: Experiment, plant: Plant) -> dict[str, tuple[Any, Any]]:
@@ -657,15 +687,15 @@ def _metric_unit(name: str, signal_unit: str) -> str:
 
 def measure_runs(
     plant: Plant, runs: list[Run], plans: list[dict[str, MetricPlan]], cfg: MetricsSection
-) -> pd.DataFrame:
-    """Long-form metrics of runs on plants with ``plant``'s outputs and inputs.
+) -> list[list[Any]]:
+    """Long-form metric rows of runs on plants with ``plant``'s outputs and inputs.
 
     Outputs that follow a reference get the step / regulation / tracking metrics of their
     plan; with a step on an input the controller applies (``open_loop``), every other output
     gets its step characteristics against its own final value; every input gets its effort.
     The metrics of runs that completed are computed together, vectorised over the runs that
-    share a plan (a sweep measures thousands of runs in a few calls). The first column,
-    ``run``, is the position of the row's run in ``runs``.
+    share a plan (a sweep measures thousands of runs in a few calls). A row is the position
+    of its run in ``runs``, then the values of :data:`METRIC_COLUMNS`.
     """
     ok = [i for i, r in enumerate(runs) if r.status == "ok"]
     values = {
@@ -690,7 +720,7 @@ def measure_runs(
             for name, v in values.get((i, s), {}).items():
                 note = _NAN_NOTES.get(name, "undefined") if math.isnan(v) else ""
                 rows.append([i, label, s, name, v, _metric_unit(name, unit), "ok", note])
-    return pd.DataFrame(rows, columns=["run", *METRIC_COLUMNS])
+    return rows
 
 
 def _controller_records(run: Run) -> list[dict[str, Any]]:
@@ -710,7 +740,7 @@ def _metric_plans(prepared: Prepared) -> dict[str, MetricPlan]:
     return {s: model.metric_plan(cfg) for s, (model, cfg) in prepared.references.items()}
 
 
-def _measure_all(prepared: list[Prepared], runs: list[list[Run]]) -> list[tuple[pd.DataFrame, int, int] | None]:
+def _measure_all(prepared: list[Prepared], runs: list[list[Run]]) -> list[tuple[MetricTable, int, int] | None]:
     """Metrics of every experiment's runs as (shared table, first row, end row); experiments
     with the same plant signals and metric definitions are measured together (vectorised
     over all their runs). A shared table has the column ``experiment``, the position in
@@ -725,15 +755,16 @@ def _measure_all(prepared: list[Prepared], runs: list[list[Run]]) -> list[tuple[
             p.experiment.section.metrics.model_dump_json(),
         )
         groups.setdefault(key, []).append(e)
-    rows: list[tuple[pd.DataFrame, int, int] | None] = [None] * len(prepared)
+    rows: list[tuple[MetricTable, int, int] | None] = [None] * len(prepared)
     for members in groups.values():
-        owner = np.array([e for e in members for _ in runs[e]], dtype=int)
+        owner = [e for e in members for _ in runs[e]]
         flat = [r for e in members for r in runs[e]]
         plans = [_metric_plans(prepared[e]) for e in owner]
         first = prepared[members[0]]
-        table = measure_runs(first.plant, flat, plans, first.experiment.section.metrics)
-        experiment = owner[table["run"].to_numpy(dtype=int)]
-        table.insert(0, "experiment", experiment)
+        table = MetricTable(measure_runs(first.plant, flat, plans, first.experiment.section.metrics))
+        for row in table.rows:
+            row[0] = owner[row[0]]  # the run's position in ``flat`` -> its experiment's in ``prepared``
+        experiment = [row[0] for row in table.rows]
         bounds = np.searchsorted(experiment, members, side="left"), np.searchsorted(experiment, members, side="right")
         for e, start, stop in zip(members, *bounds, strict=True):
             rows[e] = (table, int(start), int(stop))
@@ -743,10 +774,12 @@ def _measure_all(prepared: list[Prepared], runs: list[list[Run]]) -> list[tuple[
 def shared_metrics(results: list[Result]) -> pd.DataFrame:
     """The metrics of ``results`` (from one :func:`evaluate` call) in one table, with the
     column ``experiment``: the position of the row's result in ``results``, ascending."""
-    tables = {id(r.rows[0]): r.rows[0] for r in results if r.rows is not None}
+    import pandas as pd
+
+    tables = {id(r.rows[0]): r.rows[0].frame for r in results if r.rows is not None}
     if not tables:
         return pd.DataFrame(columns=["experiment", *METRIC_COLUMNS])
-    table = pd.concat([t[["experiment", *METRIC_COLUMNS]] for t in tables.values()], ignore_index=True)
+    table = pd.concat(list(tables.values()), ignore_index=True)
     return table.sort_values("experiment", kind="stable", ignore_index=True)
 
 

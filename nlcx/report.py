@@ -10,21 +10,25 @@ import json
 import platform
 import subprocess
 import time
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 import yaml
 
 import nlcx
 from nlcx.drawing import FigurePlan, Line, Painter, Panel, atomic_write, draw, draw_all
-from nlcx.engine import Result, Run
+from nlcx.engine import METRIC_COLUMNS, Result, Run
 
 if TYPE_CHECKING:  # matplotlib is imported by the commands that draw, not by sweeps and diffs
+    import pandas as pd  # nlcx run writes its CSV files from columns, without pandas
+    import pyarrow as pa
     from matplotlib.figure import Figure
+
+    from nlcx.plants.base import Plant
 
 PACKAGES = (
     "numpy", "scipy", "numba", "llvmlite", "pandas", "pyarrow", "pydantic", "matplotlib", "PyYAML", "typer", "pymoo",
@@ -37,38 +41,93 @@ def write_text(path: Path, text: str) -> None:
     atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
-def write_csv(path: Path, frame: pd.DataFrame) -> None:
-    """A CSV by Arrow's writer: ten times pandas' speed on long time series, and floats in
-    their shortest round-trip form, so the same numbers always give the same bytes."""
-    import pyarrow as pa
+def _write_table(path: Path, table: pa.Table) -> None:
+    """``table`` as a CSV by Arrow's writer: ten times pandas' speed on long time series, and
+    floats in their shortest round-trip form, so the same numbers always give the same bytes.
+    A missing value (null, or NaN in a float column) is an empty field."""
     import pyarrow.csv as pacsv
 
-    frame = frame.copy()
-    for col in frame.columns:  # a column of mixed values (e.g. tuning.csv's) is written as text
-        if frame[col].dtype == object and len({type(v) for v in frame[col] if v is not None}) > 1:
-            frame[col] = [v if isinstance(v, str) else repr(v) for v in frame[col]]
-    table = pa.Table.from_pandas(frame, preserve_index=False)
     options = pacsv.WriteOptions(quoting_style="needed")
     atomic_write(path, lambda tmp: pacsv.write_csv(table, str(tmp), options))
 
 
-def timeseries_frame(result: Result) -> pd.DataFrame:
-    """Every sample of every run: t, controller, states, inputs, references, loop logs."""
-    plant = result.prepared.plant
-    frames = []
-    for run in result.runs:
-        cols: dict[str, Any] = {"t": run.t, "controller": run.label}
-        for i, name in enumerate(plant.state_names):
-            cols[name] = run.x[:, i]
-        for i, name in enumerate(plant.input_names):
-            cols[name] = run.u[:, i]
-        offsets = run.controller.reference_offsets or (0.0,) * len(run.controller.reference_signals)
-        for i, (name, off) in enumerate(zip(run.controller.reference_signals, offsets, strict=True)):
-            cols[f"{name}_ref" if off == 0 else f"{name}_ref{off:+g}"] = run.r[:, i]
-        for i, name in enumerate(run.controller.log_names):
-            cols[name] = run.log[:, i]
-        frames.append(pd.DataFrame(cols))
-    return pd.concat(frames, ignore_index=True)
+def write_csv(path: Path, frame: pd.DataFrame) -> None:
+    """``frame`` as a CSV (:func:`_write_table`); a column of mixed values (e.g. tuning.csv's)
+    is written as text."""
+    import pyarrow as pa
+
+    frame = frame.copy()
+    for col in frame.columns:
+        if frame[col].dtype == object and len({type(v) for v in frame[col] if v is not None}) > 1:
+            frame[col] = [v if isinstance(v, str) else repr(v) for v in frame[col]]
+    _write_table(path, pa.Table.from_pandas(frame, preserve_index=False))
+
+
+def _arrow_column(values: np.ndarray | Sequence[str]) -> pa.Array:
+    """A float array as Arrow's float64 (NaN as null, as pandas hands it to Arrow), anything
+    else as strings; built from its buffers, because ``pyarrow.array`` imports pandas to check
+    what it was given."""
+    import pyarrow as pa
+
+    if isinstance(values, np.ndarray) and values.dtype.kind == "f":
+        data = np.ascontiguousarray(values, dtype=np.float64)
+        missing = np.isnan(data)
+        n_missing = int(missing.sum())
+        validity = pa.py_buffer(np.packbits(~missing, bitorder="little")) if n_missing else None
+        return pa.Array.from_buffers(pa.float64(), data.size, [validity, pa.py_buffer(data)], null_count=n_missing)
+    encoded = [str(v).encode() for v in values]
+    offsets = np.zeros(len(encoded) + 1, dtype=np.int64)
+    np.cumsum([len(e) for e in encoded], out=offsets[1:])
+    buffers = [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))]
+    return pa.Array.from_buffers(pa.large_string(), len(encoded), buffers)
+
+
+def write_columns(path: Path, columns: dict[str, np.ndarray | Sequence[str]]) -> None:
+    """Columns (name -> float array or strings) as a CSV without importing pandas: the bytes
+    :func:`write_csv` writes for the DataFrame of the same columns."""
+    import pyarrow as pa
+
+    _write_table(path, pa.table({name: _arrow_column(values) for name, values in columns.items()}))
+
+
+def metric_columns(result: Result) -> dict[str, np.ndarray | list[str]]:
+    """The columns of ``result.metrics`` (:data:`~nlcx.engine.METRIC_COLUMNS`), from its rows."""
+    rows = result.metric_rows
+    columns: dict[str, np.ndarray | list[str]] = {}
+    for i, name in enumerate(METRIC_COLUMNS):
+        values = [row[i] for row in rows]
+        columns[name] = np.array(values, dtype=np.float64) if name == "value" else values
+    return columns
+
+
+def _run_columns(run: Run, plant: Plant) -> dict[str, np.ndarray]:
+    """A run's samples by column: t, states, inputs, references, loop logs."""
+    cols = {"t": run.t}
+    for i, name in enumerate(plant.state_names):
+        cols[name] = run.x[:, i]
+    for i, name in enumerate(plant.input_names):
+        cols[name] = run.u[:, i]
+    offsets = run.controller.reference_offsets or (0.0,) * len(run.controller.reference_signals)
+    for i, (name, off) in enumerate(zip(run.controller.reference_signals, offsets, strict=True)):
+        cols[f"{name}_ref" if off == 0 else f"{name}_ref{off:+g}"] = run.r[:, i]
+    for i, name in enumerate(run.controller.log_names):
+        cols[name] = run.log[:, i]
+    return cols
+
+
+def timeseries_columns(result: Result) -> dict[str, np.ndarray]:
+    """Every sample of every run, runs one after another: t, controller, states, inputs,
+    references, loop logs. A column a run lacks (another controller's log) is NaN in its rows."""
+    per_run = [_run_columns(run, result.prepared.plant) for run in result.runs]
+    names = list(dict.fromkeys(["t", "controller", *(name for cols in per_run for name in cols)]))
+    out: dict[str, np.ndarray] = {}
+    for name in names:
+        if name == "controller":
+            out[name] = np.concatenate([np.full(run.t.size, run.label, dtype=object) for run in result.runs])
+            continue
+        parts = [cols.get(name, np.full(cols["t"].size, np.nan)) for cols in per_run]
+        out[name] = np.concatenate(parts) if parts else np.empty(0)
+    return out
 
 
 def _thin(t: np.ndarray, y: np.ndarray, points: int = 3000) -> tuple[np.ndarray, np.ndarray]:
@@ -106,11 +165,10 @@ def _run_label(run: Run, result: Result | None = None) -> str:
     names = result.prepared.experiment.section.outputs.figure_metrics if result is not None else []
     if not names:
         return run.label
-    table = result.metrics[result.metrics.controller == run.label]
+    rows = [row for row in result.metric_rows if row[0] == run.label]
     parts = []
     for name in names:
-        rows = table[table.metric == name]
-        parts += [f"{name} {v:.4g}" for v in rows.value]
+        parts += [f"{name} {row[3]:.4g}" for row in rows if row[2] == name]
     return f"{run.label} ({', '.join(parts)})" if parts else run.label
 
 
@@ -259,34 +317,36 @@ def write_run(
     """Write a run directory; manifest.json last, listing the files and the timings.
 
     ``started`` (a ``time.perf_counter()`` value) makes the manifest record the wall time
-    from then until the manifest is written. The figures are drawn by ``painter`` (another
-    process) if given, else here; either way while the time series is written.
+    from then until the manifest is written. The figures are planned first and drawn by
+    ``painter`` (another process) if given, else here in a thread, while this thread builds
+    the tables (the metrics table and its pandas import included) and writes the CSV files.
     """
     write_start = time.perf_counter()
     exp = result.prepared.experiment
     outputs = exp.section.outputs
-    written: list[Path] = []
-    path = out_dir / "config.yaml"
-    write_text(path, yaml.safe_dump(exp.resolved(), sort_keys=False, allow_unicode=True))
-    written.append(path)
-    path = out_dir / "metrics.csv"
-    write_csv(path, result.metrics)
-    written.append(path)
-    if result.prepared.tuning:
-        path = out_dir / "tuning.csv"
-        write_csv(path, pd.DataFrame(result.prepared.tuning, columns=["controller", "tuner", "parameter", "value"]))
-        written.append(path)
     figures: list[tuple[Path, FigurePlan]] = []
     if outputs.figure:
         figures.append((out_dir / "figure.png", output_plan(result, exp.section.title)))
     if outputs.gains_figure:
         figures.append((out_dir / "gains.png", gains_plan(result)))
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        # pyarrow encodes the long CSV and the painter draws, both without holding the GIL
+    written: list[Path] = []
+    with ThreadPoolExecutor(max_workers=1) as pool:
         drawn = pool.submit(painter.paint if painter is not None else draw_all, figures)
+        path = out_dir / "config.yaml"
+        write_text(path, yaml.safe_dump(exp.resolved(), sort_keys=False, allow_unicode=True))
+        written.append(path)
+        path = out_dir / "metrics.csv"
+        write_columns(path, metric_columns(result))
+        written.append(path)
+        if result.prepared.tuning:
+            import pandas as pd
+
+            path = out_dir / "tuning.csv"
+            write_csv(path, pd.DataFrame(result.prepared.tuning, columns=["controller", "tuner", "parameter", "value"]))
+            written.append(path)
         if outputs.timeseries:
             path = out_dir / "timeseries.csv"
-            pool.submit(write_csv, path, timeseries_frame(result)).result()
+            write_columns(path, timeseries_columns(result))  # pyarrow encodes without holding the GIL
             written.append(path)
         drawn.result()
     written += [path for path, _ in figures]

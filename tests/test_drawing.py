@@ -69,19 +69,20 @@ def test_the_output_plan_holds_each_runs_output_and_the_reference(x_error_raw: d
         assert lines[-1].label == "reference"
 
 
-def test_nlcx_run_leaves_matplotlib_to_the_painter(tmp_path: Path) -> None:
+def test_nlcx_run_leaves_matplotlib_to_the_painter_and_needs_no_pandas(tmp_path: Path) -> None:
     root = Path(__file__).resolve().parent.parent
     out = tmp_path / "run"
     code = (
         "import atexit, sys\n"
-        "atexit.register(lambda: print('matplotlib imported:', 'matplotlib' in sys.modules))\n"
+        "atexit.register(lambda: print('imported:', sorted({'matplotlib', 'pandas'} & set(sys.modules))))\n"
         "from nlcx.cli import main\n"
-        f"sys.argv = ['nlcx', 'run', 'configs/x_error_ags.yaml', 'simulation.t_end=2', '--out', {str(out)!r}, '-q']\n"
+        f"sys.argv = ['nlcx', 'run', 'configs/x_error_ags.yaml', 'simulation.t_end=2', '--out', {str(out)!r}]\n"
         "main()\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=300)
     assert done.returncode == 0, done.stderr
-    assert "matplotlib imported: False" in done.stdout
+    assert "imported: []" in done.stdout  # the summary, the CSV files and the report page included
+    assert "proposed" in done.stdout and (out / "report.html").is_file()
     assert (out / "figure.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 

@@ -61,17 +61,21 @@ def repository() -> Path | None:
 
 def write_report(directory: Path, configs: Path | None = None) -> tuple[Path, Path]:
     """Write DIR/report.html and DIR/report.md (atomically) for whatever DIR holds."""
-    from nlcx.pages import reproduction, run, sweep
-
     directory = directory.resolve()
     kind = kind_of(directory)
     configs = configs or (repository() or Path.cwd()) / "configs" / "thesis"
     if kind == "reproduction":
+        from nlcx.pages import reproduction
+
         ctx = reproduction.context(directory, configs, repository())
         report.write_csv(directory / "report_summary.csv", reproduction.summary_frame(ctx))
     elif kind == "sweep":
+        from nlcx.pages import sweep
+
         ctx = sweep.context(directory)
     else:
+        from nlcx.pages import run  # a run's page needs neither pandas nor the thesis pages
+
         ctx = run.context(directory)
     env = environment()
     html, md = directory / "report.html", directory / "report.md"
