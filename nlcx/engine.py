@@ -120,8 +120,8 @@ class MetricTable:
     """The long-form metric rows of experiments measured together: the column ``experiment``
     (an experiment's position in the measured list), then :data:`METRIC_COLUMNS`; each
     experiment's rows contiguous. The rows are computed when the runs are measured; the
-    DataFrame (and the pandas import it needs) only when :attr:`frame` is first read, so
-    ``nlcx run`` builds it while its figures are being drawn."""
+    DataFrame (and the pandas import it needs) only when :attr:`frame` is first read. ``nlcx
+    run`` never reads it: it writes metrics.csv from the rows (:attr:`Result.metric_rows`)."""
 
     rows: list[list[Any]]
 

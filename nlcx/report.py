@@ -64,9 +64,9 @@ def write_csv(path: Path, frame: pd.DataFrame) -> None:
 
 
 def _arrow_column(values: np.ndarray | Sequence[str]) -> pa.Array:
-    """A float array as Arrow's float64 (NaN as null, as pandas hands it to Arrow), anything
-    else as strings; built from its buffers, because ``pyarrow.array`` imports pandas to check
-    what it was given."""
+    """A float array as Arrow's float64 (NaN as null, as pandas hands it to Arrow), a sequence
+    of strings as Arrow's strings; built from their buffers, because ``pyarrow.array`` imports
+    pandas to check what it was given."""
     import pyarrow as pa
 
     if isinstance(values, np.ndarray) and values.dtype.kind == "f":
@@ -75,7 +75,7 @@ def _arrow_column(values: np.ndarray | Sequence[str]) -> pa.Array:
         n_missing = int(missing.sum())
         validity = pa.py_buffer(np.packbits(~missing, bitorder="little")) if n_missing else None
         return pa.Array.from_buffers(pa.float64(), data.size, [validity, pa.py_buffer(data)], null_count=n_missing)
-    encoded = [str(v).encode() for v in values]
+    encoded = [v.encode() for v in values]
     offsets = np.zeros(len(encoded) + 1, dtype=np.int64)
     np.cumsum([len(e) for e in encoded], out=offsets[1:])
     buffers = [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))]
@@ -116,8 +116,9 @@ def _run_columns(run: Run, plant: Plant) -> dict[str, np.ndarray]:
 
 
 def timeseries_columns(result: Result) -> dict[str, np.ndarray]:
-    """Every sample of every run, runs one after another: t, controller, states, inputs,
-    references, loop logs. A column a run lacks (another controller's log) is NaN in its rows."""
+    """Every sample of every run (a result has at least one), runs one after another: t,
+    controller, states, inputs, references, loop logs. A column a run lacks (another
+    controller's log) is NaN in its rows."""
     per_run = [_run_columns(run, result.prepared.plant) for run in result.runs]
     names = list(dict.fromkeys(["t", "controller", *(name for cols in per_run for name in cols)]))
     out: dict[str, np.ndarray] = {}
@@ -125,8 +126,7 @@ def timeseries_columns(result: Result) -> dict[str, np.ndarray]:
         if name == "controller":
             out[name] = np.concatenate([np.full(run.t.size, run.label, dtype=object) for run in result.runs])
             continue
-        parts = [cols.get(name, np.full(cols["t"].size, np.nan)) for cols in per_run]
-        out[name] = np.concatenate(parts) if parts else np.empty(0)
+        out[name] = np.concatenate([cols.get(name, np.full(cols["t"].size, np.nan)) for cols in per_run])
     return out
 
 
@@ -318,8 +318,9 @@ def write_run(
 
     ``started`` (a ``time.perf_counter()`` value) makes the manifest record the wall time
     from then until the manifest is written. The figures are planned first and drawn by
-    ``painter`` (another process) if given, else here in a thread, while this thread builds
-    the tables (the metrics table and its pandas import included) and writes the CSV files.
+    ``painter`` (another process) if given, else here in a thread, while this thread writes
+    config.yaml and the CSV files (from columns, without pandas; tuning.csv, written only when
+    tuners or controllers report values, through a DataFrame).
     """
     write_start = time.perf_counter()
     exp = result.prepared.experiment
