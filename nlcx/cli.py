@@ -71,12 +71,14 @@ def _imported() -> None:
 
 def _painter(raw: dict[str, Any]) -> Painter | None:
     """A figure painter process (:class:`nlcx.drawing.Painter`) unless the config turns every
-    figure off."""
-    outputs = raw.get("outputs") if isinstance(raw.get("outputs"), dict) else {}
-    if outputs.get("figure", True) is False and outputs.get("gains_figure", False) is False:
-        return None
+    figure off (unset keys take :class:`nlcx.config.OutputsSection`'s defaults)."""
+    from nlcx.config import OutputsSection
     from nlcx.drawing import Painter
 
+    outputs = raw.get("outputs") if isinstance(raw.get("outputs"), dict) else {}
+    fields = OutputsSection.model_fields
+    if all(outputs.get(key, fields[key].default) is False for key in ("figure", "gains_figure")):
+        return None
     return Painter()
 
 

@@ -189,10 +189,12 @@ def output_plan(result: Result, title: str | None = None) -> FigurePlan:
     plant = result.prepared.plant
     outputs = plant.outputs
     inputs = plant.inputs if result.prepared.experiment.section.outputs.figure_inputs else ()
+    legends = [_run_label(run, result) for run in result.runs]  # the same on every output's panel
     panels = []
     for k, sig in enumerate(outputs):
         j = plant.output_names.index(sig.name)
-        lines = _lines([(run, run.x @ plant.C[j], _run_label(run, result)) for run in result.runs], lw=1.3)
+        runs = zip(result.runs, legends, strict=True)
+        lines = _lines([(run, run.x @ plant.C[j], legend) for run, legend in runs], lw=1.3)
         first = result.runs[0]
         if sig.name in first.controller.reference_signals:
             col = first.controller.reference_signals.index(sig.name)
