@@ -127,11 +127,11 @@ def run(
         _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report)
         return
     painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
-    from nlcx import engine, report
-
-    _imported()
-    start = time.perf_counter()
     try:
+        from nlcx import engine, report
+
+        _imported()
+        start = time.perf_counter()
         exp = cfg.build(cfg.interpolate(raw))  # cfg.load's steps on the config already read
         loaded = time.perf_counter()
         result = engine.run_experiment(exp)

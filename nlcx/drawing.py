@@ -210,7 +210,10 @@ def _serve() -> None:
 
     gc.enable()
     _warm_up()
-    jobs = pickle.load(sys.stdin.buffer)
+    try:
+        jobs = pickle.load(sys.stdin.buffer)
+    except EOFError:  # the run ended without handing figures over (it failed or was interrupted)
+        os._exit(0)
     draw_all(jobs)
     sys.stdout.buffer.write(pickle.dumps("ok"))
     sys.stdout.buffer.flush()

@@ -101,3 +101,9 @@ def test_every_column_of_the_gains_figure_ends_in_a_time_axis(x_error_raw: dict)
     for col in range(plan.n_cols):
         column = plan.panels[col :: plan.n_cols]
         assert [p.xlabel for p in column] == [""] * (len(column) - 1) + ["Time (s)"]
+
+
+def test_a_painter_left_without_figures_exits_quietly() -> None:
+    # the run failed or was interrupted before handing its figures over: no traceback
+    done = subprocess.run([sys.executable, "-m", "nlcx.drawing"], input=b"", capture_output=True, timeout=120)
+    assert (done.returncode, done.stderr) == (0, b"")
