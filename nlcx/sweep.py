@@ -32,7 +32,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Collection, Iterable
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -432,6 +432,12 @@ def run(
     return SweepOutcome(out_dir, index, len(todo), len(variants) - len(todo), wall)
 
 
+def _member_of(hashes: pd.Series, wanted: Collection[str]) -> np.ndarray:
+    """``hashes.isin(wanted)`` by set lookups: pandas' ``isin`` on Arrow-backed strings loops
+    in Python and took ~0.1 s of assembling a 10 000-variant sweep."""
+    return np.fromiter((h in wanted for h in hashes.to_numpy(dtype=object)), dtype=bool, count=len(hashes))
+
+
 def assemble(
     out_dir: Path, variants: list[Variant], hashes: list[str], base_raw: dict[str, Any], spec: SweepSection
 ) -> pd.DataFrame:
@@ -452,10 +458,10 @@ def assemble(
         report.write_csv(out_dir / "metrics.csv", pd.DataFrame())
         return pd.DataFrame()
     rows = pd.concat(indexes, ignore_index=True)
-    rows = rows[rows.config_hash.isin(want)]
+    rows = rows[_member_of(rows.config_hash, want)]
     # per variant: its first complete result, else its last failure (a retry supersedes a failure)
     complete = rows[rows.status != "failed"].drop_duplicates("config_hash", keep="first")
-    failed = rows[(rows.status == "failed") & ~rows.config_hash.isin(complete.config_hash)]
+    failed = rows[(rows.status == "failed") & ~_member_of(rows.config_hash, set(complete.config_hash))]
     chosen = pd.concat([complete, failed.drop_duplicates("config_hash", keep="last")])
     chosen = chosen.assign(new_variant=chosen.config_hash.map(want))
     metrics = pd.concat(metric_parts, ignore_index=True)

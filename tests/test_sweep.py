@@ -114,6 +114,12 @@ def test_batch_equals_single_runs_bit_for_bit(tmp_path: Path) -> None:
             assert np.array_equal(mine.value.to_numpy(), single.value.to_numpy(), equal_nan=True)
 
 
+def test_membership_by_set_lookups_equals_pandas_isin() -> None:
+    hashes = pd.Series(["a1", "b2", None, "c3", "a1", "d4"], dtype="str")
+    for wanted in ({"a1", "c3"}, {"zz"}, set(), {"a1": 0, "d4": 1, "b2": 2}):
+        assert list(sweep._member_of(hashes, wanted)) == list(hashes.isin(list(wanted)))
+
+
 def test_failed_variant_is_recorded_the_rest_go_on(tmp_path: Path) -> None:
     path = write_sweep(tmp_path, {"grid": {"plant.params.M": [1.0, -1.0, 1.1]}})
     out = tmp_path / "fail"
