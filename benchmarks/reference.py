@@ -11,6 +11,10 @@ computed from them); ``record=False`` measures the loop alone.
 
 It is not part of nlcx: it exists to say how fast this one loop can be simulated on this
 machine, so that nlcx's speed is quoted as a ratio to it, measured in the same run.
+
+:func:`simulate_nlcx_pid` is the same loop with nlcx's PID in place of the written-out one:
+it measures how much of the distance between nlcx's kernel and the limit is the kernel's
+design (every variant in lock step, states in arrays) and how much is nlcx's generic PID.
 """
 
 from __future__ import annotations
@@ -19,6 +23,9 @@ import math
 
 import numpy as np
 from numba import njit
+
+from nlcx.controllers.pid import DIRECT_CONSTANT, DIRECT_ERROR_AGS, DIRECT_TIME_AGS, G, H, I, L, S, _update_period
+from nlcx.controllers.schedules import constant_gains, error_ags_gains, time_ags_gains
 
 #: An error-AGS loop's parameters, in this order (Table 2.2 ranges, section 2.3 rates).
 AGS = ("kp_min", "kp_max", "ki_min", "ki_max", "kd_min", "kd_max", "kp_rate", "ki_rate", "kd_rate")
@@ -55,6 +62,30 @@ def _rhs(M, m, l, g, th, thd, F):  # pragma: no cover - compiled
     return b0 * r0 - L10 * a1, a1
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _rk4(M, m, l, g, x, xd, th, thd, F, dt):  # pragma: no cover - compiled
+    """One classic RK4 step of size dt with F held: the state at t + dt."""
+    a1, t1 = _rhs(M, m, l, g, th, thd, F)
+    a2, t2 = _rhs(M, m, l, g, th + 0.5 * dt * thd, thd + 0.5 * dt * t1, F)
+    a3, t3 = _rhs(M, m, l, g, th + 0.5 * dt * (thd + 0.5 * dt * t1), thd + 0.5 * dt * t2, F)
+    th4 = th + dt * (thd + 0.5 * dt * t2)
+    a4, t4 = _rhs(M, m, l, g, th4, thd + dt * t3, F)
+    v2, v3, v4 = xd + 0.5 * dt * a1, xd + 0.5 * dt * a2, xd + dt * a3
+    w2, w3, w4 = thd + 0.5 * dt * t1, thd + 0.5 * dt * t2, thd + dt * t3
+    return (
+        x + dt / 6.0 * (xd + 2.0 * (v2 + v3) + v4),
+        xd + dt / 6.0 * (a1 + 2.0 * (a2 + a3) + a4),
+        th + dt / 6.0 * (thd + 2.0 * (w2 + w3) + w4),
+        thd + dt / 6.0 * (t1 + 2.0 * (t2 + t3) + t4),
+    )
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _stops(x, xd, th, thd, bound):  # pragma: no cover - compiled
+    """Whether a run stops here: |theta| past its bound or a state not finite."""
+    return not (abs(th) <= bound and math.isfinite(x) and math.isfinite(xd) and math.isfinite(thd))
+
+
 @njit(cache=True, error_model="numpy")
 def simulate(p, theta_loop, x_loop, dt, n_steps, bound, X, U, n_valid, record):  # pragma: no cover - compiled
     """Every variant b (p[b] = M, m, l, g) from rest to t = n_steps dt; X (B, K+1, 4) and U
@@ -83,18 +114,100 @@ def simulate(p, theta_loop, x_loop, dt, n_steps, bound, X, U, n_valid, record): 
                 U[b, k] = F
             if k == n_steps:
                 break
-            a1, t1 = _rhs(M, m, l, g, th, thd, F)
-            a2, t2 = _rhs(M, m, l, g, th + 0.5 * dt * thd, thd + 0.5 * dt * t1, F)
-            a3, t3 = _rhs(M, m, l, g, th + 0.5 * dt * (thd + 0.5 * dt * t1), thd + 0.5 * dt * t2, F)
-            th4 = th + dt * (thd + 0.5 * dt * t2)
-            a4, t4 = _rhs(M, m, l, g, th4, thd + dt * t3, F)
-            v2, v3, v4 = xd + 0.5 * dt * a1, xd + 0.5 * dt * a2, xd + dt * a3
-            w2, w3, w4 = thd + 0.5 * dt * t1, thd + 0.5 * dt * t2, thd + dt * t3
-            x += dt / 6.0 * (xd + 2.0 * (v2 + v3) + v4)
-            th += dt / 6.0 * (thd + 2.0 * (w2 + w3) + w4)
-            xd += dt / 6.0 * (a1 + 2.0 * (a2 + a3) + a4)
-            thd += dt / 6.0 * (t1 + 2.0 * (t2 + t3) + t4)
-            if not (abs(th) <= bound and math.isfinite(x) and math.isfinite(xd) and math.isfinite(thd)):
+            x, xd, th, thd = _rk4(M, m, l, g, x, xd, th, thd, F, dt)
+            if _stops(x, xd, th, thd, bound):
+                n_valid[b] = k + 1
+                break
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _pid_row(t, dt, y, r, cp, cs, row, log, callbacks):  # pragma: no cover - compiled
+    """nlcx's :func:`~nlcx.controllers.pid.pid_step` for row ``row`` of its parameter and state
+    arrays (cp, cs, log, callbacks as nlcx packs them), one input, without saturation; the
+    outputs y and references r as tuples. Returns u_0. A copy of pid_step's loop body made
+    for this measurement: :func:`simulate_nlcx_pid` checks itself against nlcx bit for bit."""
+    u0 = cp[row, len(H) + I.bias]
+    base = len(H) + len(I) * 1
+    for i in range(int(cp[row, H.n_loops])):
+        h = base + len(L) * i
+        c = len(S) * i
+        period = _update_period(t, dt, cp[row, H.sample_time], cs, row, c)
+        cs[row, c + S.period] = period
+        if period == 0.0:
+            u0 += cs[row, c + S.held]
+            continue
+        y_i = y[int(cp[row, h + L.y_index])] * cp[row, h + L.scale]
+        r_i = r[int(cp[row, h + L.r_index])] * cp[row, h + L.scale]
+        e = r_i - y_i
+        if cs[row, c + S.started] == 0.0:
+            cs[row, c + S.e_prev] = e
+            cs[row, c + S.y_prev] = y_i
+            cs[row, c + S.started] = 1.0
+        on_measurement = cp[row, h + L.on_measurement] != 0.0
+        dv = (cs[row, c + S.y_prev] - y_i) if on_measurement else (e - cs[row, c + S.e_prev])
+        if cp[row, h + L.filtered] != 0.0:
+            N = cp[row, h + L.N]
+            d = (cs[row, c + S.d_filtered] + N * dv) / (1.0 + N * period)
+            cs[row, c + S.d_filtered] = d
+        else:
+            d = dv / period
+        off = int(cp[row, h + L.schedule_offset])
+        direct = int(cp[row, h + L.direct_schedule])
+        if direct == DIRECT_ERROR_AGS:
+            kp, ki, kd = error_ags_gains(t, e, d, cp, row, off)
+        elif direct == DIRECT_TIME_AGS:
+            kp, ki, kd = time_ags_gains(t, e, d, cp, row, off)
+        elif direct == DIRECT_CONSTANT:
+            kp, ki, kd = constant_gains(t, e, d, cp, row, off)
+        else:
+            kp, ki, kd = callbacks[int(cp[row, h + L.schedule_slot])](t, e, d, cp, row, off)
+        form = cp[row, h + L.form]
+        if form != 0.0:
+            kp, ki, kd = (kp * (1.0 + ki * kd) if form == 2.0 else kp), kp * ki, kp * kd
+        step = ki * e * period if cp[row, h + L.gain_inside] != 0.0 else e * period
+        cs[row, c + S.integral] += step
+        cs[row, c + S.increment] = step
+        integral_term = cs[row, c + S.integral] * (1.0 if cp[row, h + L.gain_inside] != 0.0 else ki)
+        out = cp[row, h + L.sign] * (kp * (cp[row, h + L.setpoint_weight] * r_i - y_i) + integral_term + kd * d)
+        g = len(G) * i
+        log[row, g + G.kp] = kp
+        log[row, g + G.ki] = ki
+        log[row, g + G.kd] = kd
+        log[row, g + G.u] = out
+        cs[row, c + S.held] = out
+        u0 += out
+        cs[row, c + S.e_prev] = e
+        cs[row, c + S.y_prev] = y_i
+    return u0
+
+
+@njit(cache=True, error_model="numpy")
+def simulate_nlcx_pid(p, pid, ref, dt, n_steps, bound, X, U, n_valid):  # pragma: no cover - compiled
+    """:func:`simulate` with nlcx's PID (:func:`_pid_row`) in place of the written-out loops:
+    ``pid`` = (cp, cs, log, callbacks) as nlcx packs them, ``ref`` (K+1, 2) the references of
+    x and theta.
+
+    The plant state stays in local variables, the controller's in nlcx's arrays. What
+    separates this loop from nlcx's kernel is only that design (one variant at a time, the
+    plant state in registers, plant and controller compiled into the loop) against the
+    kernel's (every variant in lock step, states in arrays, plant and controller called as
+    compiled-function values): it measures what the kernel would gain by it."""
+    cp, cs, log, callbacks = pid
+    for b in range(p.shape[0]):
+        M, m, l, g = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        x, xd, th, thd = 0.0, 0.0, 0.0, 0.0
+        n_valid[b] = n_steps + 1
+        for k in range(n_steps + 1):
+            F = _pid_row(k * dt, dt, (x, th), (ref[k, 0], ref[k, 1]), cp, cs, b, log, callbacks)
+            X[b, k, 0], X[b, k, 1], X[b, k, 2], X[b, k, 3] = x, xd, th, thd
+            U[b, k] = F
+            if not math.isfinite(F):
+                n_valid[b] = k + 1
+                break
+            if k == n_steps:
+                break
+            x, xd, th, thd = _rk4(M, m, l, g, x, xd, th, thd, F, dt)
+            if _stops(x, xd, th, thd, bound):
                 n_valid[b] = k + 1
                 break
 

@@ -8,7 +8,9 @@
 (b) a 10 000-variant x-pendulum sweep (error-AGS PID, M, m, l within +-20 %, 20 s at 1 ms) with
     --jobs 2 (target <= 30 s wall, <= 2 GB peak memory of the whole process tree), beside the
     limit reference (benchmarks/reference.py) of the same variants, alternated in one run:
-    ns per variant-step, simulated seconds per wall second and their ratio (goal <= 1.3).
+    ns per variant-step, simulated seconds per wall second and their ratio (goal <= 1.3); and
+    the kernels alone in one process: nlcx's kernel, the reference's loop with nlcx's PID and
+    the limit, per variant-step, with their trajectories checked bit for bit against nlcx's.
 (c) `nlcx reproduce` of every thesis figure and table, calibration excluded (target <= 120 s).
 (d) the experiment of (a), proposed controller, through python-control's input_output_response
     and scipy's solve_ivp (RK45, the PID integrators in the ODE), with the speed ratios and the
@@ -143,6 +145,7 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
         limit = limit_reference(raw)
         limits.append(limit)
     summary = out.strip().splitlines()[-1].replace(str(work), "<tmp>")
+    alone = kernels_alone(raw)
     steps = limits[0]["variant_steps"]
     nlcx_s, limit_s = min(walls), min(x["wall_s"] for x in limits)
     simulated = steps * raw["simulation"]["dt"]
@@ -152,7 +155,7 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
         "limit_s": limit_s, "limit_walls_s": [x["wall_s"] for x in limits], "limit_kernel_s": limits[0]["kernel_s"],
         "variant_steps": steps, "ns_per_step": 1e9 * nlcx_s / steps * 2, "limit_ns_per_step": 1e9 * limit_s / steps * 2,
         "sim_per_wall": simulated / nlcx_s, "limit_sim_per_wall": simulated / limit_s, "ratio": nlcx_s / limit_s,
-        "max_dev": limits[0]["max_dev"],
+        "max_dev": limits[0]["max_dev"], "alone": alone,
     }  # fmt: skip
 
 
@@ -207,6 +210,76 @@ def limit_reference(raw: dict[str, Any], jobs: int = 2) -> dict[str, Any]:
     return {
         "wall_s": wall, "variant_steps": sum(s for s, _ in done), "kernel_s": sum(t for _, t in done), "max_dev": dev,
     }  # fmt: skip
+
+
+def _packed_pid(controllers: list[Any]) -> tuple[Any, ...]:
+    """(cp, cs, log, callbacks) of a batch of nlcx PIDs, as the kernel hands them to the controller."""
+    from nlcx.kernel.abi import callback_slots
+
+    first = controllers[0]
+    return (np.stack([c.cp for c in controllers]), np.stack([c.cs0 for c in controllers]),
+            np.zeros((len(controllers), len(first.log_names))), callback_slots(first.callbacks))  # fmt: skip
+
+
+def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[str, Any]:
+    """The first ``n`` variants of the sweep in this process, batches of 100, through three
+    loops, alternated, CPU time of the best of ``repeats``: nlcx's kernel (with its array
+    packing and its records lent by an arena, as a sweep batch calls it), the reference's loop
+    with nlcx's PID (:func:`reference.simulate_nlcx_pid`: the plant state in registers) and the
+    limit reference. Where a sweep's time goes beyond the kernel (metrics, configs, files,
+    processes) is the difference to (b)'s ratio."""
+    import reference
+
+    from nlcx import config, engine, sweep
+
+    base_raw = {k: v for k, v in raw.items() if k != "sweep"}
+    spec = sweep.SweepSection.model_validate({**raw["sweep"], "random": {**raw["sweep"]["random"], "n": n}})
+    variants = sweep.expand(spec, config.interpolate(base_raw))
+    base = config.build(config.interpolate(base_raw))
+    prepared = [engine.prepare(config.build(v.resolve(base_raw), like=base)) for v in variants]
+    grid, dt = prepared[0].grid, base.section.simulation.dt
+    batches = [[item for p in prepared[k : k + 100] for item in engine.items_of(p)] for k in range(0, n, 100)]
+    n_k = grid.t.size
+    X, U, n_valid = np.empty((100, n_k, 4)), np.empty((100, n_k)), np.empty(100, dtype=np.int64)
+    theta_loop, x_loop = (reference.loop_parameters(base_raw["controllers"]["proposed"]["loops"][s]["schedule"])
+                          for s in ("theta", "x"))  # fmt: skip
+
+    arena = engine.RecordArena()
+
+    def nlcx_kernel() -> None:
+        for items in batches:
+            engine.simulate_items(items, grid, "rk4", record_logs=False, arena=arena)
+            arena.release()
+
+    def register_level(loop: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        xs, us = [], []
+        for items in batches:
+            p = np.stack([item.plant.p for item in items])
+            if loop == "nlcx_pid":
+                pid = _packed_pid([item.controller for item in items])
+                reference.simulate_nlcx_pid(p, pid, items[0].ref, dt, n_k - 1, np.pi / 2, X, U, n_valid)
+            else:
+                reference.simulate(p, theta_loop, x_loop, dt, n_k - 1, np.pi / 2, X, U, n_valid, True)
+            xs += [X[b, : n_valid[b]].copy() for b in range(len(items))]
+            us += [U[b, : n_valid[b]].copy() for b in range(len(items))]
+        return xs, us
+
+    ours = [run for items in batches for run in engine.simulate_items(items, grid, "rk4", record_logs=False)]
+    steps = sum(run.t.size - 1 for run in ours)
+    same = {}
+    for loop in ("nlcx_pid", "limit"):
+        xs, us = register_level(loop)
+        pairs = zip(ours, xs, us, strict=True)
+        same[loop] = all(np.array_equal(r.x, x) and np.array_equal(r.u[:, 0], u) for r, x, u in pairs)
+    cpu: dict[str, list[float]] = {"nlcx": [], "nlcx_pid": [], "limit": []}
+    for _ in range(repeats):
+        for name, fn in (("nlcx", nlcx_kernel), ("nlcx_pid", lambda: register_level("nlcx_pid")),
+                         ("limit", lambda: register_level("limit"))):  # fmt: skip
+            start = time.process_time()
+            fn()
+            cpu[name].append(time.process_time() - start)
+    ns = {name: 1e9 * min(times) / steps for name, times in cpu.items()}
+    return {"variants": n, "ns": ns, "same": same}
 
 
 def _import_reference() -> None:
@@ -349,6 +422,14 @@ def print_b(b: dict[str, Any]) -> None:
         f"{b['sim_per_wall']:.0f} simulated s per wall s; "
         f"limit {b['limit_ns_per_step']:.0f} ns, {b['limit_sim_per_wall']:.0f} s/s; ratio nlcx / limit "
         f"{b['ratio']:.2f} [goal <= 1.3]; trajectories max |difference| {b['max_dev']:.1e}"
+    )
+    ns, same = b["alone"]["ns"], b["alone"]["same"]
+    print(
+        f"    kernels alone, one process, {b['alone']['variants']} of the variants in batches of 100 (CPU time): "
+        f"nlcx's kernel {ns['nlcx']:.0f} ns per variant-step; the reference's loop with nlcx's PID "
+        f"(plant state in registers) {ns['nlcx_pid']:.0f} ns; limit {ns['limit']:.0f} ns; ratios to the limit "
+        f"{ns['nlcx'] / ns['limit']:.2f} and {ns['nlcx_pid'] / ns['limit']:.2f}; "
+        f"trajectories bit-identical to nlcx's: {same['nlcx_pid']} and {same['limit']}"
     )
 
 
