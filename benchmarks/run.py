@@ -129,6 +129,14 @@ def sweep_config(n: int) -> dict[str, Any]:
     return raw
 
 
+def _children_cpu_s() -> float:
+    """CPU seconds (user + system) of this process's finished children and their descendants."""
+    import resource
+
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
     """nlcx's sweep and the hand-written limit reference (benchmarks/reference.py) of the same
     variants on two processes each, alternated, in one run: wall times and their ratio."""
@@ -136,10 +144,12 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
     work = Path(tempfile.mkdtemp())
     path = work / "sweep.yaml"
     path.write_text(yaml.safe_dump(raw))
-    walls, peaks, limits = [], [], []
+    walls, cpus, peaks, limits = [], [], [], []
     for repeat in range(repeats):  # a fresh output directory each time: nothing is resumed
         cmd = [*NLCX, "sweep", str(path), "--jobs", "2", "--out", str(work / f"out{repeat}"), "--no-report"]
+        before = _children_cpu_s()
         wall, peak_kb, out = run_measured(cmd, ROOT)
+        cpus.append(_children_cpu_s() - before)
         walls.append(wall)
         peaks.append((peak_kb[0] / 1024, peak_kb[1] / 1024))
         limit = limit_reference(raw)
@@ -152,10 +162,12 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
     return {
         "variants": n, "wall_s": nlcx_s, "walls_s": walls, "summary": summary,
         "peak_memory_mb": max(p[0] for p in peaks), "peak_pss_mb": max(p[1] for p in peaks),
-        "limit_s": limit_s, "limit_walls_s": [x["wall_s"] for x in limits], "limit_kernel_s": limits[0]["kernel_s"],
+        "limit_s": limit_s, "limit_walls_s": [x["wall_s"] for x in limits],
+        "limit_kernel_s": min(x["kernel_s"] for x in limits),
         "variant_steps": steps, "ns_per_step": 1e9 * nlcx_s / steps * 2, "limit_ns_per_step": 1e9 * limit_s / steps * 2,
         "sim_per_wall": simulated / nlcx_s, "limit_sim_per_wall": simulated / limit_s, "ratio": nlcx_s / limit_s,
-        "max_dev": limits[0]["max_dev"], "alone": alone,
+        "max_dev": limits[0]["max_dev"], "alone": alone, "cpu_s": cpus[walls.index(nlcx_s)],
+        "kernel_cpu_s": 1e-9 * alone["ns"]["nlcx"] * steps,
     }  # fmt: skip
 
 
@@ -430,6 +442,12 @@ def print_b(b: dict[str, Any]) -> None:
         f"(plant state in registers) {ns['nlcx_pid']:.0f} ns; limit {ns['limit']:.0f} ns; ratios to the limit "
         f"{ns['nlcx'] / ns['limit']:.2f} and {ns['nlcx_pid'] / ns['limit']:.2f}; "
         f"trajectories bit-identical to nlcx's: {same['nlcx_pid']} and {same['limit']}"
+    )
+    print(
+        f"    where the sweep's time goes: its processes used {b['cpu_s']:.1f} s of CPU in {b['wall_s']:.1f} s on 2 "
+        f"cores; the kernel ~{b['kernel_cpu_s']:.1f} s of it ({b['variant_steps'] / 1e6:.0f} M variant-steps at its "
+        f"speed alone), the rest (configs, metrics, files, imports, planning, assembling) "
+        f"{b['cpu_s'] - b['kernel_cpu_s']:.1f} s; the limit's loop {b['limit_kernel_s']:.1f} s"
     )
 
 
