@@ -263,7 +263,8 @@ def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[s
             engine.simulate_items(items, grid, "rk4", record_logs=False, arena=arena)
             arena.release()
 
-    def register_level(loop: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    def register_level(loop: str, keep: bool = False) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """The batches through one of the reference's loops; the trajectories copied out if ``keep``."""
         xs, us = [], []
         for items in batches:
             p = np.stack([item.plant.p for item in items])
@@ -272,15 +273,16 @@ def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[s
                 reference.simulate_nlcx_pid(p, pid, items[0].ref, dt, n_k - 1, np.pi / 2, X, U, n_valid)
             else:
                 reference.simulate(p, theta_loop, x_loop, dt, n_k - 1, np.pi / 2, X, U, n_valid, True)
-            xs += [X[b, : n_valid[b]].copy() for b in range(len(items))]
-            us += [U[b, : n_valid[b]].copy() for b in range(len(items))]
+            if keep:
+                xs += [X[b, : n_valid[b]].copy() for b in range(len(items))]
+                us += [U[b, : n_valid[b]].copy() for b in range(len(items))]
         return xs, us
 
     ours = [run for items in batches for run in engine.simulate_items(items, grid, "rk4", record_logs=False)]
     steps = sum(run.t.size - 1 for run in ours)
     same = {}
     for loop in ("nlcx_pid", "limit"):
-        xs, us = register_level(loop)
+        xs, us = register_level(loop, keep=True)
         pairs = zip(ours, xs, us, strict=True)
         same[loop] = all(np.array_equal(r.x, x) and np.array_equal(r.u[:, 0], u) for r, x, u in pairs)
     cpu: dict[str, list[float]] = {"nlcx": [], "nlcx_pid": [], "limit": []}
