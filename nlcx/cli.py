@@ -6,6 +6,7 @@ import functools
 import gc
 import math
 import os
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -14,6 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 import typer
 
 from nlcx import registry
+from nlcx.compiled_cache import CompileHelper
 from nlcx.errors import ConfigError, NlcxError
 
 if TYPE_CHECKING:
@@ -127,10 +129,13 @@ def run(
         _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report)
         return
     painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
+    helper = CompileHelper([sys.executable, "-m", "nlcx.cli", "prewarm", str(config), *(overrides or [])])
     try:
         from nlcx import engine, report
 
         _imported()
+        with helper.watching():  # a slow load means an empty numba cache: `nlcx prewarm` compiles alongside
+            engine.load_kernel()
         start = time.perf_counter()
         exp = cfg.build(cfg.interpolate(raw))  # cfg.load's steps on the config already read
         loaded = time.perf_counter()
@@ -141,6 +146,7 @@ def run(
     finally:
         if painter is not None:
             painter.close()
+        helper.close()
     page = None if no_report else _write_report(out_dir)
     elapsed = time.perf_counter() - start
     if quiet:
@@ -152,6 +158,17 @@ def run(
     )
     typer.echo(_summary(result))
     typer.echo(f"wrote {out_dir}/ in {elapsed:.2f} s" + (f"; report {page}" if page else ""))
+
+
+@app.command(hidden=True)
+@one_line_errors
+def prewarm(config: ConfigArg, overrides: OverridesArg = None) -> None:
+    """Compile what a run of CONFIG needs besides the kernel into numba's cache (``nlcx run``
+    starts this beside itself when the cache is empty; see nlcx.engine.prewarm)."""
+    from nlcx import config as cfg
+    from nlcx import engine
+
+    engine.prewarm(cfg.load(config, overrides or []))
 
 
 def _sweep(

@@ -1,4 +1,4 @@
-"""Keep numba's disk cache consistent with the package's source.
+"""Keep numba's disk cache consistent with the package's source, and fill it on two cores.
 
 numba's ``cache=True`` keys each compiled function on its own module's source file only. A
 function that calls another module's compiled function directly (the PID calls the built-in
@@ -7,12 +7,20 @@ with the *old* callee inlined, after only the callee's module changed. nlcx ther
 stamps the cache with a hash of every source file of the package; when the stamp differs,
 the package's cache files (``*.nbi``, ``*.nbc`` in its ``__pycache__`` folders) are removed
 before anything is compiled or loaded, and numba rebuilds them.
+
+Rebuilding takes a while: the kernel alone compiles for ~13 s, in the process that needs it.
+:class:`CompileHelper` lets ``nlcx run`` compile the rest of what the run needs (its plugins'
+functions, the metric functions) in a second process meanwhile.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
+import subprocess
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
@@ -50,3 +58,42 @@ def ensure_consistent(root: Path = PACKAGE, stamp: Path | None = None) -> bool:
     except OSError:
         return False
     return True
+
+
+class CompileHelper:
+    """A command run in a second process, started only if a step of this one takes longer than
+    ``after`` seconds: ``nlcx run`` watches loading the kernel, which takes ~0.1 s from numba's
+    cache and ~13 s when it compiles, and then starts ``nlcx prewarm`` with the run's config
+    (:func:`nlcx.engine.prewarm`). Both processes write numba's cache; numba writes each file
+    under a temporary name and renames it, so either may finish first."""
+
+    def __init__(self, command: list[str], after: float = 1.0) -> None:
+        self.command = command
+        self.process: subprocess.Popen[bytes] | None = None
+        self._timer = threading.Timer(after, self._start)
+        self._timer.daemon = True
+
+    def _start(self) -> None:
+        self.process = subprocess.Popen(
+            self.command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
+
+    @contextlib.contextmanager
+    def watching(self) -> Iterator[None]:
+        """Start the command if the block is still running after ``after`` seconds."""
+        self._timer.start()
+        try:
+            yield
+        finally:
+            self._timer.cancel()
+
+    def close(self, timeout: float = 120.0) -> None:
+        """Wait for the command if it was started (killed after ``timeout`` seconds)."""
+        self._timer.cancel()
+        if self.process is None:
+            return
+        try:
+            self.process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()

@@ -28,9 +28,19 @@ from nlcx import preflight, registry
 from nlcx.config import Experiment, MetricsSection, build, controller_section
 from nlcx.controllers.base import ControllerInstance
 from nlcx.errors import ConfigError
-from nlcx.kernel.abi import ELEMENT_ENTRY, HOOKS, STATUS_BOUND, STATUS_NONFINITE, callback_slots, element_slots
+from nlcx.kernel.abi import (
+    CALLBACK_SIG,
+    CONTROLLER_SIG,
+    ELEMENT_ENTRY,
+    ELEMENT_SIG,
+    HOOKS,
+    RHS_SIG,
+    STATUS_BOUND,
+    STATUS_NONFINITE,
+    callback_slots,
+    element_slots,
+)
 from nlcx.kernel.friction import FA, FRICTION_AXIS, FRICTION_NONE, FRICTIONAL, FRICTIONLESS
-from nlcx.kernel.integrator import simulate
 from nlcx.plants.base import Plant, check_rows
 from nlcx.references.base import MetricPlan
 from nlcx.tuning.base import TuneContext
@@ -465,6 +475,8 @@ def simulate_items(
     ``record_logs=False`` skips the controller logs and friction forces (``Run.log`` and
     ``Run.friction`` are None): a sweep that keeps only metrics does not need them. With an
     ``arena`` the records are its arrays (see :class:`RecordArena`)."""
+    from nlcx.kernel.integrator import simulate  # loaded (or compiled) on first use: see load_kernel
+
     a, b = TABLEAUS[integrator]
     empty = np.empty if arena is None else arena.take
     keys = [_group_key(item) for item in items]
@@ -840,6 +852,44 @@ def remeasure(results: Sequence[Result], metrics: Mapping[str, Any]) -> list[Res
         prepared.append(dataclasses.replace(r.prepared, experiment=experiment))
     rows = _measure_all(prepared, [r.runs for r in results])
     return [dataclasses.replace(r, prepared=p, rows=block) for r, p, block in zip(results, prepared, rows, strict=True)]
+
+
+def load_kernel() -> None:
+    """Load the kernel (:func:`nlcx.kernel.integrator.simulate`) from numba's disk cache, or
+    compile it (~13 s; with a warm cache ~0.1 s). Importing this module does not: a process
+    that only prepares and measures (:func:`prewarm`) never needs it."""
+    import nlcx.kernel.integrator  # noqa: F401
+
+
+def prewarm(exp: Experiment) -> None:
+    """Compile into numba's disk cache (or load from it) what :func:`evaluate` of ``exp`` needs
+    besides the kernel: the functions of its plant, controllers and loop elements for the
+    kernel's signatures, and the metric functions, run on zero trajectories of the right shapes.
+
+    ``nlcx run`` starts this in a second process when loading the kernel takes long (an empty
+    or stale cache), so that the two compile side by side and the run then loads these from the
+    cache (:class:`nlcx.compiled_cache.CompileHelper`). Nothing is simulated, so an experiment
+    with tuners, which simulate while preparing, is left alone."""
+    if any(c.tuners for c in exp.controllers):
+        return
+    prepared = prepare(exp)
+    n_k = prepared.grid.t.size
+    runs = []
+    for item in items_of(prepared):
+        c, plant = item.controller, item.plant
+        for function, signature in (
+            (plant.rhs, RHS_SIG),
+            (c.step, CONTROLLER_SIG),
+            *((f, CALLBACK_SIG) for f in c.callbacks),
+            *((e.function, ELEMENT_SIG) for e in item.elements),
+        ):
+            if not function.signatures:  # one declared with its signature is compiled on import
+                function.compile(signature)
+        zeros = functools.partial(np.zeros, dtype=np.float64)
+        runs.append(Run(controller=c, status="ok", reason="", t=prepared.grid.t, x=zeros((n_k, len(plant.states))),
+                        u=zeros((n_k, len(plant.inputs))), r=item.ref, log=zeros((n_k, len(c.log_names))),
+                        friction=zeros((n_k, len(plant.inputs)))))  # fmt: skip
+    _measure_all([prepared], [runs])
 
 
 def run_experiment(exp: Experiment) -> Result:

@@ -397,6 +397,8 @@ def run(
     finished, failures = len(variants) - len(todo), 0
     if progress is not None:
         progress(finished, len(variants), failures)
+    if batches:
+        engine.load_kernel()  # here, once: the process pool's workers fork from this process and inherit it
     pool, close = make_executor(executor, jobs, scheduler) if batches else (None, lambda: None)
     try:
         results: Iterable[BatchResult]

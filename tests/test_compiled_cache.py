@@ -1,10 +1,17 @@
-"""numba's disk cache is dropped when any source file of the package changes."""
+"""numba's disk cache is dropped when any source file of the package changes, and a cold run
+compiles on two cores."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 from nlcx import compiled_cache
+
+CONFIG = Path(__file__).resolve().parent.parent / "configs" / "x_error_ags.yaml"
 
 
 def _package(tmp_path: Path) -> Path:
@@ -32,3 +39,44 @@ def test_a_changed_callee_module_drops_every_cached_function(tmp_path: Path) -> 
 def test_the_package_is_stamped_with_its_current_source() -> None:
     stamp = compiled_cache.STAMP
     assert stamp.read_text().strip() == compiled_cache.source_digest()
+
+
+def test_the_helper_starts_only_when_the_watched_step_is_slow(tmp_path: Path) -> None:
+    marker = tmp_path / "started"
+    command = [sys.executable, "-c", f"open({str(marker)!r}, 'w').close()"]
+    quick = compiled_cache.CompileHelper(command, after=5.0)
+    with quick.watching():
+        pass
+    quick.close()
+    assert quick.process is None and not marker.exists()
+    slow = compiled_cache.CompileHelper(command, after=0.05)
+    with slow.watching():
+        time.sleep(0.5)
+    slow.close()
+    assert slow.process is not None and slow.process.returncode == 0 and marker.exists()
+
+
+def _cache_index(cache: Path) -> set[str]:
+    """The compiled functions numba's cache under ``cache`` holds an index for."""
+    return {p.name.split("-")[0] for p in cache.rglob("*.nbi")}
+
+
+def test_prewarm_compiles_what_a_run_needs_except_the_kernel(tmp_path: Path) -> None:
+    """`nlcx prewarm` (what `nlcx run` starts beside itself on an empty cache) fills the cache
+    with the run's plugin and metric functions, but not the kernel; a run on that cache then
+    compiles the kernel alone, and its files equal those of a run on the warm cache."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    overrides = ["simulation.t_end=2"]
+    nlcx = [sys.executable, "-m", "nlcx.cli"]
+    done = subprocess.run([*nlcx, "prewarm", str(CONFIG), *overrides], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    index = _cache_index(tmp_path / "cache")
+    assert {"pid.pid_step", "pendulums.x_derived_rhs", "metrics._error_terms", "metrics._first_crossing"} <= index
+    assert not any(name.startswith("integrator.") for name in index)
+    for out, run_env in ((tmp_path / "cold", env), (tmp_path / "warm", None)):
+        run = [*nlcx, "run", str(CONFIG), *overrides, "--out", str(out), "--no-report", "-q"]
+        done = subprocess.run(run, env=run_env, capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+    assert "integrator.simulate" in _cache_index(tmp_path / "cache")
+    for name in ("metrics.csv", "timeseries.csv"):
+        assert (tmp_path / "cold" / name).read_bytes() == (tmp_path / "warm" / name).read_bytes()
