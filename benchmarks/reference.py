@@ -212,6 +212,16 @@ def simulate_nlcx_pid(p, pid, ref, dt, n_steps, bound, X, U, n_valid):  # pragma
                 break
 
 
+def packed_pid(controllers: list) -> tuple:
+    """(cp, cs, log, callbacks) of nlcx PIDs, one row each, as the kernel hands them to the
+    controller: the ``pid`` argument of :func:`simulate_nlcx_pid`."""
+    from nlcx.kernel.abi import callback_slots
+
+    first = controllers[0]
+    return (np.stack([c.cp for c in controllers]), np.stack([c.cs0 for c in controllers]),
+            np.zeros((len(controllers), len(first.log_names))), callback_slots(first.callbacks))  # fmt: skip
+
+
 def loop_parameters(schedule: dict) -> np.ndarray:
     """An error-AGS schedule of a config (kp/ki/kd ranges, rate) as :data:`AGS`."""
     ends = [schedule[g][end] for g in ("kp", "ki", "kd") for end in ("min", "max")]

@@ -224,15 +224,6 @@ def limit_reference(raw: dict[str, Any], jobs: int = 2) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def _packed_pid(controllers: list[Any]) -> tuple[Any, ...]:
-    """(cp, cs, log, callbacks) of a batch of nlcx PIDs, as the kernel hands them to the controller."""
-    from nlcx.kernel.abi import callback_slots
-
-    first = controllers[0]
-    return (np.stack([c.cp for c in controllers]), np.stack([c.cs0 for c in controllers]),
-            np.zeros((len(controllers), len(first.log_names))), callback_slots(first.callbacks))  # fmt: skip
-
-
 def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[str, Any]:
     """The first ``n`` variants of the sweep in this process, batches of 100, through three
     loops, alternated, CPU time of the best of ``repeats``: nlcx's kernel (with its array
@@ -269,7 +260,7 @@ def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[s
         for items in batches:
             p = np.stack([item.plant.p for item in items])
             if loop == "nlcx_pid":
-                pid = _packed_pid([item.controller for item in items])
+                pid = reference.packed_pid([item.controller for item in items])
                 reference.simulate_nlcx_pid(p, pid, items[0].ref, dt, n_k - 1, np.pi / 2, X, U, n_valid)
             else:
                 reference.simulate(p, theta_loop, x_loop, dt, n_k - 1, np.pi / 2, X, U, n_valid, True)

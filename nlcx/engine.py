@@ -885,10 +885,9 @@ def prewarm(exp: Experiment) -> None:
         ):
             if not function.signatures:  # one declared with its signature is compiled on import
                 function.compile(signature)
-        zeros = functools.partial(np.zeros, dtype=np.float64)
-        runs.append(Run(controller=c, status="ok", reason="", t=prepared.grid.t, x=zeros((n_k, len(plant.states))),
-                        u=zeros((n_k, len(plant.inputs))), r=item.ref, log=zeros((n_k, len(c.log_names))),
-                        friction=zeros((n_k, len(plant.inputs)))))  # fmt: skip
+        runs.append(Run(controller=c, status="ok", reason="", t=prepared.grid.t, x=np.zeros((n_k, len(plant.states))),
+                        u=np.zeros((n_k, len(plant.inputs))), r=item.ref, log=np.zeros((n_k, len(c.log_names))),
+                        friction=np.zeros((n_k, len(plant.inputs)))))  # fmt: skip
     _measure_all([prepared], [runs])
 
 

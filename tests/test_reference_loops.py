@@ -11,7 +11,6 @@ import numpy as np
 import yaml
 
 from nlcx import config, engine
-from nlcx.kernel.abi import callback_slots
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -35,9 +34,7 @@ def test_reference_loops_equal_nlcx_bit_for_bit() -> None:
     p = np.array([[M, m, l, raw["plant"]["params"]["g"]] for M, m, l in params])
     dt, n_k = raw["simulation"]["dt"], prepared[0].grid.t.size
     loops = raw["controllers"]["proposed"]["loops"]
-    controllers = [item.controller for item in items]
-    pid = (np.stack([c.cp for c in controllers]), np.stack([c.cs0 for c in controllers]),
-           np.zeros((len(items), len(controllers[0].log_names))), callback_slots(controllers[0].callbacks))  # fmt: skip
+    pid = reference.packed_pid([item.controller for item in items])
     for loop in ("limit", "nlcx_pid"):
         X, U, n_valid = np.empty((len(params), n_k, 4)), np.empty((len(params), n_k)), np.empty(len(params), int)
         if loop == "limit":
