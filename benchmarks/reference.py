@@ -5,16 +5,18 @@ error-AGS PID loops (eqs. 2.20-2.22 on |e|; F = -PID_theta + PID_x), the unit st
 t = 0, classic RK4 at dt with the force held over the step, every variant of a batch
 integrated on its own in plain scalar code: the state, the loop states and the parameters
 live in local variables, the right-hand side and the schedules are written out, sin, cos and
-exp are libm's. A run stops when |theta| exceeds its bound or a state is not finite, as
-nlcx's does. Like nlcx, it records the state and the input at every sample (the metrics are
+exp are libm's (nlcx's kernel takes sin and cos from :mod:`nlcx.kernel.trig`, within 1 ulp of
+libm's, so the two trajectories differ by rounding). A run stops when |theta| exceeds its bound
+or a state is not finite, as nlcx's does. Like nlcx, it records the state and the input at every sample (the metrics are
 computed from them); ``record=False`` measures the loop alone.
 
 It is not part of nlcx: it exists to say how fast this one loop can be simulated on this
 machine, so that nlcx's speed is quoted as a ratio to it, measured in the same run.
 
-:func:`simulate_nlcx_pid` is the same loop with nlcx's PID in place of the written-out one:
-it measures how much of the distance between nlcx's kernel and the limit is the kernel's
-design (every variant in lock step, states in arrays) and how much is nlcx's generic PID.
+:func:`simulate_nlcx_pid` is the same loop with nlcx's PID in place of the written-out one,
+and nlcx's sin and cos (one angle at a time), so that it computes nlcx's bits: it measures how
+much of the distance between nlcx's kernel and the limit is the kernel's design (every variant
+in lock step, states in arrays, sin and cos in vector code) and how much is nlcx's generic PID.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from numba import njit
 
 from nlcx.controllers.pid import DIRECT_CONSTANT, DIRECT_ERROR_AGS, DIRECT_TIME_AGS, G, H, I, L, S, _update_period
 from nlcx.controllers.schedules import constant_gains, error_ags_gains, time_ags_gains
+from nlcx.kernel.trig import sincos
 
 #: An error-AGS loop's parameters, in this order (Table 2.2 ranges, section 2.3 rates).
 AGS = ("kp_min", "kp_max", "ki_min", "ki_max", "kd_min", "kd_max", "kp_rate", "ki_rate", "kd_rate")
@@ -46,12 +49,14 @@ def _ags(s, a):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _rhs(M, m, l, g, th, thd, F):  # pragma: no cover - compiled
-    """(x'', theta'') of the x pendulum, the mass matrix solved as nlcx's generated code does."""
+def _rhs(M, m, l, g, th, thd, F, nlcx_trig):  # pragma: no cover - compiled
+    """(x'', theta'') of the x pendulum, the mass matrix solved as nlcx's generated code does;
+    sin and cos from nlcx (:func:`nlcx.kernel.trig.sincos`) if ``nlcx_trig``, else libm's."""
+    sin_th, cos_th = sincos(th) if nlcx_trig else (math.sin(th), math.cos(th))
     w0 = l * m
-    w1 = w0 * math.sin(th)
+    w1 = w0 * sin_th
     m00 = M + m
-    m10 = w0 * math.cos(th)
+    m10 = w0 * cos_th
     m11 = l**2 * m
     b0 = F + thd**2 * w1
     b1 = g * w1
@@ -63,13 +68,13 @@ def _rhs(M, m, l, g, th, thd, F):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _rk4(M, m, l, g, x, xd, th, thd, F, dt):  # pragma: no cover - compiled
+def _rk4(M, m, l, g, x, xd, th, thd, F, dt, nlcx_trig):  # pragma: no cover - compiled
     """One classic RK4 step of size dt with F held: the state at t + dt."""
-    a1, t1 = _rhs(M, m, l, g, th, thd, F)
-    a2, t2 = _rhs(M, m, l, g, th + 0.5 * dt * thd, thd + 0.5 * dt * t1, F)
-    a3, t3 = _rhs(M, m, l, g, th + 0.5 * dt * (thd + 0.5 * dt * t1), thd + 0.5 * dt * t2, F)
+    a1, t1 = _rhs(M, m, l, g, th, thd, F, nlcx_trig)
+    a2, t2 = _rhs(M, m, l, g, th + 0.5 * dt * thd, thd + 0.5 * dt * t1, F, nlcx_trig)
+    a3, t3 = _rhs(M, m, l, g, th + 0.5 * dt * (thd + 0.5 * dt * t1), thd + 0.5 * dt * t2, F, nlcx_trig)
     th4 = th + dt * (thd + 0.5 * dt * t2)
-    a4, t4 = _rhs(M, m, l, g, th4, thd + dt * t3, F)
+    a4, t4 = _rhs(M, m, l, g, th4, thd + dt * t3, F, nlcx_trig)
     v2, v3, v4 = xd + 0.5 * dt * a1, xd + 0.5 * dt * a2, xd + dt * a3
     w2, w3, w4 = thd + 0.5 * dt * t1, thd + 0.5 * dt * t2, thd + dt * t3
     return (
@@ -114,7 +119,7 @@ def simulate(p, theta_loop, x_loop, dt, n_steps, bound, X, U, n_valid, record): 
                 U[b, k] = F
             if k == n_steps:
                 break
-            x, xd, th, thd = _rk4(M, m, l, g, x, xd, th, thd, F, dt)
+            x, xd, th, thd = _rk4(M, m, l, g, x, xd, th, thd, F, dt, False)
             if _stops(x, xd, th, thd, bound):
                 n_valid[b] = k + 1
                 break
@@ -191,7 +196,8 @@ def simulate_nlcx_pid(p, pid, ref, dt, n_steps, bound, X, U, n_valid):  # pragma
     separates this loop from nlcx's kernel is only that design (one variant at a time, the
     plant state in registers, plant and controller compiled into the loop) against the
     kernel's (every variant in lock step, states in arrays, plant and controller called as
-    compiled-function values): it measures what the kernel would gain by it."""
+    compiled-function values, sin and cos of the batch's angles in vector code): it measures
+    what the kernel would gain by it."""
     cp, cs, log, callbacks = pid
     for b in range(p.shape[0]):
         M, m, l, g = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
@@ -206,7 +212,7 @@ def simulate_nlcx_pid(p, pid, ref, dt, n_steps, bound, X, U, n_valid):  # pragma
                 break
             if k == n_steps:
                 break
-            x, xd, th, thd = _rk4(M, m, l, g, x, xd, th, thd, F, dt)
+            x, xd, th, thd = _rk4(M, m, l, g, x, xd, th, thd, F, dt, True)
             if _stops(x, xd, th, thd, bound):
                 n_valid[b] = k + 1
                 break

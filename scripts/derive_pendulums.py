@@ -180,9 +180,10 @@ def _simplify(expr: sp.Expr) -> sp.Expr:
 
 
 class _Printer(PythonCodePrinter):
-    """Python code with sin/cos from ``module`` (math for numba, np for arrays) and renames."""
+    """Python code with sin/cos from ``module`` (np for arrays) and renames; with ``module``
+    None, sin(q) and cos(q) of a coordinate q print as the locals ``sin_q`` and ``cos_q``."""
 
-    def __init__(self, module: str, names: dict[sp.Symbol, str]) -> None:
+    def __init__(self, module: str | None, names: dict[sp.Symbol, str]) -> None:
         super().__init__({"standard": "python3"})
         self.fn_module = module
         self.names = names
@@ -190,11 +191,19 @@ class _Printer(PythonCodePrinter):
     def _print_Symbol(self, expr: sp.Symbol) -> str:
         return self.names.get(expr, expr.name)
 
+    def _print_trig(self, fn: str, expr: sp.Expr) -> str:
+        arg = self._print(expr.args[0])
+        if self.fn_module is None:
+            if not isinstance(expr.args[0], sp.Symbol):
+                raise ValueError(f"{fn} of {arg}: the kernel takes sin and cos of coordinates only")
+            return f"{fn}_{arg}"
+        return f"{self.fn_module}.{fn}({arg})"
+
     def _print_sin(self, expr: sp.Expr) -> str:
-        return f"{self.fn_module}.sin({self._print(expr.args[0])})"
+        return self._print_trig("sin", expr)
 
     def _print_cos(self, expr: sp.Expr) -> str:
-        return f"{self.fn_module}.cos({self._print(expr.args[0])})"
+        return self._print_trig("cos", expr)
 
 
 def _code_names() -> dict[sp.Symbol, str]:
@@ -285,7 +294,7 @@ def emit_rhs(d: Derivation) -> str:
     """The numba right-hand side ``{key}_derived_rhs(t, x, u, p, dx)`` of one model."""
     key, n = d.spec.key, len(d.q)
     names = _code_names()
-    printer = _Printer("math", names)
+    printer = _Printer(None, names)
     lower = [(i, j) for i in range(n) for j in range(i + 1)]
     zero = [[d.mass[i, j] == 0 for j in range(n)] for i in range(n)]
     entries = [d.mass[i, j] for i, j in lower if not zero[i][j]]
@@ -295,30 +304,33 @@ def emit_rhs(d: Derivation) -> str:
     b_out = reduced[len(entries) :]
 
     used = set()
-    for _, e in repl:
-        used |= e.free_symbols
-    for e in reduced:
-        used |= e.free_symbols
+    for e in [*(e for _, e in repl), *reduced]:
+        used |= e.xreplace({f: sp.Dummy() for f in e.atoms(sp.sin, sp.cos)}).free_symbols
     source = {s: f"p[b, {i}]" for i, s in enumerate(d.params)}
     source.update({s: f"x[b, {i}]" for i, s in enumerate(d.states)})
     source.update({s: f"u[b, {i}]" for i, s in enumerate(d.u)})
     order = [*d.params, *d.states, *d.u]
+    angles = _trig_arguments([*(e for _, e in repl), *reduced], d.states)
     head = "    "
     ind = head * 2
     doc = (
         f'{head}"""The {d.spec.title} derived from {d.spec.source}.\n\n'
         f"{head}Row b of x is one variant: state ({', '.join(s.name for s in d.states)}),\n"
-        f"{head}input ({', '.join(s.name for s in d.u)}), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)\n"
-        f"{head}without allocating.\n"
+        f"{head}input ({', '.join(s.name for s in d.u)}), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u);\n"
+        f"{head}sin and cos of the angles for the whole batch by nlcx.kernel.trig.sincos_column.\n"
         f'{head}"""'
     )
     lines = [
         '@njit(cache=True, error_model="numpy")',
         f"def {key}_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled",
         doc,
-        f"{head}for b in range(x.shape[0]):",
     ]
+    lines += [f"{head}sc_{names.get(q, q.name)} = sincos_column(x, {i})" for q, i in angles]
+    lines.append(f"{head}for b in range(x.shape[0]):")
     lines += _load(ind, [s for s in order if s in used], source, names)
+    for q, _ in angles:
+        name = names.get(q, q.name)
+        lines += [f"{ind}sin_{name} = sc_{name}[0, b]", f"{ind}cos_{name} = sc_{name}[1, b]"]
     for sym, e in repl:
         lines += _assign(ind, sym.name, printer.doprint(e))
     lines.append(f"{ind}# mass matrix M(q) (lower triangle, structural zeros omitted)")
@@ -332,6 +344,16 @@ def emit_rhs(d: Derivation) -> str:
         lines.append(f"{ind}dx[b, {2 * i}] = x[b, {2 * i + 1}]")
         lines.append(f"{ind}dx[b, {2 * i + 1}] = a{i}")
     return "\n".join(lines) + "\n"
+
+
+def _trig_arguments(exprs: list[sp.Expr], states: tuple[sp.Symbol, ...]) -> list[tuple[sp.Symbol, int]]:
+    """The states whose sin or cos the expressions take, with their index in the state, in
+    state order (each gets one :func:`nlcx.kernel.trig.sincos_column` per call)."""
+    args = {f.args[0] for e in exprs for f in e.atoms(sp.sin, sp.cos)}
+    unknown = args - set(states)
+    if unknown:
+        raise ValueError(f"sin/cos of {sorted(map(str, unknown))}: the kernel takes them of states only")
+    return [(q, i) for i, q in enumerate(states) if q in args]
 
 
 def emit_energy(d: Derivation) -> str:
@@ -382,8 +404,9 @@ def emit_module() -> str:
     parts = [
         HEADER,
         "from __future__ import annotations\n",
-        "import math\nfrom collections.abc import Sequence\n",
+        "from collections.abc import Sequence\n",
         "import numpy as np\nfrom numba import njit\n",
+        "from nlcx.kernel.trig import sincos_column\n",
     ]
     text = "\n".join(parts)
     for d in derivations:

@@ -12,11 +12,11 @@ the two agree (to rounding).
 
 from __future__ import annotations
 
-import math
 from types import MappingProxyType
 
 from numba import njit
 
+from nlcx.kernel.trig import sincos
 from nlcx.plants.generated.pendulums import x_derived_rhs, x_energy
 from nlcx.plants.pendulum import (
     ANGLE_BOUND,
@@ -41,8 +41,7 @@ def x_pendulum_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
         M, m, l, g = p[b, P.M], p[b, P.m], p[b, P.l], p[b, P.g]
         theta, theta_dot = x[b, 2], x[b, 3]
         F = u[b, 0]
-        s = math.sin(theta)
-        c = math.cos(theta)
+        s, c = sincos(theta)
         den = M + m * s * s
         dx[b, 0] = x[b, 1]  # eq. 2.8
         dx[b, 1] = (-m * g * c * s + m * l * s * theta_dot * theta_dot + F) / den  # eq. 2.9

@@ -12,11 +12,11 @@ with the Lagrangian (docs/errata.md).
 
 from __future__ import annotations
 
-import math
 from types import MappingProxyType
 
 from numba import njit
 
+from nlcx.kernel.trig import sincos
 from nlcx.plants.generated.pendulums import xy_derived_rhs, xy_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
 
@@ -29,8 +29,8 @@ def _xy_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
     M, m, l, g = p[P.M], p[P.m], p[P.l], p[P.g]
     F_x, F_y = u[0], u[1]
     x6, x8 = x[5], x[7]
-    s5, c5 = math.sin(x[4]), math.cos(x[4])
-    s7, c7 = math.sin(x[6]), math.cos(x[6])
+    s5, c5 = sincos(x[4])
+    s7, c7 = sincos(x[6])
     den = M * M + M * m * s5**2 * c7**2 + M * m * s7**2
     dx[0] = x[1]  # eq. 3.11
     dx[1] = (  # eq. 3.12

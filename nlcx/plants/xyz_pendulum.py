@@ -13,11 +13,11 @@ derivation follows 4.4b. ``equations: printed`` integrates the printed state equ
 
 from __future__ import annotations
 
-import math
 from types import MappingProxyType
 
 from numba import njit
 
+from nlcx.kernel.trig import sincos
 from nlcx.plants.generated.pendulums import xyz_derived_rhs, xyz_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
 
@@ -33,8 +33,8 @@ def _xyz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
     M, m, l, g = p[P.M], p[P.m], p[P.l], p[P.g]
     F_x, F_y, F_z = u[0], u[1], u[2]
     x8, x9, x10 = x[7], x[8], x[9]
-    s7, c7 = math.sin(x[6]), math.cos(x[6])
-    s9, c9 = math.sin(x9), math.cos(x9)
+    s7, c7 = sincos(x[6])
+    s9, c9 = sincos(x9)
     dx[0] = x[1]  # eq. 4.18
     dx[1] = (  # eq. 4.19
         (M + m) * F_x

@@ -13,11 +13,11 @@ Lagrangian (docs/errata.md).
 
 from __future__ import annotations
 
-import math
 from types import MappingProxyType
 
 from numba import njit
 
+from nlcx.kernel.trig import sincos
 from nlcx.plants.generated.pendulums import xz_derived_rhs, xz_energy
 from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
 
@@ -33,7 +33,7 @@ def _xz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
     M, m, l, g = p[P.M], p[P.m], p[P.l], p[P.g]
     F_x, F_z = u[0], u[1]
     theta, theta_dot = x[4], x[5]
-    s, c = math.sin(theta), math.cos(theta)
+    s, c = sincos(theta)
     dx[0] = x[1]  # eq. 3.42
     dx[1] = (  # eq. 3.43
         -m * s * c * F_z + F_x * (M + m - m * s**2) + M * m * l * s * theta_dot**2

@@ -11,11 +11,12 @@ energy T + V, vectorised over leading axes of x.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
 from numba import njit
+
+from nlcx.kernel.trig import sincos_column
 
 
 @njit(cache=True, error_model="numpy")
@@ -23,22 +24,24 @@ def x_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x inverted pendulum derived from eqs. 2.1, 2.4-2.6 (Lagrange eqs. 2.2, 2.7).
 
     Row b of x is one variant: state (x, x_dot, theta, theta_dot),
-    input (F_x), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)
-    without allocating.
+    input (F_x), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u);
+    sin and cos of the angles for the whole batch by nlcx.kernel.trig.sincos_column.
     """
+    sc_theta = sincos_column(x, 2)
     for b in range(x.shape[0]):
         M = p[b, 0]
         m = p[b, 1]
         l = p[b, 2]
         g = p[b, 3]
-        theta = x[b, 2]
         theta_dot = x[b, 3]
         F_x = u[b, 0]
+        sin_theta = sc_theta[0, b]
+        cos_theta = sc_theta[1, b]
         w0 = l*m
-        w1 = w0*math.sin(theta)
+        w1 = w0*sin_theta
         # mass matrix M(q) (lower triangle, structural zeros omitted)
         m00 = M + m
-        m10 = w0*math.cos(theta)
+        m10 = w0*cos_theta
         m11 = l**2*m
         # b(q, q', u) = Q(u) - C(q, q') q' - dV/dq
         b0 = F_x + theta_dot**2*w1
@@ -65,29 +68,33 @@ def xy_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x-y inverted pendulum derived from eqs. 3.1, 3.4-3.6 (Lagrange eqs. 3.2, 3.7-3.10).
 
     Row b of x is one variant: state (x, x_dot, y, y_dot, theta, theta_dot, phi, phi_dot),
-    input (F_x, F_y), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)
-    without allocating.
+    input (F_x, F_y), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u);
+    sin and cos of the angles for the whole batch by nlcx.kernel.trig.sincos_column.
     """
+    sc_theta = sincos_column(x, 4)
+    sc_phi = sincos_column(x, 6)
     for b in range(x.shape[0]):
         M = p[b, 0]
         m = p[b, 1]
         l = p[b, 2]
         g = p[b, 3]
-        theta = x[b, 4]
         theta_dot = x[b, 5]
-        phi = x[b, 6]
         phi_dot = x[b, 7]
         F_x = u[b, 0]
         F_y = u[b, 1]
+        sin_theta = sc_theta[0, b]
+        cos_theta = sc_theta[1, b]
+        sin_phi = sc_phi[0, b]
+        cos_phi = sc_phi[1, b]
         w0 = M + m
-        w1 = math.cos(theta)
+        w1 = cos_theta
         w2 = l*w1
         w3 = m*w2
-        w4 = math.sin(phi)
-        w5 = l*math.sin(theta)
+        w4 = sin_phi
+        w5 = l*sin_theta
         w6 = m*w5
         w7 = l**2*m
-        w8 = math.cos(phi)
+        w8 = cos_phi
         w9 = theta_dot**2
         w10 = phi_dot**2
         w11 = w3*w4
@@ -142,22 +149,24 @@ def xz_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x-z inverted pendulum derived from eqs. 3.36-3.38 (Lagrange eqs. 3.34, 3.39-3.41).
 
     Row b of x is one variant: state (x, x_dot, z, z_dot, theta, theta_dot),
-    input (F_x, F_z), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)
-    without allocating.
+    input (F_x, F_z), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u);
+    sin and cos of the angles for the whole batch by nlcx.kernel.trig.sincos_column.
     """
+    sc_theta = sincos_column(x, 4)
     for b in range(x.shape[0]):
         M = p[b, 0]
         m = p[b, 1]
         l = p[b, 2]
         g = p[b, 3]
-        theta = x[b, 4]
         theta_dot = x[b, 5]
         F_x = u[b, 0]
         F_z = u[b, 1]
+        sin_theta = sc_theta[0, b]
+        cos_theta = sc_theta[1, b]
         w0 = M + m
         w1 = l*m
-        w2 = w1*math.cos(theta)
-        w3 = math.sin(theta)
+        w2 = w1*cos_theta
+        w3 = sin_theta
         w4 = w1*w3
         w5 = theta_dot**2
         w6 = g*m
@@ -200,30 +209,34 @@ def xyz_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x-y-z inverted pendulum derived from eqs. 4.1, 4.4-4.5 (Lagrange eqs. 4.2, 4.8-4.12).
 
     Row b of x is one variant: state (x, x_dot, y, y_dot, z, z_dot, theta, theta_dot, phi, phi_dot),
-    input (F_x, F_y, F_z), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)
-    without allocating.
+    input (F_x, F_y, F_z), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u);
+    sin and cos of the angles for the whole batch by nlcx.kernel.trig.sincos_column.
     """
+    sc_theta = sincos_column(x, 6)
+    sc_phi = sincos_column(x, 8)
     for b in range(x.shape[0]):
         M = p[b, 0]
         m = p[b, 1]
         l = p[b, 2]
         g = p[b, 3]
-        theta = x[b, 6]
         theta_dot = x[b, 7]
-        phi = x[b, 8]
         phi_dot = x[b, 9]
         F_x = u[b, 0]
         F_y = u[b, 1]
         F_z = u[b, 2]
+        sin_theta = sc_theta[0, b]
+        cos_theta = sc_theta[1, b]
+        sin_phi = sc_phi[0, b]
+        cos_phi = sc_phi[1, b]
         w0 = M + m
-        w1 = math.cos(theta)
+        w1 = cos_theta
         w2 = l*w1
         w3 = m*w2
-        w4 = math.sin(phi)
-        w5 = l*math.sin(theta)
+        w4 = sin_phi
+        w5 = l*sin_theta
         w6 = m*w5
         w7 = w4*w6
-        w8 = math.cos(phi)
+        w8 = cos_phi
         w9 = w6*w8
         w10 = l**2*m
         w11 = w3*w8
