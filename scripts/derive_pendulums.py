@@ -311,38 +311,49 @@ def emit_rhs(d: Derivation) -> str:
     source.update({s: f"u[b, {i}]" for i, s in enumerate(d.u)})
     order = [*d.params, *d.states, *d.u]
     angles = _trig_arguments([*(e for _, e in repl), *reduced], d.states)
+    trig = [f"{fn}_{names.get(q, q.name)}" for q, _ in angles for fn in ("sin", "cos")]
     head = "    "
     ind = head * 2
-    doc = (
-        f'{head}"""The {d.spec.title} derived from {d.spec.source}.\n\n'
-        f"{head}Row b of x is one variant: state ({', '.join(s.name for s in d.states)}),\n"
-        f"{head}input ({', '.join(s.name for s in d.u)}), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u);\n"
-        f"{head}sin and cos of the angles for the whole batch by nlcx.kernel.trig.sincos_column.\n"
-        f'{head}"""'
-    )
+    row = f"_{key}_derived_row"
     lines = [
+        '@njit(cache=True, inline="always", error_model="numpy")',
+        f"def {row}(b, x, u, p, dx, {', '.join(trig)}):  # pragma: no cover - compiled",
+        f'{head}"""dx[b] of {key}_derived_rhs for row b, given sin and cos of its angles."""',
+    ]
+    lines += _load(head, [s for s in order if s in used], source, names)
+    for sym, e in repl:
+        lines += _assign(head, sym.name, printer.doprint(e))
+    lines.append(f"{head}# mass matrix M(q) (lower triangle, structural zeros omitted)")
+    for (i, j), e in mass_out.items():
+        lines += _assign(head, f"m{i}{j}", printer.doprint(e))
+    lines.append(f"{head}# b(q, q', u) = Q(u) - C(q, q') q' - dV/dq")
+    for i, e in enumerate(b_out):
+        lines += _assign(head, f"b{i}", printer.doprint(e))
+    lines += _ldl_solve(n, zero, head)
+    for i in range(n):
+        lines.append(f"{head}dx[b, {2 * i}] = x[b, {2 * i + 1}]")
+        lines.append(f"{head}dx[b, {2 * i + 1}] = a{i}")
+    pairs = [f"sin_{names.get(q, q.name)}, cos_{names.get(q, q.name)} = sincos(x[b, {i}])" for q, i in angles]
+    columns = ", ".join(f"sc_{names.get(q, q.name)}[{k}, b]" for q, _ in angles for k in (0, 1))
+    lines += [
+        "",
+        "",
         '@njit(cache=True, error_model="numpy")',
         f"def {key}_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled",
-        doc,
+        f'{head}"""The {d.spec.title} derived from {d.spec.source}.\n',
+        f"{head}Row b of x is one variant: state ({', '.join(s.name for s in d.states)}),",
+        f"{head}input ({', '.join(s.name for s in d.u)}), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u).",
+        f"{head}sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,",
+        f"{head}or one at a time for fewer than COLUMN_ROWS rows (the same bits either way).",
+        f'{head}"""',
+        f"{head}if x.shape[0] < COLUMN_ROWS:",
+        f"{ind}for b in range(x.shape[0]):",
+        *(f"{ind}{head}{pair}" for pair in pairs),
+        f"{ind}{head}{row}(b, x, u, p, dx, {', '.join(trig)})",
+        f"{ind}return",
     ]
     lines += [f"{head}sc_{names.get(q, q.name)} = sincos_column(x, {i})" for q, i in angles]
-    lines.append(f"{head}for b in range(x.shape[0]):")
-    lines += _load(ind, [s for s in order if s in used], source, names)
-    for q, _ in angles:
-        name = names.get(q, q.name)
-        lines += [f"{ind}sin_{name} = sc_{name}[0, b]", f"{ind}cos_{name} = sc_{name}[1, b]"]
-    for sym, e in repl:
-        lines += _assign(ind, sym.name, printer.doprint(e))
-    lines.append(f"{ind}# mass matrix M(q) (lower triangle, structural zeros omitted)")
-    for (i, j), e in mass_out.items():
-        lines += _assign(ind, f"m{i}{j}", printer.doprint(e))
-    lines.append(f"{ind}# b(q, q', u) = Q(u) - C(q, q') q' - dV/dq")
-    for i, e in enumerate(b_out):
-        lines += _assign(ind, f"b{i}", printer.doprint(e))
-    lines += _ldl_solve(n, zero, ind)
-    for i in range(n):
-        lines.append(f"{ind}dx[b, {2 * i}] = x[b, {2 * i + 1}]")
-        lines.append(f"{ind}dx[b, {2 * i + 1}] = a{i}")
+    lines += [f"{head}for b in range(x.shape[0]):", f"{ind}{row}(b, x, u, p, dx, {columns})"]
     return "\n".join(lines) + "\n"
 
 
@@ -406,7 +417,7 @@ def emit_module() -> str:
         "from __future__ import annotations\n",
         "from collections.abc import Sequence\n",
         "import numpy as np\nfrom numba import njit\n",
-        "from nlcx.kernel.trig import sincos_column\n",
+        "from nlcx.kernel.trig import COLUMN_ROWS, sincos, sincos_column\n",
     ]
     text = "\n".join(parts)
     for d in derivations:

@@ -90,3 +90,25 @@ def test_zero_and_tiny_angles_as_libm() -> None:
     sc = _column(a)
     assert np.array_equal(sc[0], a) and np.array_equal(np.signbit(sc[0]), np.signbit(a))
     assert np.array_equal(sc[1], np.ones_like(a))
+
+
+@pytest.mark.parametrize(("model", "n", "n_u"), [("x", 4, 1), ("xy", 8, 2), ("xz", 6, 2), ("xyz", 10, 3)])
+def test_derived_equations_same_bits_in_any_batch(model: str, n: int, n_u: int) -> None:
+    """The generated right-hand sides take their sines per row below COLUMN_ROWS rows and per
+    column above: a variant's derivative is the same in a batch of 1, 3 or 50."""
+    from nlcx.kernel import trig
+    from nlcx.plants.generated import pendulums
+
+    rhs = getattr(pendulums, f"{model}_derived_rhs")
+    rows = 50
+    x = RNG.normal(size=(rows, n)) * 0.5
+    u = RNG.normal(size=(rows, n_u))
+    p = np.column_stack([RNG.uniform(0.8, 1.2, rows), RNG.uniform(0.08, 0.12, rows), RNG.uniform(0.24, 0.36, rows),
+                         np.full(rows, 9.81)])  # fmt: skip
+    whole = np.empty((rows, n))
+    rhs(0.0, x, u, p, whole)
+    for size in (1, trig.COLUMN_ROWS - 1, trig.COLUMN_ROWS, 7):
+        for start in range(0, rows - size, 11):
+            part = np.empty((size, n))
+            rhs(0.0, x[start : start + size], u[start : start + size], p[start : start + size], part)
+            assert np.array_equal(part, whole[start : start + size]), (size, start)

@@ -25,6 +25,9 @@ import math
 import numpy as np
 from numba import njit
 
+#: Batches of at least this many rows take :func:`sincos_column` (its work array costs about
+#: as much as three angles one at a time); smaller ones call :func:`sincos` per row.
+COLUMN_ROWS = 4
 #: Beyond this |x| (rad) the two-part reduction is not trusted; libm takes over.
 REDUCTION_LIMIT = 1.0e5
 #: Below this |x| sin x = x and cos x = 1 to the last bit (and sin keeps the sign of zero).

@@ -16,7 +16,42 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
-from nlcx.kernel.trig import sincos_column
+from nlcx.kernel.trig import COLUMN_ROWS, sincos, sincos_column
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _x_derived_row(b, x, u, p, dx, sin_theta, cos_theta):  # pragma: no cover - compiled
+    """dx[b] of x_derived_rhs for row b, given sin and cos of its angles."""
+    M = p[b, 0]
+    m = p[b, 1]
+    l = p[b, 2]
+    g = p[b, 3]
+    theta_dot = x[b, 3]
+    F_x = u[b, 0]
+    w0 = l*m
+    w1 = w0*sin_theta
+    # mass matrix M(q) (lower triangle, structural zeros omitted)
+    m00 = M + m
+    m10 = w0*cos_theta
+    m11 = l**2*m
+    # b(q, q', u) = Q(u) - C(q, q') q' - dV/dq
+    b0 = F_x + theta_dot**2*w1
+    b1 = g*w1
+    # M q'' = b by LDL^T: M = L D L^T with unit lower-triangular L
+    d0 = m00
+    r0 = 1.0 / d0
+    L10 = m10 * r0
+    d1 = m11 - L10 * L10 * d0
+    r1 = 1.0 / d1
+    # forward substitution L z = b, then z / D, then back substitution L^T a = z / D
+    z0 = b0
+    z1 = b1 - L10 * z0
+    a1 = z1 * r1
+    a0 = z0 * r0 - L10 * a1
+    dx[b, 0] = x[b, 1]
+    dx[b, 1] = a0
+    dx[b, 2] = x[b, 3]
+    dx[b, 3] = a1
 
 
 @njit(cache=True, error_model="numpy")
@@ -24,43 +59,87 @@ def x_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x inverted pendulum derived from eqs. 2.1, 2.4-2.6 (Lagrange eqs. 2.2, 2.7).
 
     Row b of x is one variant: state (x, x_dot, theta, theta_dot),
-    input (F_x), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u);
-    sin and cos of the angles for the whole batch by nlcx.kernel.trig.sincos_column.
+    input (F_x), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u).
+    sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,
+    or one at a time for fewer than COLUMN_ROWS rows (the same bits either way).
     """
+    if x.shape[0] < COLUMN_ROWS:
+        for b in range(x.shape[0]):
+            sin_theta, cos_theta = sincos(x[b, 2])
+            _x_derived_row(b, x, u, p, dx, sin_theta, cos_theta)
+        return
     sc_theta = sincos_column(x, 2)
     for b in range(x.shape[0]):
-        M = p[b, 0]
-        m = p[b, 1]
-        l = p[b, 2]
-        g = p[b, 3]
-        theta_dot = x[b, 3]
-        F_x = u[b, 0]
-        sin_theta = sc_theta[0, b]
-        cos_theta = sc_theta[1, b]
-        w0 = l*m
-        w1 = w0*sin_theta
-        # mass matrix M(q) (lower triangle, structural zeros omitted)
-        m00 = M + m
-        m10 = w0*cos_theta
-        m11 = l**2*m
-        # b(q, q', u) = Q(u) - C(q, q') q' - dV/dq
-        b0 = F_x + theta_dot**2*w1
-        b1 = g*w1
-        # M q'' = b by LDL^T: M = L D L^T with unit lower-triangular L
-        d0 = m00
-        r0 = 1.0 / d0
-        L10 = m10 * r0
-        d1 = m11 - L10 * L10 * d0
-        r1 = 1.0 / d1
-        # forward substitution L z = b, then z / D, then back substitution L^T a = z / D
-        z0 = b0
-        z1 = b1 - L10 * z0
-        a1 = z1 * r1
-        a0 = z0 * r0 - L10 * a1
-        dx[b, 0] = x[b, 1]
-        dx[b, 1] = a0
-        dx[b, 2] = x[b, 3]
-        dx[b, 3] = a1
+        _x_derived_row(b, x, u, p, dx, sc_theta[0, b], sc_theta[1, b])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _xy_derived_row(b, x, u, p, dx, sin_theta, cos_theta, sin_phi, cos_phi):  # pragma: no cover - compiled
+    """dx[b] of xy_derived_rhs for row b, given sin and cos of its angles."""
+    M = p[b, 0]
+    m = p[b, 1]
+    l = p[b, 2]
+    g = p[b, 3]
+    theta_dot = x[b, 5]
+    phi_dot = x[b, 7]
+    F_x = u[b, 0]
+    F_y = u[b, 1]
+    w0 = M + m
+    w1 = cos_theta
+    w2 = l*w1
+    w3 = m*w2
+    w4 = sin_phi
+    w5 = l*sin_theta
+    w6 = m*w5
+    w7 = l**2*m
+    w8 = cos_phi
+    w9 = theta_dot**2
+    w10 = phi_dot**2
+    w11 = w3*w4
+    w12 = 2*phi_dot*theta_dot
+    # mass matrix M(q) (lower triangle, structural zeros omitted)
+    m00 = w0
+    m11 = w0
+    m20 = w3
+    m21 = -w4*w6
+    m22 = w7
+    m31 = w3*w8
+    m33 = w1**2*w7
+    # b(q, q', u) = Q(u) - C(q, q') q' - dV/dq
+    b0 = F_x + w6*w9
+    b1 = F_y + w10*w11 + w11*w9 + w12*w6*w8
+    b2 = w6*(g*w8 - w10*w2)
+    b3 = w3*(g*w4 + w12*w5)
+    # M q'' = b by LDL^T: M = L D L^T with unit lower-triangular L
+    d0 = m00
+    r0 = 1.0 / d0
+    L20 = m20 * r0
+    d1 = m11
+    r1 = 1.0 / d1
+    L21 = m21 * r1
+    L31 = m31 * r1
+    d2 = m22 - L20 * L20 * d0 - L21 * L21 * d1
+    r2 = 1.0 / d2
+    L32 = (0.0 - L31 * L21 * d1) * r2
+    d3 = m33 - L31 * L31 * d1 - L32 * L32 * d2
+    r3 = 1.0 / d3
+    # forward substitution L z = b, then z / D, then back substitution L^T a = z / D
+    z0 = b0
+    z1 = b1
+    z2 = b2 - L20 * z0 - L21 * z1
+    z3 = b3 - L31 * z1 - L32 * z2
+    a3 = z3 * r3
+    a2 = z2 * r2 - L32 * a3
+    a1 = z1 * r1 - L21 * a2 - L31 * a3
+    a0 = z0 * r0 - L20 * a2
+    dx[b, 0] = x[b, 1]
+    dx[b, 1] = a0
+    dx[b, 2] = x[b, 3]
+    dx[b, 3] = a1
+    dx[b, 4] = x[b, 5]
+    dx[b, 5] = a2
+    dx[b, 6] = x[b, 7]
+    dx[b, 7] = a3
 
 
 @njit(cache=True, error_model="numpy")
@@ -68,80 +147,71 @@ def xy_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x-y inverted pendulum derived from eqs. 3.1, 3.4-3.6 (Lagrange eqs. 3.2, 3.7-3.10).
 
     Row b of x is one variant: state (x, x_dot, y, y_dot, theta, theta_dot, phi, phi_dot),
-    input (F_x, F_y), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u);
-    sin and cos of the angles for the whole batch by nlcx.kernel.trig.sincos_column.
+    input (F_x, F_y), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u).
+    sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,
+    or one at a time for fewer than COLUMN_ROWS rows (the same bits either way).
     """
+    if x.shape[0] < COLUMN_ROWS:
+        for b in range(x.shape[0]):
+            sin_theta, cos_theta = sincos(x[b, 4])
+            sin_phi, cos_phi = sincos(x[b, 6])
+            _xy_derived_row(b, x, u, p, dx, sin_theta, cos_theta, sin_phi, cos_phi)
+        return
     sc_theta = sincos_column(x, 4)
     sc_phi = sincos_column(x, 6)
     for b in range(x.shape[0]):
-        M = p[b, 0]
-        m = p[b, 1]
-        l = p[b, 2]
-        g = p[b, 3]
-        theta_dot = x[b, 5]
-        phi_dot = x[b, 7]
-        F_x = u[b, 0]
-        F_y = u[b, 1]
-        sin_theta = sc_theta[0, b]
-        cos_theta = sc_theta[1, b]
-        sin_phi = sc_phi[0, b]
-        cos_phi = sc_phi[1, b]
-        w0 = M + m
-        w1 = cos_theta
-        w2 = l*w1
-        w3 = m*w2
-        w4 = sin_phi
-        w5 = l*sin_theta
-        w6 = m*w5
-        w7 = l**2*m
-        w8 = cos_phi
-        w9 = theta_dot**2
-        w10 = phi_dot**2
-        w11 = w3*w4
-        w12 = 2*phi_dot*theta_dot
-        # mass matrix M(q) (lower triangle, structural zeros omitted)
-        m00 = w0
-        m11 = w0
-        m20 = w3
-        m21 = -w4*w6
-        m22 = w7
-        m31 = w3*w8
-        m33 = w1**2*w7
-        # b(q, q', u) = Q(u) - C(q, q') q' - dV/dq
-        b0 = F_x + w6*w9
-        b1 = F_y + w10*w11 + w11*w9 + w12*w6*w8
-        b2 = w6*(g*w8 - w10*w2)
-        b3 = w3*(g*w4 + w12*w5)
-        # M q'' = b by LDL^T: M = L D L^T with unit lower-triangular L
-        d0 = m00
-        r0 = 1.0 / d0
-        L20 = m20 * r0
-        d1 = m11
-        r1 = 1.0 / d1
-        L21 = m21 * r1
-        L31 = m31 * r1
-        d2 = m22 - L20 * L20 * d0 - L21 * L21 * d1
-        r2 = 1.0 / d2
-        L32 = (0.0 - L31 * L21 * d1) * r2
-        d3 = m33 - L31 * L31 * d1 - L32 * L32 * d2
-        r3 = 1.0 / d3
-        # forward substitution L z = b, then z / D, then back substitution L^T a = z / D
-        z0 = b0
-        z1 = b1
-        z2 = b2 - L20 * z0 - L21 * z1
-        z3 = b3 - L31 * z1 - L32 * z2
-        a3 = z3 * r3
-        a2 = z2 * r2 - L32 * a3
-        a1 = z1 * r1 - L21 * a2 - L31 * a3
-        a0 = z0 * r0 - L20 * a2
-        dx[b, 0] = x[b, 1]
-        dx[b, 1] = a0
-        dx[b, 2] = x[b, 3]
-        dx[b, 3] = a1
-        dx[b, 4] = x[b, 5]
-        dx[b, 5] = a2
-        dx[b, 6] = x[b, 7]
-        dx[b, 7] = a3
+        _xy_derived_row(b, x, u, p, dx, sc_theta[0, b], sc_theta[1, b], sc_phi[0, b], sc_phi[1, b])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _xz_derived_row(b, x, u, p, dx, sin_theta, cos_theta):  # pragma: no cover - compiled
+    """dx[b] of xz_derived_rhs for row b, given sin and cos of its angles."""
+    M = p[b, 0]
+    m = p[b, 1]
+    l = p[b, 2]
+    g = p[b, 3]
+    theta_dot = x[b, 5]
+    F_x = u[b, 0]
+    F_z = u[b, 1]
+    w0 = M + m
+    w1 = l*m
+    w2 = w1*cos_theta
+    w3 = sin_theta
+    w4 = w1*w3
+    w5 = theta_dot**2
+    w6 = g*m
+    # mass matrix M(q) (lower triangle, structural zeros omitted)
+    m00 = w0
+    m11 = w0
+    m20 = w2
+    m21 = -w4
+    m22 = l**2*m
+    # b(q, q', u) = Q(u) - C(q, q') q' - dV/dq
+    b0 = F_x + w4*w5
+    b1 = F_z - M*g + w2*w5 - w6
+    b2 = l*w3*w6
+    # M q'' = b by LDL^T: M = L D L^T with unit lower-triangular L
+    d0 = m00
+    r0 = 1.0 / d0
+    L20 = m20 * r0
+    d1 = m11
+    r1 = 1.0 / d1
+    L21 = m21 * r1
+    d2 = m22 - L20 * L20 * d0 - L21 * L21 * d1
+    r2 = 1.0 / d2
+    # forward substitution L z = b, then z / D, then back substitution L^T a = z / D
+    z0 = b0
+    z1 = b1
+    z2 = b2 - L20 * z0 - L21 * z1
+    a2 = z2 * r2
+    a1 = z1 * r1 - L21 * a2
+    a0 = z0 * r0 - L20 * a2
+    dx[b, 0] = x[b, 1]
+    dx[b, 1] = a0
+    dx[b, 2] = x[b, 3]
+    dx[b, 3] = a1
+    dx[b, 4] = x[b, 5]
+    dx[b, 5] = a2
 
 
 @njit(cache=True, error_model="numpy")
@@ -149,59 +219,103 @@ def xz_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x-z inverted pendulum derived from eqs. 3.36-3.38 (Lagrange eqs. 3.34, 3.39-3.41).
 
     Row b of x is one variant: state (x, x_dot, z, z_dot, theta, theta_dot),
-    input (F_x, F_z), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u);
-    sin and cos of the angles for the whole batch by nlcx.kernel.trig.sincos_column.
+    input (F_x, F_z), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u).
+    sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,
+    or one at a time for fewer than COLUMN_ROWS rows (the same bits either way).
     """
+    if x.shape[0] < COLUMN_ROWS:
+        for b in range(x.shape[0]):
+            sin_theta, cos_theta = sincos(x[b, 4])
+            _xz_derived_row(b, x, u, p, dx, sin_theta, cos_theta)
+        return
     sc_theta = sincos_column(x, 4)
     for b in range(x.shape[0]):
-        M = p[b, 0]
-        m = p[b, 1]
-        l = p[b, 2]
-        g = p[b, 3]
-        theta_dot = x[b, 5]
-        F_x = u[b, 0]
-        F_z = u[b, 1]
-        sin_theta = sc_theta[0, b]
-        cos_theta = sc_theta[1, b]
-        w0 = M + m
-        w1 = l*m
-        w2 = w1*cos_theta
-        w3 = sin_theta
-        w4 = w1*w3
-        w5 = theta_dot**2
-        w6 = g*m
-        # mass matrix M(q) (lower triangle, structural zeros omitted)
-        m00 = w0
-        m11 = w0
-        m20 = w2
-        m21 = -w4
-        m22 = l**2*m
-        # b(q, q', u) = Q(u) - C(q, q') q' - dV/dq
-        b0 = F_x + w4*w5
-        b1 = F_z - M*g + w2*w5 - w6
-        b2 = l*w3*w6
-        # M q'' = b by LDL^T: M = L D L^T with unit lower-triangular L
-        d0 = m00
-        r0 = 1.0 / d0
-        L20 = m20 * r0
-        d1 = m11
-        r1 = 1.0 / d1
-        L21 = m21 * r1
-        d2 = m22 - L20 * L20 * d0 - L21 * L21 * d1
-        r2 = 1.0 / d2
-        # forward substitution L z = b, then z / D, then back substitution L^T a = z / D
-        z0 = b0
-        z1 = b1
-        z2 = b2 - L20 * z0 - L21 * z1
-        a2 = z2 * r2
-        a1 = z1 * r1 - L21 * a2
-        a0 = z0 * r0 - L20 * a2
-        dx[b, 0] = x[b, 1]
-        dx[b, 1] = a0
-        dx[b, 2] = x[b, 3]
-        dx[b, 3] = a1
-        dx[b, 4] = x[b, 5]
-        dx[b, 5] = a2
+        _xz_derived_row(b, x, u, p, dx, sc_theta[0, b], sc_theta[1, b])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _xyz_derived_row(b, x, u, p, dx, sin_theta, cos_theta, sin_phi, cos_phi):  # pragma: no cover - compiled
+    """dx[b] of xyz_derived_rhs for row b, given sin and cos of its angles."""
+    M = p[b, 0]
+    m = p[b, 1]
+    l = p[b, 2]
+    g = p[b, 3]
+    theta_dot = x[b, 7]
+    phi_dot = x[b, 9]
+    F_x = u[b, 0]
+    F_y = u[b, 1]
+    F_z = u[b, 2]
+    w0 = M + m
+    w1 = cos_theta
+    w2 = l*w1
+    w3 = m*w2
+    w4 = sin_phi
+    w5 = l*sin_theta
+    w6 = m*w5
+    w7 = w4*w6
+    w8 = cos_phi
+    w9 = w6*w8
+    w10 = l**2*m
+    w11 = w3*w8
+    w12 = w3*w4
+    w13 = theta_dot**2
+    w14 = phi_dot**2
+    w15 = 2*phi_dot*theta_dot
+    # mass matrix M(q) (lower triangle, structural zeros omitted)
+    m00 = w0
+    m11 = w0
+    m22 = w0
+    m30 = w3
+    m31 = -w7
+    m32 = -w9
+    m33 = w10
+    m41 = w11
+    m42 = -w12
+    m44 = w1**2*w10
+    # b(q, q', u) = Q(u) - C(q, q') q' - dV/dq
+    b0 = F_x + w13*w6
+    b1 = F_y + w12*w13 + w12*w14 + w15*w9
+    b2 = F_z - M*g - g*m + w11*w13 + w11*w14 - w15*w7
+    b3 = w6*(g*w8 - w14*w2)
+    b4 = w3*(g*w4 + w15*w5)
+    # M q'' = b by LDL^T: M = L D L^T with unit lower-triangular L
+    d0 = m00
+    r0 = 1.0 / d0
+    L30 = m30 * r0
+    d1 = m11
+    r1 = 1.0 / d1
+    L31 = m31 * r1
+    L41 = m41 * r1
+    d2 = m22
+    r2 = 1.0 / d2
+    L32 = m32 * r2
+    L42 = m42 * r2
+    d3 = m33 - L30 * L30 * d0 - L31 * L31 * d1 - L32 * L32 * d2
+    r3 = 1.0 / d3
+    L43 = (0.0 - L41 * L31 * d1 - L42 * L32 * d2) * r3
+    d4 = m44 - L41 * L41 * d1 - L42 * L42 * d2 - L43 * L43 * d3
+    r4 = 1.0 / d4
+    # forward substitution L z = b, then z / D, then back substitution L^T a = z / D
+    z0 = b0
+    z1 = b1
+    z2 = b2
+    z3 = b3 - L30 * z0 - L31 * z1 - L32 * z2
+    z4 = b4 - L41 * z1 - L42 * z2 - L43 * z3
+    a4 = z4 * r4
+    a3 = z3 * r3 - L43 * a4
+    a2 = z2 * r2 - L32 * a3 - L42 * a4
+    a1 = z1 * r1 - L31 * a3 - L41 * a4
+    a0 = z0 * r0 - L30 * a3
+    dx[b, 0] = x[b, 1]
+    dx[b, 1] = a0
+    dx[b, 2] = x[b, 3]
+    dx[b, 3] = a1
+    dx[b, 4] = x[b, 5]
+    dx[b, 5] = a2
+    dx[b, 6] = x[b, 7]
+    dx[b, 7] = a3
+    dx[b, 8] = x[b, 9]
+    dx[b, 9] = a4
 
 
 @njit(cache=True, error_model="numpy")
@@ -209,96 +323,20 @@ def xyz_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
     """The x-y-z inverted pendulum derived from eqs. 4.1, 4.4-4.5 (Lagrange eqs. 4.2, 4.8-4.12).
 
     Row b of x is one variant: state (x, x_dot, y, y_dot, z, z_dot, theta, theta_dot, phi, phi_dot),
-    input (F_x, F_y, F_z), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u);
-    sin and cos of the angles for the whole batch by nlcx.kernel.trig.sincos_column.
+    input (F_x, F_y, F_z), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u).
+    sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,
+    or one at a time for fewer than COLUMN_ROWS rows (the same bits either way).
     """
+    if x.shape[0] < COLUMN_ROWS:
+        for b in range(x.shape[0]):
+            sin_theta, cos_theta = sincos(x[b, 6])
+            sin_phi, cos_phi = sincos(x[b, 8])
+            _xyz_derived_row(b, x, u, p, dx, sin_theta, cos_theta, sin_phi, cos_phi)
+        return
     sc_theta = sincos_column(x, 6)
     sc_phi = sincos_column(x, 8)
     for b in range(x.shape[0]):
-        M = p[b, 0]
-        m = p[b, 1]
-        l = p[b, 2]
-        g = p[b, 3]
-        theta_dot = x[b, 7]
-        phi_dot = x[b, 9]
-        F_x = u[b, 0]
-        F_y = u[b, 1]
-        F_z = u[b, 2]
-        sin_theta = sc_theta[0, b]
-        cos_theta = sc_theta[1, b]
-        sin_phi = sc_phi[0, b]
-        cos_phi = sc_phi[1, b]
-        w0 = M + m
-        w1 = cos_theta
-        w2 = l*w1
-        w3 = m*w2
-        w4 = sin_phi
-        w5 = l*sin_theta
-        w6 = m*w5
-        w7 = w4*w6
-        w8 = cos_phi
-        w9 = w6*w8
-        w10 = l**2*m
-        w11 = w3*w8
-        w12 = w3*w4
-        w13 = theta_dot**2
-        w14 = phi_dot**2
-        w15 = 2*phi_dot*theta_dot
-        # mass matrix M(q) (lower triangle, structural zeros omitted)
-        m00 = w0
-        m11 = w0
-        m22 = w0
-        m30 = w3
-        m31 = -w7
-        m32 = -w9
-        m33 = w10
-        m41 = w11
-        m42 = -w12
-        m44 = w1**2*w10
-        # b(q, q', u) = Q(u) - C(q, q') q' - dV/dq
-        b0 = F_x + w13*w6
-        b1 = F_y + w12*w13 + w12*w14 + w15*w9
-        b2 = F_z - M*g - g*m + w11*w13 + w11*w14 - w15*w7
-        b3 = w6*(g*w8 - w14*w2)
-        b4 = w3*(g*w4 + w15*w5)
-        # M q'' = b by LDL^T: M = L D L^T with unit lower-triangular L
-        d0 = m00
-        r0 = 1.0 / d0
-        L30 = m30 * r0
-        d1 = m11
-        r1 = 1.0 / d1
-        L31 = m31 * r1
-        L41 = m41 * r1
-        d2 = m22
-        r2 = 1.0 / d2
-        L32 = m32 * r2
-        L42 = m42 * r2
-        d3 = m33 - L30 * L30 * d0 - L31 * L31 * d1 - L32 * L32 * d2
-        r3 = 1.0 / d3
-        L43 = (0.0 - L41 * L31 * d1 - L42 * L32 * d2) * r3
-        d4 = m44 - L41 * L41 * d1 - L42 * L42 * d2 - L43 * L43 * d3
-        r4 = 1.0 / d4
-        # forward substitution L z = b, then z / D, then back substitution L^T a = z / D
-        z0 = b0
-        z1 = b1
-        z2 = b2
-        z3 = b3 - L30 * z0 - L31 * z1 - L32 * z2
-        z4 = b4 - L41 * z1 - L42 * z2 - L43 * z3
-        a4 = z4 * r4
-        a3 = z3 * r3 - L43 * a4
-        a2 = z2 * r2 - L32 * a3 - L42 * a4
-        a1 = z1 * r1 - L31 * a3 - L41 * a4
-        a0 = z0 * r0 - L30 * a3
-        dx[b, 0] = x[b, 1]
-        dx[b, 1] = a0
-        dx[b, 2] = x[b, 3]
-        dx[b, 3] = a1
-        dx[b, 4] = x[b, 5]
-        dx[b, 5] = a2
-        dx[b, 6] = x[b, 7]
-        dx[b, 7] = a3
-        dx[b, 8] = x[b, 9]
-        dx[b, 9] = a4
+        _xyz_derived_row(b, x, u, p, dx, sc_theta[0, b], sc_theta[1, b], sc_phi[0, b], sc_phi[1, b])
 
 
 def x_energy(x: np.ndarray, p: Sequence[float]) -> np.ndarray:
