@@ -291,18 +291,32 @@ def _load(indent: str, symbols: list[sp.Symbol], source: dict[sp.Symbol, str], n
 
 
 def emit_rhs(d: Derivation) -> str:
-    """The numba right-hand side ``{key}_derived_rhs(t, x, u, p, dx)`` of one model."""
-    key, n = d.spec.key, len(d.q)
+    """The numba right-hand side ``{key}_derived_rhs(t, x, u, p, dx)`` of one model: its row
+    function (the Euler-Lagrange equations of one variant) and the loop over the batch."""
     names = _code_names()
-    printer = _Printer(None, names)
-    lower = [(i, j) for i in range(n) for j in range(i + 1)]
-    zero = [[d.mass[i, j] == 0 for j in range(n)] for i in range(n)]
+    lower = [(i, j) for i in range(len(d.q)) for j in range(i + 1)]
+    zero = [[d.mass[i, j] == 0 for j in range(len(d.q))] for i in range(len(d.q))]
     entries = [d.mass[i, j] for i, j in lower if not zero[i][j]]
     repl, reduced = _cse([*entries, *list(d.b)], "w")
-    nonzero = [ij for ij in lower if not zero[ij[0]][ij[1]]]
-    mass_out = dict(zip(nonzero, reduced[: len(entries)], strict=True))
-    b_out = reduced[len(entries) :]
+    angles = _trig_arguments([*(e for _, e in repl), *reduced], d.states)
+    angle_names = [(names.get(q, q.name), i) for q, i in angles]
+    return _emit_row(d, names, zero, repl, reduced, angle_names) + "\n\n" + _emit_batch(d, angle_names)
 
+
+def _emit_row(
+    d: Derivation,
+    names: dict[sp.Symbol, str],
+    zero: list[list[bool]],
+    repl: list[tuple[sp.Symbol, sp.Expr]],
+    reduced: list[sp.Expr],
+    angles: list[tuple[str, int]],
+) -> str:
+    """``_{key}_derived_row(b, x, u, p, dx, sin_q, cos_q, ...)``: dx[b] from M(q) q'' = b(q, q', u)
+    of row b, given sin and cos of its angles (inlined into the batch loop)."""
+    key, n, head = d.spec.key, len(d.q), "    "
+    printer = _Printer(None, names)
+    nonzero = [(i, j) for i in range(n) for j in range(i + 1) if not zero[i][j]]
+    mass_out = dict(zip(nonzero, reduced[: len(nonzero)], strict=True))
     used = set()
     for e in [*(e for _, e in repl), *reduced]:
         used |= e.xreplace({f: sp.Dummy() for f in e.atoms(sp.sin, sp.cos)}).free_symbols
@@ -310,14 +324,10 @@ def emit_rhs(d: Derivation) -> str:
     source.update({s: f"x[b, {i}]" for i, s in enumerate(d.states)})
     source.update({s: f"u[b, {i}]" for i, s in enumerate(d.u)})
     order = [*d.params, *d.states, *d.u]
-    angles = _trig_arguments([*(e for _, e in repl), *reduced], d.states)
-    trig = [f"{fn}_{names.get(q, q.name)}" for q, _ in angles for fn in ("sin", "cos")]
-    head = "    "
-    ind = head * 2
-    row = f"_{key}_derived_row"
+    trig = ", ".join(f"sin_{name}, cos_{name}" for name, _ in angles)
     lines = [
         '@njit(cache=True, inline="always", error_model="numpy")',
-        f"def {row}(b, x, u, p, dx, {', '.join(trig)}):  # pragma: no cover - compiled",
+        f"def _{key}_derived_row(b, x, u, p, dx, {trig}):  # pragma: no cover - compiled",
         f'{head}"""dx[b] of {key}_derived_rhs for row b, given sin and cos of its angles."""',
     ]
     lines += _load(head, [s for s in order if s in used], source, names)
@@ -327,17 +337,24 @@ def emit_rhs(d: Derivation) -> str:
     for (i, j), e in mass_out.items():
         lines += _assign(head, f"m{i}{j}", printer.doprint(e))
     lines.append(f"{head}# b(q, q', u) = Q(u) - C(q, q') q' - dV/dq")
-    for i, e in enumerate(b_out):
+    for i, e in enumerate(reduced[len(nonzero) :]):
         lines += _assign(head, f"b{i}", printer.doprint(e))
     lines += _ldl_solve(n, zero, head)
     for i in range(n):
         lines.append(f"{head}dx[b, {2 * i}] = x[b, {2 * i + 1}]")
         lines.append(f"{head}dx[b, {2 * i + 1}] = a{i}")
-    pairs = [f"sin_{names.get(q, q.name)}, cos_{names.get(q, q.name)} = sincos(x[b, {i}])" for q, i in angles]
-    columns = ", ".join(f"sc_{names.get(q, q.name)}[{k}, b]" for q, _ in angles for k in (0, 1))
-    lines += [
-        "",
-        "",
+    return "\n".join(lines) + "\n"
+
+
+def _emit_batch(d: Derivation, angles: list[tuple[str, int]]) -> str:
+    """``{key}_derived_rhs``: the row function for every row, sin and cos of the angles from
+    :mod:`nlcx.kernel.trig`, per column for a batch, per row below ``COLUMN_ROWS`` rows."""
+    key, head = d.spec.key, "    "
+    ind = head * 2
+    row = f"_{key}_derived_row"
+    trig = ", ".join(f"sin_{name}, cos_{name}" for name, _ in angles)
+    columns = ", ".join(f"sc_{name}[0, b], sc_{name}[1, b]" for name, _ in angles)
+    lines = [
         '@njit(cache=True, error_model="numpy")',
         f"def {key}_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled",
         f'{head}"""The {d.spec.title} derived from {d.spec.source}.\n',
@@ -348,12 +365,13 @@ def emit_rhs(d: Derivation) -> str:
         f'{head}"""',
         f"{head}if x.shape[0] < COLUMN_ROWS:",
         f"{ind}for b in range(x.shape[0]):",
-        *(f"{ind}{head}{pair}" for pair in pairs),
-        f"{ind}{head}{row}(b, x, u, p, dx, {', '.join(trig)})",
+        *(f"{ind}{head}sin_{name}, cos_{name} = sincos(x[b, {i}])" for name, i in angles),
+        f"{ind}{head}{row}(b, x, u, p, dx, {trig})",
         f"{ind}return",
+        *(f"{head}sc_{name} = sincos_column(x, {i})" for name, i in angles),
+        f"{head}for b in range(x.shape[0]):",
+        f"{ind}{row}(b, x, u, p, dx, {columns})",
     ]
-    lines += [f"{head}sc_{names.get(q, q.name)} = sincos_column(x, {i})" for q, i in angles]
-    lines += [f"{head}for b in range(x.shape[0]):", f"{ind}{row}(b, x, u, p, dx, {columns})"]
     return "\n".join(lines) + "\n"
 
 
