@@ -112,3 +112,13 @@ def test_derived_equations_same_bits_in_any_batch(model: str, n: int, n_u: int) 
             part = np.empty((size, n))
             rhs(0.0, x[start : start + size], u[start : start + size], p[start : start + size], part)
             assert np.array_equal(part, whole[start : start + size]), (size, start)
+
+
+def test_no_contraction_in_the_compiled_code() -> None:
+    """The same-bits property rests on every multiply and add being rounded on its own: no
+    fast-math flags, no fused multiply-add in the compiled IR of the vector loop."""
+    _column(np.zeros(3))
+    ir = sincos_column.inspect_llvm(sincos_column.signatures[0])
+    assert "fadd" in ir and "fmul" in ir
+    for marker in ("contract", "fast ", "llvm.fma", "llvm.fmuladd"):
+        assert marker not in ir, marker
