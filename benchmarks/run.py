@@ -10,7 +10,8 @@
     limit reference (benchmarks/reference.py) of the same variants, alternated in one run:
     ns per variant-step, simulated seconds per wall second and their ratio (goal <= 1.3); and
     the kernels alone in one process: nlcx's kernel, the reference's loop with nlcx's PID and
-    the limit, per variant-step, with their trajectories checked bit for bit against nlcx's.
+    the limit, per variant-step; the loop with nlcx's PID checked bit for bit against nlcx's,
+    the limit (libm's sin and cos, nlcx's own: docs/assumptions.md A30) to rounding.
 (c) `nlcx reproduce` of every thesis figure and table, calibration excluded (target <= 120 s).
 (d) the experiment of (a), proposed controller, through python-control's input_output_response
     and scipy's solve_ivp (RK45, the PID integrators in the ODE), with the speed ratios and the

@@ -300,7 +300,8 @@ def emit_rhs(d: Derivation) -> str:
     repl, reduced = _cse([*entries, *list(d.b)], "w")
     angles = _trig_arguments([*(e for _, e in repl), *reduced], d.states)
     angle_names = [(names.get(q, q.name), i) for q, i in angles]
-    return _emit_row(d, names, zero, repl, reduced, angle_names) + "\n\n" + _emit_batch(d, angle_names)
+    trig = ", ".join(f"sin_{name}, cos_{name}" for name, _ in angle_names)
+    return _emit_row(d, names, zero, repl, reduced, trig) + "\n\n" + _emit_batch(d, angle_names, trig)
 
 
 def _emit_row(
@@ -309,10 +310,11 @@ def _emit_row(
     zero: list[list[bool]],
     repl: list[tuple[sp.Symbol, sp.Expr]],
     reduced: list[sp.Expr],
-    angles: list[tuple[str, int]],
+    trig: str,
 ) -> str:
     """``_{key}_derived_row(b, x, u, p, dx, sin_q, cos_q, ...)``: dx[b] from M(q) q'' = b(q, q', u)
-    of row b, given sin and cos of its angles (inlined into the batch loop)."""
+    of row b, given sin and cos of its angles (``trig``: those parameters; inlined into the
+    batch loop)."""
     key, n, head = d.spec.key, len(d.q), "    "
     printer = _Printer(None, names)
     nonzero = [(i, j) for i in range(n) for j in range(i + 1) if not zero[i][j]]
@@ -324,7 +326,6 @@ def _emit_row(
     source.update({s: f"x[b, {i}]" for i, s in enumerate(d.states)})
     source.update({s: f"u[b, {i}]" for i, s in enumerate(d.u)})
     order = [*d.params, *d.states, *d.u]
-    trig = ", ".join(f"sin_{name}, cos_{name}" for name, _ in angles)
     lines = [
         '@njit(cache=True, inline="always", error_model="numpy")',
         f"def _{key}_derived_row(b, x, u, p, dx, {trig}):  # pragma: no cover - compiled",
@@ -346,13 +347,12 @@ def _emit_row(
     return "\n".join(lines) + "\n"
 
 
-def _emit_batch(d: Derivation, angles: list[tuple[str, int]]) -> str:
+def _emit_batch(d: Derivation, angles: list[tuple[str, int]], trig: str) -> str:
     """``{key}_derived_rhs``: the row function for every row, sin and cos of the angles from
     :mod:`nlcx.kernel.trig`, per column for a batch, per row below ``COLUMN_ROWS`` rows."""
     key, head = d.spec.key, "    "
     ind = head * 2
     row = f"_{key}_derived_row"
-    trig = ", ".join(f"sin_{name}, cos_{name}" for name, _ in angles)
     columns = ", ".join(f"sc_{name}[0, b], sc_{name}[1, b]" for name, _ in angles)
     lines = [
         '@njit(cache=True, error_model="numpy")',
