@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from nlcx.kernel.trig import REDUCTION_LIMIT, TINY, sincos, sincos_column
+from nlcx.kernel.trig import NO_REDUCTION, REDUCTION_LIMIT, TINY, sincos, sincos_column
 
 RNG = np.random.default_rng(20261124)
 HALF_PI_MULTIPLES = np.arange(-60_000, 60_000) * (np.pi / 2)
@@ -76,6 +76,21 @@ def test_same_bits_in_any_batch_and_alone() -> None:
     assert np.array_equal(_one_at_a_time(a), full)
 
 
+def test_one_angle_without_the_reduction_same_bits() -> None:
+    """:func:`sincos` skips the reduction below NO_REDUCTION: the same bits as the reduced
+    vector path (signs of zero included) below, at and above that edge and pi/4, and the
+    reduction is indeed the identity there (its quotient is 0 up to the edge)."""
+    edges = np.array([NO_REDUCTION, np.pi / 4])
+    near = np.concatenate([np.nextafter(edges, 0.0), edges, np.nextafter(edges, 1.0)])
+    near = np.concatenate([near + k * 1e-12 for k in range(-200, 201)])
+    a = np.concatenate([near, -near, RNG.uniform(-1.0, 1.0, 100_000), RNG.normal(size=100_000) * 0.3,
+                        [0.0, -0.0, 5e-324, -5e-324, TINY, -TINY, TINY / 2]])  # fmt: skip
+    alone, column = _one_at_a_time(a), _column(a)
+    assert np.array_equal(alone.view(np.int64), column.view(np.int64))
+    below = np.abs(a) < NO_REDUCTION
+    assert np.all(np.floor(a[below] * (2 / np.pi) + 0.5) == 0.0)
+
+
 def test_outside_the_reduction_range_libm_decides() -> None:
     a = np.array([REDUCTION_LIMIT * 1.0000001, -3.0e7, 1e300, np.inf, -np.inf, np.nan])
     with np.errstate(invalid="ignore"):
@@ -87,9 +102,9 @@ def test_outside_the_reduction_range_libm_decides() -> None:
 
 def test_zero_and_tiny_angles_as_libm() -> None:
     a = np.array([0.0, -0.0, 5e-324, -TINY / 2, TINY / 2])
-    sc = _column(a)
-    assert np.array_equal(sc[0], a) and np.array_equal(np.signbit(sc[0]), np.signbit(a))
-    assert np.array_equal(sc[1], np.ones_like(a))
+    for sc in (_column(a), _one_at_a_time(a)):
+        assert np.array_equal(sc[0], a) and np.array_equal(np.signbit(sc[0]), np.signbit(a))
+        assert np.array_equal(sc[1], np.ones_like(a))
 
 
 @pytest.mark.parametrize(("model", "n", "n_u"), [("x", 4, 1), ("xy", 8, 2), ("xz", 6, 2), ("xyz", 10, 3)])
@@ -107,7 +122,7 @@ def test_derived_equations_same_bits_in_any_batch(model: str, n: int, n_u: int) 
                          np.full(rows, 9.81)])  # fmt: skip
     whole = np.empty((rows, n))
     rhs(0.0, x, u, p, whole)
-    for size in (1, trig.COLUMN_ROWS - 1, trig.COLUMN_ROWS, 7):
+    for size in (1, 3, trig.COLUMN_ROWS - 1, trig.COLUMN_ROWS, 13):
         for start in range(0, rows - size, 11):
             part = np.empty((size, n))
             rhs(0.0, x[start : start + size], u[start : start + size], p[start : start + size], part)

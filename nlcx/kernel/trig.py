@@ -26,11 +26,16 @@ import math
 import numpy as np
 from numba import njit
 
-#: Batches of at least this many rows take :func:`sincos_column` (its work array costs about
-#: as much as three angles one at a time); smaller ones call :func:`sincos` per row.
-COLUMN_ROWS = 4
+#: Batches of at least this many rows take :func:`sincos_column`; smaller ones call
+#: :func:`sincos` per row. Measured on the x pendulum's equations (AVX-512, pendulum angles):
+#: one row at a time about 12 ns a row at any batch size; the column 30 ns a row at 4 rows
+#: (its work array, and no full vector of 8 angles), 11 at 8, 9 at 100.
+COLUMN_ROWS = 8
 #: Beyond this |x| (rad) the two-part reduction is not trusted; libm takes over.
 REDUCTION_LIMIT = 1.0e5
+#: Below this |x| (rad; pi/4 = 0.785...) x 2/pi + 1/2 lies in (0, 1), so the reduction is
+#: the identity, and :func:`sincos` skips it.
+NO_REDUCTION = 0.78
 #: Below this |x| sin x = x and cos x = 1 to the last bit (and sin keeps the sign of zero).
 TINY = 2.0**-27
 
@@ -77,6 +82,20 @@ def _kernel_cos(x, y):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _sincos_of(x, y0, y1, n):  # pragma: no cover - compiled
+    """(sin x, cos x) from the reduction x = n pi/2 + (y0 + y1), n mod 4 the quadrant."""
+    s = _kernel_sin(y0, y1)
+    c = _kernel_cos(y0, y1)
+    swap = (n & 1) == 1
+    sin_x = c if swap else s
+    cos_x = s if swap else c
+    sin_x = -sin_x if (n & 2) != 0 else sin_x
+    cos_x = -cos_x if ((n + 1) & 2) != 0 else cos_x
+    tiny = abs(x) < TINY
+    return (x if tiny else sin_x), (1.0 if tiny else cos_x)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _sincos_reduced(x):  # pragma: no cover - compiled
     """(sin x, cos x) for |x| <= :data:`REDUCTION_LIMIT` in branch-free arithmetic (the
     module docstring); the caller sends larger or non-finite x to libm."""
@@ -87,16 +106,7 @@ def _sincos_reduced(x):  # pragma: no cover - compiled
     w = fn * PIO2_2T - ((r - head) - w)
     y0 = head - w
     y1 = (head - y0) - w
-    s = _kernel_sin(y0, y1)
-    c = _kernel_cos(y0, y1)
-    n = int(fn) & 3
-    swap = (n & 1) == 1
-    sin_x = c if swap else s
-    cos_x = s if swap else c
-    sin_x = -sin_x if (n & 2) != 0 else sin_x
-    cos_x = -cos_x if ((n + 1) & 2) != 0 else cos_x
-    tiny = abs(x) < TINY
-    return (x if tiny else sin_x), (1.0 if tiny else cos_x)
+    return _sincos_of(x, y0, y1, int(fn) & 3)
 
 
 @njit(cache=True, error_model="numpy")
@@ -120,7 +130,14 @@ def sincos_column(x, j):  # pragma: no cover - compiled
 
 @njit(cache=True, inline="always", error_model="numpy")
 def sincos(x):  # pragma: no cover - compiled
-    """(sin x, cos x) of one angle, the same bits as :func:`sincos_column` gives it."""
+    """(sin x, cos x) of one angle, the same bits as :func:`sincos_column` gives it.
+
+    Below :data:`NO_REDUCTION` the reduction is skipped: there it yields n = 0, y0 = x and
+    y1 = +0.0 exactly (fn = 0, and each step subtracts or adds a zero), so the kernels get the
+    same arguments. One angle at a time, the reduction's floor, conversion and selects were
+    most of the cost (an upright pendulum's angles are all below it)."""
+    if abs(x) < NO_REDUCTION:
+        return _sincos_of(x, x, 0.0, 0)
     if abs(x) <= REDUCTION_LIMIT:
         return _sincos_reduced(x)
     return math.sin(x), math.cos(x)
