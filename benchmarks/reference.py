@@ -22,13 +22,19 @@ in lock step, states in arrays, sin and cos in vector code) and how much is nlcx
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit
 
+from nlcx import compiled_cache
 from nlcx.controllers.pid import DIRECT_CONSTANT, DIRECT_ERROR_AGS, DIRECT_TIME_AGS, G, H, I, L, S, _update_period
 from nlcx.controllers.schedules import constant_gains, error_ags_gains, time_ags_gains
 from nlcx.kernel.trig import sincos
+
+# numba keys this module's cache on this file alone, but its loops inline nlcx's PID and sin and
+# cos: a change to nlcx would otherwise leave the old code in the cache (and in the timings)
+compiled_cache.ensure_consistent(Path(__file__).resolve().parent, depends=(compiled_cache.PACKAGE,))
 
 #: An error-AGS loop's parameters, in this order (Table 2.2 ranges, section 2.3 rates).
 AGS = ("kp_min", "kp_max", "ki_min", "ki_max", "kd_min", "kd_max", "kp_rate", "ki_rate", "kd_rate")

@@ -41,11 +41,13 @@ def cache_files(root: Path = PACKAGE) -> list[Path]:
     return [p for pattern in ("*.nbi", "*.nbc") for p in root.rglob(f"__pycache__/{pattern}")]
 
 
-def ensure_consistent(root: Path = PACKAGE, stamp: Path | None = None) -> bool:
+def ensure_consistent(root: Path = PACKAGE, stamp: Path | None = None, depends: tuple[Path, ...] = ()) -> bool:
     """Remove the package's numba cache if the source changed since it was stamped; True if
-    it was removed. A read-only install (no writable ``__pycache__``) is left alone."""
+    it was removed. ``depends``: other packages whose compiled functions ``root``'s call (and
+    inline), their source hashed into the stamp too (benchmarks/reference.py inlines nlcx's).
+    A read-only install (no writable ``__pycache__``) is left alone."""
     stamp = stamp or root / "__pycache__" / STAMP.name
-    current = source_digest(root)
+    current = "".join(source_digest(path) for path in (root, *depends))
     try:
         if stamp.is_file() and stamp.read_text(encoding="ascii").strip() == current:
             return False

@@ -36,6 +36,21 @@ def test_a_changed_callee_module_drops_every_cached_function(tmp_path: Path) -> 
     assert (root / "__pycache__" / compiled_cache.STAMP.name).read_text().strip() == compiled_cache.source_digest(root)
 
 
+def test_a_changed_dependency_drops_the_cache_that_inlines_it(tmp_path: Path) -> None:
+    """benchmarks/reference.py inlines nlcx's functions: its stamp covers nlcx's source too."""
+    root, dependency = _package(tmp_path), tmp_path / "dep"
+    dependency.mkdir()
+    (dependency / "c.py").write_text("z = 1\n")
+    assert compiled_cache.ensure_consistent(root, depends=(dependency,))
+    cached = root / "sub" / "__pycache__" / "b.f-1.py311.nbi"
+    cached.write_bytes(b"machine code")
+    assert not compiled_cache.ensure_consistent(root, depends=(dependency,))
+    assert cached.exists()
+    (dependency / "c.py").write_text("z = 2\n")
+    assert compiled_cache.ensure_consistent(root, depends=(dependency,))
+    assert not cached.exists()
+
+
 def test_the_package_is_stamped_with_its_current_source() -> None:
     stamp = compiled_cache.STAMP
     assert stamp.read_text().strip() == compiled_cache.source_digest()
