@@ -11,7 +11,9 @@
     ns per variant-step, simulated seconds per wall second and their ratio (goal <= 1.3); and
     the kernels alone in one process: nlcx's kernel, the reference's loop with nlcx's PID and
     the limit, per variant-step; the loop with nlcx's PID checked bit for bit against nlcx's,
-    the limit (libm's sin and cos, nlcx's own: docs/assumptions.md A30) to rounding.
+    the limit (libm's sin and cos, nlcx's own: docs/assumptions.md A30) to rounding; and the
+    floor of the sweep at this kernel's speed: the parent's serial time (its manifest.json's
+    timings) plus the kernel's CPU time on two cores.
 (c) `nlcx reproduce` of every thesis figure and table, calibration excluded (target <= 120 s).
 (d) the experiment of (a), proposed controller, through python-control's input_output_response
     and scipy's solve_ivp (RK45, the PID integrators in the ODE), with the speed ratios and the
@@ -23,6 +25,7 @@ Machines are noisy: each timing is the best of a few repeats, and ratios come fr
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import subprocess
@@ -159,6 +162,8 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
     alone = kernels_alone(raw)
     steps = limits[0]["variant_steps"]
     nlcx_s, limit_s = min(walls), min(x["wall_s"] for x in limits)
+    best = walls.index(nlcx_s)
+    batches_s = json.loads((work / f"out{best}" / "manifest.json").read_text())["timings_s"]["batches"]
     simulated = steps * raw["simulation"]["dt"]
     return {
         "variants": n, "wall_s": nlcx_s, "walls_s": walls, "summary": summary,
@@ -167,8 +172,8 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
         "limit_kernel_s": min(x["kernel_s"] for x in limits),
         "variant_steps": steps, "ns_per_step": 1e9 * nlcx_s / steps * 2, "limit_ns_per_step": 1e9 * limit_s / steps * 2,
         "sim_per_wall": simulated / nlcx_s, "limit_sim_per_wall": simulated / limit_s, "ratio": nlcx_s / limit_s,
-        "max_dev": limits[0]["max_dev"], "alone": alone, "cpu_s": cpus[walls.index(nlcx_s)],
-        "kernel_cpu_s": 1e-9 * alone["ns"]["nlcx"] * steps,
+        "max_dev": limits[0]["max_dev"], "alone": alone, "cpu_s": cpus[best],
+        "kernel_cpu_s": 1e-9 * alone["ns"]["nlcx"] * steps, "serial_s": nlcx_s - batches_s,
     }  # fmt: skip
 
 
@@ -443,6 +448,12 @@ def print_b(b: dict[str, Any]) -> None:
         f"cores; the kernel ~{b['kernel_cpu_s']:.1f} s of it ({b['variant_steps'] / 1e6:.0f} M variant-steps at its "
         f"speed alone), the rest (configs, metrics, files, imports, planning, assembling) "
         f"{b['cpu_s'] - b['kernel_cpu_s']:.1f} s; the limit's loop {b['limit_kernel_s']:.1f} s"
+    )
+    floor = b["serial_s"] + b["kernel_cpu_s"] / 2
+    print(
+        f"    the parent alone (start, imports, planning before the pool; assembling after it; manifest.json's "
+        f"timings) {b['serial_s']:.1f} s; with nothing but the kernel in the workers the sweep would still take "
+        f"~{floor:.1f} s ({b['serial_s']:.1f} + {b['kernel_cpu_s']:.1f} / 2), {floor / b['limit_s']:.2f}x the limit"
     )
 
 

@@ -405,6 +405,7 @@ def run(
         # skips what they inherit (imports, the kernel), ~465 -> ~330 ms of a worker's first
         # batch (medians of six pairs); a list splice, nothing collected, free here
         gc.freeze()
+    planned = time.perf_counter()
     pool, close = make_executor(executor, jobs, scheduler) if batches else (None, lambda: None)
     try:
         results: Iterable[BatchResult]
@@ -423,8 +424,11 @@ def run(
         if forked:
             gc.unfreeze()
         _records.cache_clear()  # the records of batches run in this process (serial executor)
+    simulated = time.perf_counter()
     index = assemble(out_dir, variants, hashes, base_raw, spec)
-    wall = time.perf_counter() - start
+    end = time.perf_counter()
+    wall = end - start
+    timings = {"plan": planned - start, "batches": simulated - planned, "assemble": end - simulated, "wall": wall}
     info = {
         "name": base.name,
         "variants": len(variants),
@@ -435,6 +439,8 @@ def run(
         "executor": executor,
         "jobs": jobs,
         "wall_s": round(wall, 3),
+        # reading, planning, loading the kernel; the pool's batches; assembling sweep.csv and metrics.csv
+        "timings_s": {phase: round(seconds, 3) for phase, seconds in timings.items()},
         "versions": report.package_versions(),
         "git": report.git_state(),
     }

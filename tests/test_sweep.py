@@ -76,6 +76,10 @@ def test_serial_pool_and_dask_give_identical_metrics(tmp_path: Path) -> None:
     index = pd.read_csv(tmp_path / "serial" / "sweep.csv")
     assert list(index.variant) == list(range(12)) and set(index.status) <= {"ok", "unstable"}
     assert {"value:plant.params.M", "seed", "config_hash", "wall_s"} <= set(index.columns)
+    for executor in ("serial", "process", "dask"):  # the manifest's phases add up to its wall time
+        timings = json.loads((tmp_path / executor / "manifest.json").read_text())["timings_s"]
+        assert set(timings) == {"plan", "batches", "assemble", "wall"} and min(timings.values()) > 0
+        assert abs(timings["plan"] + timings["batches"] + timings["assemble"] - timings["wall"]) <= 0.002
 
 
 def test_batch_equals_single_runs_bit_for_bit(tmp_path: Path) -> None:
