@@ -43,8 +43,8 @@ def cache_files(root: Path = PACKAGE) -> list[Path]:
 
 def ensure_consistent(root: Path = PACKAGE, stamp: Path | None = None, depends: tuple[Path, ...] = ()) -> bool:
     """Remove the package's numba cache if the source changed since it was stamped; True if
-    it was removed. ``depends``: other packages whose compiled functions ``root``'s call (and
-    inline), their source hashed into the stamp too (benchmarks/reference.py inlines nlcx's).
+    it was removed. ``depends``: other packages whose compiled functions ``root``'s functions call
+    (and inline), their source hashed into the stamp too (benchmarks/reference.py inlines nlcx's).
     A read-only install (no writable ``__pycache__``) is left alone."""
     stamp = stamp or root / "__pycache__" / STAMP.name
     current = "".join(source_digest(path) for path in (root, *depends))
