@@ -374,8 +374,6 @@ def run(
     progress: Callable[[int, int, int], None] | None = None,
 ) -> SweepOutcome:
     """Run (or resume) a sweep; write sweep.csv, metrics.csv, config.yaml and manifest.json."""
-    from nlcx import report
-
     start = time.perf_counter()
     base_raw, spec, base = load(path, overrides)
     out_dir = Path(out_dir or base.section.outputs.dir or Path("results") / base.name)
@@ -429,23 +427,35 @@ def run(
     end = time.perf_counter()
     wall = end - start
     timings = {"plan": planned - start, "batches": simulated - planned, "assemble": end - simulated, "wall": wall}
+    _write_manifest(out_dir, index, spec, timings, name=base.name, variants=len(variants), computed=len(todo),
+                    executor=executor, jobs=jobs)  # fmt: skip
+    return SweepOutcome(out_dir, index, len(todo), len(variants) - len(todo), wall)
+
+
+def _write_manifest(
+    out_dir: Path, index: pd.DataFrame, spec: SweepSection, timings: dict[str, float], *,
+    name: str, variants: int, computed: int, executor: str, jobs: int,
+) -> None:  # fmt: skip
+    """manifest.json: the run (name, variants computed and skipped, statuses, seed, executor),
+    the wall time of each phase (reading, planning and loading the kernel; the batches;
+    assembling sweep.csv and metrics.csv), the package versions and the git commit."""
+    from nlcx import report
+
     info = {
-        "name": base.name,
-        "variants": len(variants),
-        "computed": len(todo),
-        "skipped": len(variants) - len(todo),
+        "name": name,
+        "variants": variants,
+        "computed": computed,
+        "skipped": variants - computed,
         "status": index.status.value_counts().to_dict(),
         "seed": spec.seed,
         "executor": executor,
         "jobs": jobs,
-        "wall_s": round(wall, 3),
-        # reading, planning, loading the kernel; the pool's batches; assembling sweep.csv and metrics.csv
+        "wall_s": round(timings["wall"], 3),
         "timings_s": {phase: round(seconds, 3) for phase, seconds in timings.items()},
         "versions": report.package_versions(),
         "git": report.git_state(),
     }
     report.write_text(out_dir / "manifest.json", json.dumps(info, indent=2, default=str) + "\n")
-    return SweepOutcome(out_dir, index, len(todo), len(variants) - len(todo), wall)
 
 
 def _member_of(hashes: pd.Series, wanted: Collection[str]) -> np.ndarray:
