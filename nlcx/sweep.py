@@ -397,8 +397,8 @@ def run(
         progress(finished, len(variants), failures)
     if batches:
         engine.load_kernel()  # here, once: the process pool's workers fork from this process and inherit it
-    forked = bool(batches) and executor == "process"
-    if forked:
+    frozen = bool(batches) and executor == "process"
+    if frozen:
         # the workers fork with this heap frozen: their first collection (_settle_heap) then
         # skips what they inherit (imports, the kernel), ~465 -> ~330 ms of a worker's first
         # batch (medians of six pairs); a list splice, nothing collected, free here
@@ -419,7 +419,7 @@ def run(
                 progress(finished, len(variants), failures)
     finally:
         close()
-        if forked:
+        if frozen:
             gc.unfreeze()
         _records.cache_clear()  # the records of batches run in this process (serial executor)
     simulated = time.perf_counter()
@@ -427,15 +427,32 @@ def run(
     end = time.perf_counter()
     wall = end - start
     timings = {"plan": planned - start, "batches": simulated - planned, "assemble": end - simulated, "wall": wall}
-    _write_manifest(out_dir, index, spec, timings, name=base.name, variants=len(variants), computed=len(todo),
-                    executor=executor, jobs=jobs)  # fmt: skip
+    _write_manifest(
+        out_dir,
+        index,
+        spec,
+        timings,
+        name=base.name,
+        variants=len(variants),
+        computed=len(todo),
+        executor=executor,
+        jobs=jobs,
+    )
     return SweepOutcome(out_dir, index, len(todo), len(variants) - len(todo), wall)
 
 
 def _write_manifest(
-    out_dir: Path, index: pd.DataFrame, spec: SweepSection, timings: dict[str, float], *,
-    name: str, variants: int, computed: int, executor: str, jobs: int,
-) -> None:  # fmt: skip
+    out_dir: Path,
+    index: pd.DataFrame,
+    spec: SweepSection,
+    timings: dict[str, float],
+    *,
+    name: str,
+    variants: int,
+    computed: int,
+    executor: str,
+    jobs: int,
+) -> None:
     """manifest.json: the run (name, variants computed and skipped, statuses, seed, executor),
     the wall time of each phase (reading, planning and loading the kernel; the batches;
     assembling sweep.csv and metrics.csv), the package versions and the git commit."""
