@@ -17,6 +17,9 @@ machine, so that nlcx's speed is quoted as a ratio to it, measured in the same r
 and nlcx's sin and cos (one angle at a time), so that it computes nlcx's bits: it measures how
 much of the distance between nlcx's kernel and the limit is the kernel's design (every variant
 in lock step, states in arrays, sin and cos in vector code) and how much is nlcx's generic PID.
+:func:`simulate_lockstep` is the limit's loop stepped as nlcx's kernel steps a batch, every
+variant together, with nlcx's sin and cos: nlcx's bits at the speed a kernel with the plant and
+the PID compiled into it would have.
 """
 
 from __future__ import annotations
@@ -30,12 +33,15 @@ from numba import njit
 from nlcx import compiled_cache
 from nlcx.controllers.pid import DIRECT_CONSTANT, DIRECT_ERROR_AGS, DIRECT_TIME_AGS, G, H, I, L, S, _update_period
 from nlcx.controllers.schedules import constant_gains, error_ags_gains, time_ags_gains
-from nlcx.kernel.trig import sincos
+from nlcx.kernel.trig import _sincos_reduced, sincos
+from nlcx.layout import Layout
 
 # numba keys this module's cache on this file alone, but its loops inline nlcx's PID and sin and
 # cos: a change to nlcx would otherwise leave the old code in the cache (and in the timings)
 compiled_cache.ensure_consistent(Path(__file__).resolve().parent, depends=(compiled_cache.PACKAGE,))
 
+#: Where :func:`_rhs` takes sin and cos from.
+LIBM, NLCX, NLCX_VECTOR = 0, 1, 2
 #: An error-AGS loop's parameters, in this order (Table 2.2 ranges, section 2.3 rates).
 AGS = ("kp_min", "kp_max", "ki_min", "ki_max", "kd_min", "kd_max", "kp_rate", "ki_rate", "kd_rate")
 
@@ -55,10 +61,17 @@ def _ags(s, a):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _rhs(M, m, l, g, th, thd, F, nlcx_trig):  # pragma: no cover - compiled
+def _rhs(M, m, l, g, th, thd, F, trig):  # pragma: no cover - compiled
     """(x'', theta'') of the x pendulum, the mass matrix solved as nlcx's generated code does;
-    sin and cos from nlcx (:func:`nlcx.kernel.trig.sincos`) if ``nlcx_trig``, else libm's."""
-    sin_th, cos_th = sincos(th) if nlcx_trig else (math.sin(th), math.cos(th))
+    sin and cos from libm (``trig`` = :data:`LIBM`), nlcx's one angle at a time
+    (:func:`nlcx.kernel.trig.sincos`, :data:`NLCX`) or nlcx's reduction without branches
+    (:data:`NLCX_VECTOR`, the same bits for |theta| <= 1e5 rad, where nlcx's vector code uses it)."""
+    if trig == NLCX:
+        sin_th, cos_th = sincos(th)
+    elif trig == NLCX_VECTOR:
+        sin_th, cos_th = _sincos_reduced(th)
+    else:
+        sin_th, cos_th = math.sin(th), math.cos(th)
     w0 = l * m
     w1 = w0 * sin_th
     m00 = M + m
@@ -74,13 +87,13 @@ def _rhs(M, m, l, g, th, thd, F, nlcx_trig):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _rk4(M, m, l, g, x, xd, th, thd, F, dt, nlcx_trig):  # pragma: no cover - compiled
-    """One classic RK4 step of size dt with F held: the state at t + dt."""
-    a1, t1 = _rhs(M, m, l, g, th, thd, F, nlcx_trig)
-    a2, t2 = _rhs(M, m, l, g, th + 0.5 * dt * thd, thd + 0.5 * dt * t1, F, nlcx_trig)
-    a3, t3 = _rhs(M, m, l, g, th + 0.5 * dt * (thd + 0.5 * dt * t1), thd + 0.5 * dt * t2, F, nlcx_trig)
+def _rk4(M, m, l, g, x, xd, th, thd, F, dt, trig):  # pragma: no cover - compiled
+    """One classic RK4 step of size dt with F held: the state at t + dt (sin and cos by ``trig``)."""
+    a1, t1 = _rhs(M, m, l, g, th, thd, F, trig)
+    a2, t2 = _rhs(M, m, l, g, th + 0.5 * dt * thd, thd + 0.5 * dt * t1, F, trig)
+    a3, t3 = _rhs(M, m, l, g, th + 0.5 * dt * (thd + 0.5 * dt * t1), thd + 0.5 * dt * t2, F, trig)
     th4 = th + dt * (thd + 0.5 * dt * t2)
-    a4, t4 = _rhs(M, m, l, g, th4, thd + dt * t3, F, nlcx_trig)
+    a4, t4 = _rhs(M, m, l, g, th4, thd + dt * t3, F, trig)
     v2, v3, v4 = xd + 0.5 * dt * a1, xd + 0.5 * dt * a2, xd + dt * a3
     w2, w3, w4 = thd + 0.5 * dt * t1, thd + 0.5 * dt * t2, thd + dt * t3
     return (
@@ -125,9 +138,88 @@ def simulate(p, theta_loop, x_loop, dt, n_steps, bound, X, U, n_valid, record): 
                 U[b, k] = F
             if k == n_steps:
                 break
-            x, xd, th, thd = _rk4(M, m, l, g, x, xd, th, thd, F, dt, False)
+            x, xd, th, thd = _rk4(M, m, l, g, x, xd, th, thd, F, dt, LIBM)
             if _stops(x, xd, th, thd, bound):
                 n_valid[b] = k + 1
+                break
+
+
+#: The rows of :func:`simulate_lockstep`'s work array: one quantity over the batch per row.
+LOCKSTEP_ROWS = Layout(
+    "LockstepRows",
+    ("x", "x_dot", "theta", "theta_dot", "i_theta", "i_x", "e_theta_prev", "e_x_prev", "M", "m", "l", "g"),
+)
+Q = LOCKSTEP_ROWS.at
+
+
+@njit(cache=True, error_model="numpy")
+def _leave(q, vid, stopped, nb, n_valid, samples):  # pragma: no cover - compiled
+    """Move the stopped variants behind the active ones (a stopped one trades places with the
+    last active one), each with its number of valid samples; returns the number still active."""
+    b = 0
+    while b < nb:
+        if not stopped[b]:
+            b += 1
+            continue
+        n_valid[vid[b]] = samples
+        nb -= 1
+        for row in range(q.shape[0]):
+            q[row, b] = q[row, nb]
+        vid[b], stopped[b] = vid[nb], stopped[nb]
+    return nb
+
+
+@njit(cache=True, error_model="numpy")
+def simulate_lockstep(p, theta_loop, x_loop, dt, n_steps, bound, X, U, n_valid):  # pragma: no cover - compiled
+    """:func:`simulate`'s loop (the written-out PID and plant) with every variant of the batch
+    stepped together, as nlcx's kernel steps them: at each sample the PID of every active
+    variant, their records, then one RK4 step of each; every quantity an array over the batch
+    (a row of q, :data:`LOCKSTEP_ROWS`); a variant that stops trades places with the last active
+    one. The step has no branch (sin and cos by nlcx's reduction, not its libm fallback beyond
+    1e5 rad, which no angle of these runs comes near), so the compiler steps several variants at
+    once in vector code; the PID's exponentials stay libm's calls.
+
+    It computes nlcx's bits (``tests/test_reference_loops.py`` and the benchmark check) and
+    measures what nlcx's lock-step kernel would cost if the plant and the controller were
+    compiled into it instead of called as compiled-function values with their parameters and
+    states in packed arrays."""
+    n_batch = p.shape[0]
+    q = np.zeros((len(Q), n_batch))
+    for b in range(n_batch):
+        q[Q.M, b], q[Q.m, b], q[Q.l, b], q[Q.g, b] = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        n_valid[b] = n_steps + 1
+    vid, stopped, F = np.arange(n_batch), np.zeros(n_batch, dtype=np.bool_), np.empty(n_batch)
+    x, xd, th, thd = q[Q.x], q[Q.x_dot], q[Q.theta], q[Q.theta_dot]
+    i_th, i_x, e_th_prev, e_x_prev = q[Q.i_theta], q[Q.i_x], q[Q.e_theta_prev], q[Q.e_x_prev]
+    M, m, l, g = q[Q.M], q[Q.m], q[Q.l], q[Q.g]
+    nb = n_batch
+    for k in range(n_steps + 1):
+        for b in range(nb):
+            e_th = 0.0 - th[b]
+            e_x = 1.0 - x[b]
+            if k == 0:
+                e_th_prev[b], e_x_prev[b] = e_th, e_x
+            kp, ki, kd = _ags(abs(e_th), theta_loop)
+            i_th[b] += e_th * dt
+            f = -(kp * e_th + i_th[b] * ki + kd * ((e_th - e_th_prev[b]) / dt))
+            kp, ki, kd = _ags(abs(e_x), x_loop)
+            i_x[b] += e_x * dt
+            F[b] = f + (kp * e_x + i_x[b] * ki + kd * ((e_x - e_x_prev[b]) / dt))
+            e_th_prev[b], e_x_prev[b] = e_th, e_x
+            v = vid[b]
+            X[v, k, 0], X[v, k, 1], X[v, k, 2], X[v, k, 3] = x[b], xd[b], th[b], thd[b]
+            U[v, k] = F[b]
+        if k == n_steps:
+            break
+        n_stop = 0
+        for b in range(nb):  # no branch: vector code
+            x[b], xd[b], th[b], thd[b] = _rk4(M[b], m[b], l[b], g[b], x[b], xd[b], th[b], thd[b], F[b], dt,
+                                              NLCX_VECTOR)  # fmt: skip
+            stopped[b] = _stops(x[b], xd[b], th[b], thd[b], bound)
+            n_stop += stopped[b]
+        if n_stop > 0:
+            nb = _leave(q, vid, stopped, nb, n_valid, k + 1)
+            if nb == 0:
                 break
 
 
@@ -218,7 +310,7 @@ def simulate_nlcx_pid(p, pid, ref, dt, n_steps, bound, X, U, n_valid):  # pragma
                 break
             if k == n_steps:
                 break
-            x, xd, th, thd = _rk4(M, m, l, g, x, xd, th, thd, F, dt, True)
+            x, xd, th, thd = _rk4(M, m, l, g, x, xd, th, thd, F, dt, NLCX)
             if _stops(x, xd, th, thd, bound):
                 n_valid[b] = k + 1
                 break

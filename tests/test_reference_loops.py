@@ -1,7 +1,8 @@
 """The benchmark's hand-written loops (benchmarks/reference.py) simulate nlcx's closed loop, so
 the speeds the benchmark compares are those of the same computation: the loop with nlcx's PID
 equals nlcx's kernel bit for bit; the limit, with libm's sin and cos where nlcx has its own
-(within 1 ulp, nlcx.kernel.trig), stops at the same samples and differs by rounding."""
+(within 1 ulp, nlcx.kernel.trig), stops at the same samples and differs by rounding; the limit's
+loop stepped in lock step with nlcx's sin and cos equals nlcx's kernel bit for bit."""
 
 from __future__ import annotations
 
@@ -18,13 +19,16 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import reference  # noqa: E402
 
+#: nominal, heavier, lighter and one that falls (theta leaves its bound): both ways a run ends
+PARAMS = [(1.0, 0.1, 0.3), (1.2, 0.12, 0.36), (0.8, 0.08, 0.24), (0.05, 2.0, 0.05)]
 
-def test_reference_loops_compute_nlcx_closed_loop() -> None:
+
+def _nlcx_runs(params: list[tuple[float, float, float]]) -> tuple[dict, list, list[engine.Run], np.ndarray]:
+    """(config, items, nlcx's runs, p rows) of the x pendulum's error-AGS loop for 4 s, one
+    variant per (M, m, l), simulated by nlcx in one batch."""
     raw = yaml.safe_load((ROOT / "configs" / "x_error_ags.yaml").read_text())
     del raw["controllers"]["conventional"]
     raw["simulation"]["t_end"] = 4.0
-    # nominal, heavier, lighter and one that falls (theta leaves its bound): both ways a run ends
-    params = [(1.0, 0.1, 0.3), (1.2, 0.12, 0.36), (0.8, 0.08, 0.24), (0.05, 2.0, 0.05)]
     prepared = []
     for M, m, l in params:
         raw["plant"]["params"].update(M=M, m=m, l=l)
@@ -33,11 +37,16 @@ def test_reference_loops_compute_nlcx_closed_loop() -> None:
     ours = engine.simulate_items(items, prepared[0].grid, "rk4", record_logs=False)
     assert {run.status for run in ours} == {"ok", "unstable"}
     p = np.array([[M, m, l, raw["plant"]["params"]["g"]] for M, m, l in params])
-    dt, n_k = raw["simulation"]["dt"], prepared[0].grid.t.size
+    return raw, items, ours, p
+
+
+def test_reference_loops_compute_nlcx_closed_loop() -> None:
+    raw, items, ours, p = _nlcx_runs(PARAMS)
+    dt, n_k = raw["simulation"]["dt"], ours[0].t.size
     loops = raw["controllers"]["proposed"]["loops"]
     pid = reference.packed_pid([item.controller for item in items])
     for loop in ("limit", "nlcx_pid"):
-        X, U, n_valid = np.empty((len(params), n_k, 4)), np.empty((len(params), n_k)), np.empty(len(params), int)
+        X, U, n_valid = np.empty((len(PARAMS), n_k, 4)), np.empty((len(PARAMS), n_k)), np.empty(len(PARAMS), int)
         if loop == "limit":
             theta, x = (reference.loop_parameters(loops[s]["schedule"]) for s in ("theta", "x"))
             reference.simulate(p, theta, x, dt, n_k - 1, np.pi / 2, X, U, n_valid, True)
@@ -51,3 +60,19 @@ def test_reference_loops_compute_nlcx_closed_loop() -> None:
             else:
                 assert np.max(np.abs(x_ref - run.x)) < 1e-10 and np.max(np.abs(u_ref - run.u[:, 0])) < 1e-9, b
                 assert not np.array_equal(x_ref, run.x), "the limit's libm sin/cos should differ somewhere"
+
+
+def test_lockstep_loop_computes_nlcx_bits_in_vector_code_and_its_remainder() -> None:
+    # 37 variants, a quarter of them falling: the vector loop (8 lanes on AVX-512, unrolled up to 4
+    # times) and its scalar remainder both run, before and after variants leave the batch
+    raw, _, ours, p = _nlcx_runs((PARAMS * 10)[:37])
+    dt, n_k = raw["simulation"]["dt"], ours[0].t.size
+    theta, x = (
+        reference.loop_parameters(raw["controllers"]["proposed"]["loops"][s]["schedule"]) for s in ("theta", "x")
+    )
+    X, U, n_valid = np.full((37, n_k, 4), np.nan), np.full((37, n_k), np.nan), np.empty(37, int)
+    reference.simulate_lockstep(p, theta, x, dt, n_k - 1, np.pi / 2, X, U, n_valid)
+    for b, run in enumerate(ours):
+        assert n_valid[b] == run.t.size, b
+        assert np.array_equal(X[b, : n_valid[b]].view(np.int64), run.x.view(np.int64)), b
+        assert np.array_equal(U[b, : n_valid[b]].view(np.int64), run.u[:, 0].view(np.int64)), b
