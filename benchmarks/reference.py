@@ -232,7 +232,7 @@ def simulate_lockstep(p, theta_loop, x_loop, dt, n_steps, bound, X, U, n_valid):
 
 
 #: The x pendulum's equations with the state in (n, B) order, a column per variant:
-#: (t, x (n, B), u (B, n_u) as nlcx's PID writes it, p (n_p, B), dx (n, B), active columns).
+#: (t, x (n, B), u (n_u, B), p (n_p, B), dx (n, B), active columns).
 COLUMNS_RHS_SIG = types.void(F64, MAT, MAT, MAT, MAT, I64)
 ColumnsRhs = types.FunctionType(COLUMNS_RHS_SIG)
 
@@ -241,14 +241,19 @@ ColumnsRhs = types.FunctionType(COLUMNS_RHS_SIG)
 def x_pendulum_columns(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """dx[:, b] for the first nb columns: :func:`_rhs` (nlcx's generated equations, the same
     operations) with nlcx's branch-free sin and cos, so the loop over the columns runs in vector
-    code. The force is first copied into a contiguous array: read through the strided column
-    u[:, 0], the loop stays scalar (17.6 against 4.5 ns a variant)."""
-    force = np.empty(nb)
-    for b in range(nb):
-        force[b] = u[b, 0]
+    code. The inputs are columns too: read through the strided column u[:, 0] of nlcx's (B, n_u)
+    inputs, the loop stays scalar (17.6 against 4.5 ns a variant)."""
     for b in range(nb):
         dx[0, b], dx[2, b] = x[1, b], x[3, b]
-        dx[1, b], dx[3, b] = _rhs(p[0, b], p[1, b], p[2, b], p[3, b], x[2, b], x[3, b], force[b], NLCX_VECTOR)
+        dx[1, b], dx[3, b] = _rhs(p[0, b], p[1, b], p[2, b], p[3, b], x[2, b], x[3, b], u[0, b], NLCX_VECTOR)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _stage_input(xs, x, h, k, nb):  # pragma: no cover - compiled
+    """xs = x + h k on the first nb columns: a Runge-Kutta stage's input."""
+    for i in range(x.shape[0]):
+        for b in range(nb):
+            xs[i, b] = x[i, b] + h * k[i, b]
 
 
 #: (rhs, controller, pid = (cp, cs, log, callbacks), p, x0, ref, dt, n_steps, bound, X, U, n_valid)
@@ -262,8 +267,8 @@ COLUMNS_SIG = types.void(
 def simulate_columns(rhs, controller, pid, p, x0, ref, dt, n_steps, bound, X, U, n_valid):  # pragma: no cover
     """nlcx's kernel for this loop (classic RK4 in flat loops over the batch, nlcx's PID, every
     variant in lock step, the records, a stopped variant leaving the batch) with one change:
-    the plant's state in (n, B) order, so that its equations (``rhs``, called as a
-    compiled-function value as nlcx calls a plant) run in vector code. ``controller``: nlcx's
+    the plant's state and its input in (n, B) order, so that its equations (``rhs``, called as
+    a compiled-function value as nlcx calls a plant) run in vector code. ``controller``: nlcx's
     PID step with ``pid`` = (cp, cs, log, callbacks) as :func:`packed_pid` packs them; ``ref``
     (K+1, 2) the references of x and theta. It computes nlcx's bits (the benchmark and
     ``tests/test_reference_loops.py`` check) and measures what the layout alone would save."""
@@ -271,7 +276,7 @@ def simulate_columns(rhs, controller, pid, p, x0, ref, dt, n_steps, bound, X, U,
     nb, n = x0.shape
     x, pt = np.ascontiguousarray(x0.T), np.ascontiguousarray(p.T)
     xs, k1, k2, k3, k4 = np.empty((n, nb)), np.empty((n, nb)), np.empty((n, nb)), np.empty((n, nb)), np.empty((n, nb))
-    y, r, u = np.empty((nb, 2)), np.empty((nb, 2)), np.empty((nb, 1))
+    y, r, u, force = np.empty((nb, 2)), np.empty((nb, 2)), np.empty((nb, 1)), np.empty((1, nb))
     vid, stopped = np.arange(nb), np.zeros(nb, dtype=np.bool_)
     for b in range(nb):
         n_valid[b] = n_steps + 1
@@ -282,23 +287,17 @@ def simulate_columns(rhs, controller, pid, p, x0, ref, dt, n_steps, bound, X, U,
             y[b, 0], y[b, 1], r[b, 0], r[b, 1], u[b, 0] = x[0, b], x[2, b], ref[k, 0], ref[k, 1], 0.0
         controller(k * dt, dt, y[:nb], y[:nb], r[:nb], cp[:nb], cs[:nb], u[:nb], log[:nb], callbacks)
         for b in range(nb):
-            U[vid[b], k] = u[b, 0]
+            U[vid[b], k], force[0, b] = u[b, 0], u[b, 0]
         if k == n_steps:
             break
         t = k * dt
-        rhs(t, x, u, pt, k1, nb)
-        for i in range(n):
-            for b in range(nb):
-                xs[i, b] = x[i, b] + 0.5 * dt * k1[i, b]
-        rhs(t + 0.5 * dt, xs, u, pt, k2, nb)
-        for i in range(n):
-            for b in range(nb):
-                xs[i, b] = x[i, b] + 0.5 * dt * k2[i, b]
-        rhs(t + 0.5 * dt, xs, u, pt, k3, nb)
-        for i in range(n):
-            for b in range(nb):
-                xs[i, b] = x[i, b] + dt * k3[i, b]
-        rhs(t + dt, xs, u, pt, k4, nb)
+        rhs(t, x, force, pt, k1, nb)
+        _stage_input(xs, x, 0.5 * dt, k1, nb)
+        rhs(t + 0.5 * dt, xs, force, pt, k2, nb)
+        _stage_input(xs, x, 0.5 * dt, k2, nb)
+        rhs(t + 0.5 * dt, xs, force, pt, k3, nb)
+        _stage_input(xs, x, dt, k3, nb)
+        rhs(t + dt, xs, force, pt, k4, nb)
         n_stop = 0
         for i in range(n):
             for b in range(nb):

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 
 from nlcx import config, engine
@@ -63,10 +64,16 @@ def test_reference_loops_compute_nlcx_closed_loop() -> None:
                 assert not np.array_equal(x_ref, run.x), "the limit's libm sin/cos should differ somewhere"
 
 
-def test_lockstep_loop_computes_nlcx_bits_in_vector_code_and_its_remainder() -> None:
-    # 37 variants, a quarter of them falling: the vector loop (8 lanes on AVX-512, unrolled up to 4
-    # times) and its scalar remainder both run, before and after variants leave the batch
-    raw, _, ours, p = _nlcx_runs((PARAMS * 10)[:37])
+@pytest.fixture(scope="module")
+def batch_of_37() -> tuple[dict, list, list[engine.Run], np.ndarray]:
+    """37 variants, a quarter of them falling: a vector loop over them (8 lanes on AVX-512,
+    unrolled up to 4 times) and its scalar remainder both run, before and after variants leave
+    the batch. Simulated by nlcx once for the tests that compare with it."""
+    return _nlcx_runs((PARAMS * 10)[:37])
+
+
+def test_lockstep_loop_computes_nlcx_bits_in_vector_code_and_its_remainder(batch_of_37: tuple) -> None:
+    raw, _, ours, p = batch_of_37
     dt, n_k = raw["simulation"]["dt"], ours[0].t.size
     theta, x = (
         reference.loop_parameters(raw["controllers"]["proposed"]["loops"][s]["schedule"]) for s in ("theta", "x")
@@ -76,9 +83,8 @@ def test_lockstep_loop_computes_nlcx_bits_in_vector_code_and_its_remainder() -> 
     _assert_same_bits(ours, X, U, n_valid)
 
 
-def test_columns_kernel_computes_nlcx_bits_in_vector_code_and_its_remainder() -> None:
-    # as above: 37 variants, so the equations' vector loop and its remainder both run
-    raw, items, ours, p = _nlcx_runs((PARAMS * 10)[:37])
+def test_columns_kernel_computes_nlcx_bits_in_vector_code_and_its_remainder(batch_of_37: tuple) -> None:
+    raw, items, ours, p = batch_of_37
     dt, n_k = raw["simulation"]["dt"], ours[0].t.size
     X, U, n_valid = np.full((37, n_k, 4), np.nan), np.full((37, n_k), np.nan), np.empty(37, int)
     x0 = np.stack([item.plant.x0 for item in items])
