@@ -14,7 +14,6 @@ from __future__ import annotations
 import cProfile
 import pstats
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -35,13 +34,13 @@ STAGES = {
 
 
 def main() -> None:
-    from run import sweep_config
+    from run import scratch, sweep_config
 
     from nlcx import sweep
 
     batches = int(sys.argv[1]) if len(sys.argv) > 1 else 4
     raw = sweep_config(100 * (batches + 1))
-    work = Path(tempfile.mkdtemp())
+    work = scratch()
     path = work / "sweep.yaml"
     path.write_text(yaml.safe_dump(raw))
     base_raw, spec, _ = sweep.load(path)

@@ -29,6 +29,7 @@ Machines are noisy: each timing is the best of a few repeats, and ratios come fr
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import platform
@@ -45,6 +46,18 @@ import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 NLCX = [sys.executable, "-m", "nlcx.cli"]
+
+
+@functools.cache
+def _scratch_root() -> tempfile.TemporaryDirectory:
+    """The benchmark's one temporary directory; Python removes it, and all in it, at exit."""
+    return tempfile.TemporaryDirectory(prefix="nlcx-bench-")
+
+
+def scratch() -> Path:
+    """A new empty directory inside the benchmark's temporary directory (gone when it ends: a
+    fresh clone and a sweep's outputs take about a gigabyte)."""
+    return Path(tempfile.mkdtemp(dir=_scratch_root().name))
 
 
 def best(fn, repeats: int = 3) -> float:
@@ -117,11 +130,11 @@ def bench_a() -> dict[str, float]:
     engine.evaluate([prepared], measure=False)
     warmup = time.perf_counter() - start
     sim = best(lambda: engine.evaluate([prepared], measure=False), 5)
-    out = Path(tempfile.mkdtemp())
+    out = scratch()
     cmd = [*NLCX, "run", "configs/xyz_error_ags.yaml", "--out", str(out / "a"), "-q"]
     subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True)
     end_to_end = best(lambda: subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True), 3)
-    cold_env = {**os.environ, "NUMBA_CACHE_DIR": tempfile.mkdtemp()}
+    cold_env = {**os.environ, "NUMBA_CACHE_DIR": str(scratch())}
     cold = run_measured(cmd, ROOT, cold_env)[0]
     return {"simulate_s": sim, "warmup_in_process_s": warmup, "end_to_end_s": end_to_end, "cold_compile_run_s": cold}
 
@@ -149,7 +162,7 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
     """nlcx's sweep and the hand-written limit reference (benchmarks/reference.py) of the same
     variants on two processes each, alternated, in one run: wall times and their ratio."""
     raw = sweep_config(n)
-    work = Path(tempfile.mkdtemp())
+    work = scratch()
     path = work / "sweep.yaml"
     path.write_text(yaml.safe_dump(raw))
     walls, cpus, peaks, limits = [], [], [], []
@@ -319,7 +332,7 @@ def _import_reference() -> None:
 
 
 def bench_c() -> dict[str, float]:
-    out = Path(tempfile.mkdtemp()) / "thesis"
+    out = scratch() / "thesis"
     wall, peak_kb, text = run_measured([*NLCX, "reproduce", "--jobs", "2", "--out", str(out)], ROOT)
     summary = " | ".join(text.strip().splitlines()[-3:]).replace(str(out.parent), "<tmp>")
     return {"wall_s": wall, "peak_memory_mb": peak_kb[0] / 1024, "peak_pss_mb": peak_kb[1] / 1024, "summary": summary}
@@ -412,7 +425,7 @@ def bench_d() -> dict[str, float]:
 def bench_fresh_clone() -> dict[str, Any]:
     """``make run`` in a fresh clone of this repository's HEAD, pip's cache off (every package
     downloaded, as on a fresh machine): install, the warm-up compile and the main job."""
-    work = Path(tempfile.mkdtemp())
+    work = scratch()
     subprocess.run(["git", "clone", "-q", str(ROOT), str(work / "nlcx")], check=True)
     env = {**os.environ, "PIP_NO_CACHE_DIR": "1"}
     wall = run_measured(["make", "run"], work / "nlcx", env)[0]
