@@ -1,6 +1,7 @@
 """Named layouts of the packed parameter blocks the compiled code reads.
 
-The compiled step functions take their numbers from flat float64 rows (a row per variant).
+The compiled step functions take their numbers from flat float64 rows (a row per variant;
+the kernel hands a plant its parameter rows as columns, ``p[P.M, b]``).
 Every block of such a row (a PID loop's header, a schedule's parameters, a friction axis,
 a loop element's parameters) is declared once, by name, as a :class:`Layout`. The compiled
 code reads the offsets the declaration generates, ``p[row, o + AGS.kp_rate]``, never a

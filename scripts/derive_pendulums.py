@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import sympy as sp
+from sympy.printing.precedence import PRECEDENCE
 from sympy.printing.pycode import PythonCodePrinter
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -180,8 +181,9 @@ def _simplify(expr: sp.Expr) -> sp.Expr:
 
 
 class _Printer(PythonCodePrinter):
-    """Python code with sin/cos from ``module`` (np for arrays) and renames; with ``module``
-    None, sin(q) and cos(q) of a coordinate q print as the locals ``sin_q`` and ``cos_q``."""
+    """Python code with sin/cos from ``module`` (np for arrays) and renames. With ``module``
+    None (the compiled right-hand side), sin(q) and cos(q) of a coordinate q print as the
+    locals ``sin_q`` and ``cos_q``, and squares and cubes as products (see :meth:`_print_Pow`)."""
 
     def __init__(self, module: str | None, names: dict[sp.Symbol, str]) -> None:
         super().__init__({"standard": "python3"})
@@ -198,6 +200,25 @@ class _Printer(PythonCodePrinter):
                 raise ValueError(f"{fn} of {arg}: the kernel takes sin and cos of coordinates only")
             return f"{fn}_{arg}"
         return f"{self.fn_module}.{fn}({arg})"
+
+    def _print_Pow(self, expr: sp.Pow, rational: bool = False) -> str:
+        """q**2 as (q*q) and q**3 as (q*(q*q)) in the compiled right-hand side: numba's power
+        with a literal integer exponent blocks vectorisation of the loop over the variants,
+        and these products are the multiplications numba's power makes, in its order, so the
+        bits are the same (tests/test_derivation.py)."""
+        if not self._is_product(expr):
+            return super()._print_Pow(expr, rational)
+        base = self.parenthesize(expr.base, PRECEDENCE["Mul"])
+        square = f"{base}*{base}"
+        return f"({square})" if expr.exp == 2 else f"({base}*({square}))"
+
+    def _is_product(self, expr: sp.Expr) -> bool:
+        return self.fn_module is None and expr.is_Pow and expr.exp.is_Integer and expr.exp in (2, 3)
+
+    def code(self, expr: sp.Expr) -> str:
+        """The printed expression, a square or cube alone without its parentheses."""
+        text = self.doprint(expr)
+        return text[1:-1] if self._is_product(expr) else text
 
     def _print_sin(self, expr: sp.Expr) -> str:
         return self._print_trig("sin", expr)
@@ -286,13 +307,20 @@ def _ldl_solve(n: int, zero: list[list[bool]], indent: str) -> list[str]:
     return lines
 
 
+def _def(name: str, params: str) -> list[str]:
+    """The ``def`` line of a compiled function, its parameters on a line of their own if long."""
+    pragma = ":  # pragma: no cover - compiled"
+    line = f"def {name}({params}){pragma}"
+    return [line] if len(line) <= LINE_LENGTH else [f"def {name}(", f"    {params}", f"){pragma}"]
+
+
 def _load(indent: str, symbols: list[sp.Symbol], source: dict[sp.Symbol, str], names: dict) -> list[str]:
     return [f"{indent}{names.get(s, s.name)} = {source[s]}" for s in symbols]
 
 
 def emit_rhs(d: Derivation) -> str:
-    """The numba right-hand side ``{key}_derived_rhs(t, x, u, p, dx)`` of one model: its row
-    function (the Euler-Lagrange equations of one variant) and the loop over the batch."""
+    """The numba right-hand side ``{key}_derived_rhs(t, x, u, p, dx, nb)`` of one model: its
+    column function (the Euler-Lagrange equations of one variant) and the loop over the batch."""
     names = _code_names()
     lower = [(i, j) for i in range(len(d.q)) for j in range(i + 1)]
     zero = [[d.mass[i, j] == 0 for j in range(len(d.q))] for i in range(len(d.q))]
@@ -301,10 +329,10 @@ def emit_rhs(d: Derivation) -> str:
     angles = _trig_arguments([*(e for _, e in repl), *reduced], d.states)
     angle_names = [(names.get(q, q.name), i) for q, i in angles]
     trig = ", ".join(f"sin_{name}, cos_{name}" for name, _ in angle_names)
-    return _emit_row(d, names, zero, repl, reduced, trig) + "\n\n" + _emit_batch(d, angle_names, trig)
+    return _emit_column(d, names, zero, repl, reduced, trig) + "\n\n" + _emit_batch(d, angle_names, trig)
 
 
-def _emit_row(
+def _emit_column(
     d: Derivation,
     names: dict[sp.Symbol, str],
     zero: list[list[bool]],
@@ -312,9 +340,9 @@ def _emit_row(
     reduced: list[sp.Expr],
     trig: str,
 ) -> str:
-    """``_{key}_derived_row(b, x, u, p, dx, sin_q, cos_q, ...)``: dx[b] from M(q) q'' = b(q, q', u)
-    of row b, given sin and cos of its angles (``trig``: those parameters; inlined into the
-    batch loop)."""
+    """``_{key}_derived_column(b, x, u, p, dx, sin_q, cos_q, ...)``: the accelerations q'' of
+    column b, dx[1::2, b], from M(q) q'' = b(q, q', u), given sin and cos of its angles
+    (``trig``: those parameters; inlined into the batch loop)."""
     key, n, head = d.spec.key, len(d.q), "    "
     printer = _Printer(None, names)
     nonzero = [(i, j) for i in range(n) for j in range(i + 1) if not zero[i][j]]
@@ -322,55 +350,61 @@ def _emit_row(
     used = set()
     for e in [*(e for _, e in repl), *reduced]:
         used |= e.xreplace({f: sp.Dummy() for f in e.atoms(sp.sin, sp.cos)}).free_symbols
-    source = {s: f"p[b, {i}]" for i, s in enumerate(d.params)}
-    source.update({s: f"x[b, {i}]" for i, s in enumerate(d.states)})
-    source.update({s: f"u[b, {i}]" for i, s in enumerate(d.u)})
+    source = {s: f"p[{i}, b]" for i, s in enumerate(d.params)}
+    source.update({s: f"x[{i}, b]" for i, s in enumerate(d.states)})
+    source.update({s: f"u[{i}, b]" for i, s in enumerate(d.u)})
     order = [*d.params, *d.states, *d.u]
     lines = [
         '@njit(cache=True, inline="always", error_model="numpy")',
-        f"def _{key}_derived_row(b, x, u, p, dx, {trig}):  # pragma: no cover - compiled",
-        f'{head}"""dx[b] of {key}_derived_rhs for row b, given sin and cos of its angles."""',
+        *_def(f"_{key}_derived_column", f"b, x, u, p, dx, {trig}"),
+        f'{head}"""q\'\' = dx[1::2, b] of {key}_derived_rhs for column (variant) b, given sin and cos of its',
+        f'{head}angles."""',
     ]
     lines += _load(head, [s for s in order if s in used], source, names)
     for sym, e in repl:
-        lines += _assign(head, sym.name, printer.doprint(e))
+        lines += _assign(head, sym.name, printer.code(e))
     lines.append(f"{head}# mass matrix M(q) (lower triangle, structural zeros omitted)")
     for (i, j), e in mass_out.items():
-        lines += _assign(head, f"m{i}{j}", printer.doprint(e))
+        lines += _assign(head, f"m{i}{j}", printer.code(e))
     lines.append(f"{head}# b(q, q', u) = Q(u) - C(q, q') q' - dV/dq")
     for i, e in enumerate(reduced[len(nonzero) :]):
-        lines += _assign(head, f"b{i}", printer.doprint(e))
+        lines += _assign(head, f"b{i}", printer.code(e))
     lines += _ldl_solve(n, zero, head)
-    for i in range(n):
-        lines.append(f"{head}dx[b, {2 * i}] = x[b, {2 * i + 1}]")
-        lines.append(f"{head}dx[b, {2 * i + 1}] = a{i}")
+    lines += [f"{head}dx[{2 * i + 1}, b] = a{i}" for i in range(n)]
     return "\n".join(lines) + "\n"
 
 
 def _emit_batch(d: Derivation, angles: list[tuple[str, int]], trig: str) -> str:
-    """``{key}_derived_rhs``: the row function for every row, sin and cos of the angles from
-    :mod:`nlcx.kernel.trig`, per column for a batch, per row below ``COLUMN_ROWS`` rows."""
+    """``{key}_derived_rhs``: the velocities q' copied, then the column function for each of
+    the first nb columns, sin and cos of the angles from :mod:`nlcx.kernel.trig` for the whole
+    batch at once, one variant at a time below ``COLUMN_ROWS`` variants.
+
+    The copies have a loop of their own: with their stores in it, the loop of the x-y and
+    x-y-z pendulums needs more run-time alias checks than LLVM makes, and stays scalar."""
     key, head = d.spec.key, "    "
     ind = head * 2
-    row = f"_{key}_derived_row"
-    columns = ", ".join(f"sc_{name}[0, b], sc_{name}[1, b]" for name, _ in angles)
+    column = f"_{key}_derived_column"
+    batch_trig = ", ".join(f"sc_{name}[0, b], sc_{name}[1, b]" for name, _ in angles)
     lines = [
         '@njit(cache=True, error_model="numpy")',
-        f"def {key}_derived_rhs(t, x, u, p, dx):  # pragma: no cover - compiled",
+        f"def {key}_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled",
         f'{head}"""The {d.spec.title} derived from {d.spec.source}.\n',
-        f"{head}Row b of x is one variant: state ({', '.join(s.name for s in d.states)}),",
-        f"{head}input ({', '.join(s.name for s in d.u)}), p[b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u).",
+        f"{head}Column b of x is one variant: state ({', '.join(s.name for s in d.states)}),",
+        f"{head}input ({', '.join(s.name for s in d.u)}), p[:, b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)",
+        f"{head}for the first nb columns; the others are neither read nor written.",
         f"{head}sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,",
-        f"{head}or one at a time for fewer than COLUMN_ROWS rows (the same bits either way).",
+        f"{head}or one at a time for fewer than COLUMN_ROWS variants (the same bits either way).",
         f'{head}"""',
-        f"{head}if x.shape[0] < COLUMN_ROWS:",
-        f"{ind}for b in range(x.shape[0]):",
-        *(f"{ind}{head}sin_{name}, cos_{name} = sincos(x[b, {i}])" for name, i in angles),
-        f"{ind}{head}{row}(b, x, u, p, dx, {trig})",
+        f"{head}for b in range(nb):  # the coordinates' derivatives are their rates",
+        *(f"{ind}dx[{2 * i}, b] = x[{2 * i + 1}, b]" for i in range(len(d.q))),
+        f"{head}if nb < COLUMN_ROWS:",
+        f"{ind}for b in range(nb):",
+        *(f"{ind}{head}sin_{name}, cos_{name} = sincos(x[{i}, b])" for name, i in angles),
+        f"{ind}{head}{column}(b, x, u, p, dx, {trig})",
         f"{ind}return",
-        *(f"{head}sc_{name} = sincos_column(x, {i})" for name, i in angles),
-        f"{head}for b in range(x.shape[0]):",
-        f"{ind}{row}(b, x, u, p, dx, {columns})",
+        *(f"{head}sc_{name} = sincos_column(x[{i}], nb)" for name, i in angles),
+        f"{head}for b in range(nb):",
+        f"{ind}{column}(b, x, u, p, dx, {batch_trig})",
     ]
     return "\n".join(lines) + "\n"
 
@@ -418,11 +452,12 @@ HEADER = f'''"""Equations of motion of the four inverted pendulums, derived from
 
 GENERATED by ``{COMMAND}`` -- do not edit; rerun the script instead.
 
-Each ``*_derived_rhs(t, x, u, p, dx)`` (numba, ``nlcx.kernel.abi.RHS_SIG``; compiled when a
-run first uses it) evaluates, for every row (variant) b of x, the mass matrix M(q) and
-b(q, q', u) = Q(u) - C(q, q') q' - dV/dq of the Euler-Lagrange equations and solves M q'' = b
-by an unrolled LDL^T factorisation; p[b] = (M, m, l, g). Each ``*_energy(x, p)`` is the total
-energy T + V, vectorised over leading axes of x.
+Each ``*_derived_rhs(t, x, u, p, dx, nb)`` (numba, ``nlcx.kernel.abi.RHS_SIG``; compiled when
+a run first uses it) evaluates, for each of the first nb columns (variants) b of x, the mass
+matrix M(q) and b(q, q', u) = Q(u) - C(q, q') q' - dV/dq of the Euler-Lagrange equations and
+solves M q'' = b by an unrolled LDL^T factorisation; p[:, b] = (M, m, l, g). Squares are
+written as products, which vectorise over the columns (the bits of numba's ``**``). Each
+``*_energy(x, p)`` is the total energy T + V, vectorised over leading axes of x.
 """
 '''
 

@@ -152,10 +152,10 @@ def test_third_party_plant_through_an_entry_point(tmp_path: Path) -> None:
             w: float = Field(2.0, gt=0)
 
         @njit(RHS_SIG, cache=False)
-        def rhs(t, x, u, p, dx):
-            for b in range(x.shape[0]):  # row b: one variant
-                dx[b, 0] = x[b, 1]
-                dx[b, 1] = -p[b, 0] * p[b, 0] * x[b, 0] + u[b, 0]
+        def rhs(t, x, u, p, dx, nb):
+            for b in range(nb):  # column b: one variant
+                dx[0, b] = x[1, b]
+                dx[1, b] = -p[0, b] * p[0, b] * x[0, b] + u[0, b]
 
         class Oscillator(PlantModel):
             """Toy harmonic oscillator from a third-party package."""

@@ -16,6 +16,7 @@ from types import ModuleType
 import numpy as np
 import pytest
 import sympy as sp
+from numba import njit
 
 from nlcx.plants.base import evaluate_rhs
 from nlcx.plants.generated import pendulums as gen
@@ -146,6 +147,40 @@ def test_emitted_module_is_the_committed_one() -> None:
     """Rerunning the generator reproduces nlcx/plants/generated/ exactly (deterministic output)."""
     assert derive.emit_module() == derive.TARGET.read_text()
     assert derive.emit_init() == derive.INIT.read_text()
+
+
+@njit(error_model="numpy")
+def _numba_powers(a):  # pragma: no cover - compiled
+    out = np.empty((2, a.size))
+    for i in range(a.size):
+        out[0, i] = a[i] ** 2
+        out[1, i] = a[i] ** 3
+    return out
+
+
+@njit(error_model="numpy")
+def _products(a):  # pragma: no cover - compiled
+    out = np.empty((2, a.size))
+    for i in range(a.size):
+        out[0, i] = a[i] * a[i]
+        out[1, i] = a[i] * (a[i] * a[i])
+    return out
+
+
+def test_squares_and_cubes_print_as_numbas_powers() -> None:
+    """In the right-hand sides q**2 and q**3 print as products, which vectorise where numba's
+    power does not: in their place in an expression, and with the bits of numba's power with
+    a literal exponent (random bit patterns, infinities, NaN, subnormals, overflow)."""
+    printer = derive._Printer(None, {})
+    l, m = sp.symbols("l m", positive=True)
+    assert [printer.code(e) for e in (l**2, l**3, l**2 * m, 2 * l**2 * m, m / l**2, l**4)] == [
+        "l*l", "l*(l*l)", "(l*l)*m", "2*(l*l)*m", "m/(l*l)", "l**4"
+    ]  # fmt: skip
+    rng = np.random.default_rng(8)
+    a = np.concatenate([rng.integers(0, 2**64, 1_000_000, dtype=np.uint64).view(float), rng.normal(size=100_000),
+                        [0.0, -0.0, np.inf, -np.inf, np.nan, 5e-324, 1e-160, 1e103, 1e155, -1e155]])  # fmt: skip
+    with np.errstate(all="ignore"):
+        assert np.array_equal(_numba_powers(a).view(np.int64), _products(a).view(np.int64))
 
 
 def test_x_derived_equals_printed_eqs_2_8_to_2_11() -> None:

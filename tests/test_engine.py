@@ -238,23 +238,23 @@ def test_a_record_arena_lends_memory_again_only_after_release_and_changes_no_bit
             assert np.array_equal(getattr(a, name), getattr(b, name)), name
 
 
-def test_a_right_hand_side_that_ignores_the_rows_is_refused() -> None:
-    """A plant written for one state (RHS_SIG's rows are variants) is caught before it runs."""
+def test_a_right_hand_side_that_ignores_the_columns_is_refused() -> None:
+    """A plant written for one state (RHS_SIG's columns are variants) is caught before it runs."""
     from numba import njit
 
     from nlcx.kernel.abi import RHS_SIG
     from nlcx.plants.base import check_rows
 
     @njit(RHS_SIG)
-    def one_state_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-        dx[0, 0] = x[0, 1]
-        dx[0, 1] = -p[0, 0] * x[0, 0] + u[0, 0]
+    def one_state_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+        dx[0, 0] = x[1, 0]
+        dx[1, 0] = -p[0, 0] * x[0, 0] + u[0, 0]
 
     prep = engine.prepare(config.build(tf_raw(CSTR, {"ol": {"kind": "open_loop"}}, {"u": {"kind": "step"}}, 1, 0.1)))
     plant = dataclasses.replace(prep.plant, rhs=one_state_rhs)
-    with pytest.raises(ConfigError, match="rows"):
+    with pytest.raises(ConfigError, match="first nb columns"):
         check_rows(plant)
-    check_rows(prep.plant)  # the companion form loops over the rows
+    check_rows(prep.plant)  # the companion form loops over the columns
 
 
 def test_same_config_same_bytes(x_time_raw: dict, tmp_path) -> None:

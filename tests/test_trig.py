@@ -5,6 +5,7 @@ property the kernel relies on: an angle gets the same bits whatever batch it is 
 
 from __future__ import annotations
 
+import importlib
 import math
 
 import mpmath
@@ -36,7 +37,7 @@ def _one_at_a_time(a):  # pragma: no cover - compiled
 
 
 def _column(a: np.ndarray) -> np.ndarray:
-    return sincos_column(np.ascontiguousarray(a, dtype=float).reshape(-1, 1), 0)
+    return sincos_column(np.ascontiguousarray(a, dtype=float), a.size)
 
 
 def _ulps(value: np.ndarray, exact: np.ndarray) -> np.ndarray:
@@ -65,14 +66,16 @@ def test_faithful_against_50_digit_values() -> None:
 
 def test_same_bits_in_any_batch_and_alone() -> None:
     """The vector loop and its scalar remainder compute alike: batch size and position do not
-    change an angle's sin and cos, nor does reading it from a strided column."""
+    change an angle's sin and cos, nor does reading it from a row of a state batch, whole or
+    its first nb angles."""
     a = RNG.uniform(-3.0, 3.0, 1003)
     full = _column(a)
     for n in (1, 2, 3, 7, 8, 9, 15, 16, 17, 31, 33, 100):
         for start in range(0, a.size - n, 89):
             assert np.array_equal(_column(a[start : start + n]), full[:, start : start + n]), (n, start)
-    rows = np.stack([RNG.normal(size=a.size), a, RNG.normal(size=a.size)], axis=1)
-    assert np.array_equal(sincos_column(rows, 1), full)
+    states = np.stack([RNG.normal(size=a.size), a, RNG.normal(size=a.size)])
+    assert np.array_equal(sincos_column(states[1], a.size), full)
+    assert np.array_equal(sincos_column(states[1], 37), full[:, :37])
     assert np.array_equal(_one_at_a_time(a), full)
 
 
@@ -107,33 +110,65 @@ def test_zero_and_tiny_angles_as_libm() -> None:
         assert np.array_equal(sc[1], np.ones_like(a))
 
 
-@pytest.mark.parametrize(("model", "n", "n_u"), [("x", 4, 1), ("xy", 8, 2), ("xz", 6, 2), ("xyz", 10, 3)])
-def test_derived_equations_same_bits_in_any_batch(model: str, n: int, n_u: int) -> None:
-    """The generated right-hand sides take their sines per row below COLUMN_ROWS rows and per
-    column above: a variant's derivative is the same in a batch of 1, 3 or 50."""
-    from nlcx.kernel import trig
-    from nlcx.plants.generated import pendulums
+MODELS = [("x", 4, 1), ("xy", 8, 2), ("xz", 6, 2), ("xyz", 10, 3)]
 
-    rhs = getattr(pendulums, f"{model}_derived_rhs")
-    rows = 50
-    x = RNG.normal(size=(rows, n)) * 0.5
-    u = RNG.normal(size=(rows, n_u))
-    p = np.column_stack([RNG.uniform(0.8, 1.2, rows), RNG.uniform(0.08, 0.12, rows), RNG.uniform(0.24, 0.36, rows),
-                         np.full(rows, 9.81)])  # fmt: skip
-    whole = np.empty((rows, n))
-    rhs(0.0, x, u, p, whole)
+
+def _batch(model: str, n: int, n_u: int, size: int, equations: str = "derived") -> tuple:
+    """A pendulum's right-hand side (``equations``: derived or printed) and a batch of ``size``
+    variants (x, u, p as columns)."""
+    rhs = getattr(importlib.import_module(f"nlcx.plants.{model}_pendulum"), f"{model}_{equations}_rhs")
+    x = RNG.normal(size=(n, size)) * 0.5
+    u = RNG.normal(size=(n_u, size))
+    p = np.stack([RNG.uniform(0.8, 1.2, size), RNG.uniform(0.08, 0.12, size), RNG.uniform(0.24, 0.36, size),
+                  np.full(size, 9.81)])  # fmt: skip
+    return rhs, x, u, p
+
+
+@pytest.mark.parametrize("equations", ["derived", "printed"])
+@pytest.mark.parametrize(("model", "n", "n_u"), MODELS)
+def test_same_bits_in_any_batch(model: str, n: int, n_u: int, equations: str) -> None:
+    """The right-hand sides take their sines one variant at a time below COLUMN_ROWS variants
+    and, the generated ones and eqs. 2.8-2.11, for the whole batch above: a variant's
+    derivative is the same in a batch of 1, 3 or 50."""
+    from nlcx.kernel import trig
+
+    variants = 50
+    rhs, x, u, p = _batch(model, n, n_u, variants, equations)
+    whole = np.empty((n, variants))
+    rhs(0.0, x, u, p, whole, variants)
     for size in (1, 3, trig.COLUMN_ROWS - 1, trig.COLUMN_ROWS, 13):
-        for start in range(0, rows - size, 11):
-            part = np.empty((size, n))
-            rhs(0.0, x[start : start + size], u[start : start + size], p[start : start + size], part)
-            assert np.array_equal(part, whole[start : start + size]), (size, start)
+        for start in range(0, variants - size, 11):
+            cols = slice(start, start + size)
+            part = np.empty((n, size))
+            rhs(0.0, *(np.ascontiguousarray(a[:, cols]) for a in (x, u, p)), part, size)
+            assert np.array_equal(part, whole[:, cols]), (size, start)
+
+
+@pytest.mark.parametrize("nb", [3, 13])
+@pytest.mark.parametrize("equations", ["derived", "printed"])
+@pytest.mark.parametrize(("model", "n", "n_u"), MODELS)
+def test_the_columns_from_nb_on_are_left_alone(model: str, n: int, n_u: int, equations: str, nb: int) -> None:
+    """Columns from nb on are neither read (NaN there changes nothing) nor written (a
+    sentinel stays), below and above COLUMN_ROWS."""
+    rhs, x, u, p = _batch(model, n, n_u, 20, equations)
+    expected = np.empty((n, 20))
+    rhs(0.0, x, u, p, expected, nb)
+    for a in (x, u, p):
+        a[:, nb:] = np.nan
+    dx = np.full((n, 20), -7.0)
+    rhs(0.0, x, u, p, dx, nb)
+    assert np.array_equal(dx[:, :nb], expected[:, :nb])
+    assert np.all(dx[:, nb:] == -7.0)
 
 
 def test_no_contraction_in_the_compiled_code() -> None:
     """The same-bits property rests on every multiply and add being rounded on its own: no
-    fast-math flags, no fused multiply-add in the compiled IR of the vector loop."""
-    _column(np.zeros(3))
-    ir = sincos_column.inspect_llvm(sincos_column.signatures[0])
+    fast-math flags, no fused multiply-add in the compiled IR of the vector loop. Compiled
+    afresh with the same options: numba cannot show the IR of code it loaded from its cache."""
+    options = {k: v for k, v in sincos_column.targetoptions.items() if k != "nopython"}
+    fresh = njit(**options)(sincos_column.py_func)
+    fresh(np.zeros(3), 3)
+    ir = fresh.inspect_llvm(fresh.signatures[0])
     assert "fadd" in ir and "fmul" in ir
     for marker in ("contract", "fast ", "llvm.fma", "llvm.fmuladd"):
         assert marker not in ir, marker

@@ -44,16 +44,17 @@ STUCK = 2
 @njit(cache=True, error_model="numpy")
 def _derivative(rhs, t, x, u, dist_row, dist_map, dx, one):  # pragma: no cover - compiled
     """dx = f(t, x, u; p) + dist_map @ d for one variant (eqs. 2.13/2.15: d enters the
-    state derivatives). ``one`` = (x, u, p, dx) scratch rows of shape (1, .); p is set."""
+    state derivatives). ``one`` = (x, u, p, dx) scratch columns of shape (., 1), the variant as
+    a batch of one (:data:`nlcx.kernel.abi.RHS_SIG`); p is set."""
     x1, u1, p1, dx1 = one
     for i in range(x.shape[0]):
-        x1[0, i] = x[i]
+        x1[i, 0] = x[i]
     for j in range(u.shape[0]):
-        u1[0, j] = u[j]
-    rhs(t, x1, u1, p1, dx1)
+        u1[j, 0] = u[j]
+    rhs(t, x1, u1, p1, dx1, 1)
     n_d = dist_row.shape[0]
     for i in range(dx.shape[0]):
-        dx[i] = dx1[0, i]
+        dx[i] = dx1[i, 0]
         if n_d > 0:
             acc = 0.0
             for j in range(n_d):
@@ -316,8 +317,9 @@ def initial_modes(axes, x, mode, direction, hold):  # pragma: no cover - compile
 def frictional_sample(
     rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records
 ):  # pragma: no cover - compiled
-    """Breakaway at t_k for the frictional rows (Appendix A's static case), and the friction
-    force on each axis at t_k when it is recorded (the step evaluates its own)."""
+    """Breakaway at t_k for the frictional variants (Appendix A's static case), and the friction
+    force on each axis at t_k when it is recorded (the step evaluates its own). x and pw by
+    columns, u by rows (:mod:`nlcx.kernel.integrator`)."""
     mode, direction, _, stopped = state
     dist, dist_map, _ = forces
     FRICTION = records[3]
@@ -349,20 +351,21 @@ def frictional_sample(
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _load_one(b, x, u, pw, xo, uo, one):  # pragma: no cover - compiled
-    """Copy row b's state, input and plant parameters into the one-variant work space."""
-    for i in range(x.shape[1]):
-        xo[i] = x[b, i]
+    """Copy working slot b's state and plant parameters (columns b of x and pw) and its input
+    (row b of u) into the one-variant work space."""
+    for i in range(x.shape[0]):
+        xo[i] = x[i, b]
     for j in range(u.shape[1]):
         uo[j] = u[b, j]
-    for i in range(pw.shape[1]):
-        one[2][0, i] = pw[b, i]
+    for i in range(pw.shape[0]):
+        one[2][i, 0] = pw[i, b]
 
 
 @njit(cache=True, error_model="numpy")
 def frictional_step(
     rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path, tableau, c
 ):  # pragma: no cover - compiled
-    """One sampling step of each frictional row, one variant at a time."""
+    """One sampling step of each frictional variant, one at a time (x, x_new, pw by columns)."""
     mode, direction, hold, stopped = state
     dist, dist_map, _ = forces
     (xo, xo_new, xo_mid, uo), scratch = one_path
@@ -377,8 +380,8 @@ def frictional_step(
             rhs, t, dt, xo, xo_new, xo_mid, uo, dist[shared_row(dist.shape[0], v), kd], c, dist_map,
             fw[b], mode[b], direction[b], hold[b], rk_a, rk_b, scratch,
         )  # fmt: skip
-        for i in range(x.shape[1]):
-            x_new[b, i] = xo_new[i]
+        for i in range(x.shape[0]):
+            x_new[i, b] = xo_new[i]
 
 
 @njit(FRICTION_SAMPLE_SIG, cache=True, error_model="numpy")

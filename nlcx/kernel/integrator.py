@@ -10,7 +10,12 @@ call of the right-hand side per Runge-Kutta stage serve every variant of the bat
 single trajectory is a chain of dependent operations (each stage needs the one before);
 stepping many variants together lets the processor overlap independent chains, and the
 cost of a call is shared by the whole batch. Variants with friction (Appendix A,
-:mod:`nlcx.kernel.friction`) are stepped one by one behind the frictionless rows.
+:mod:`nlcx.kernel.friction`) are stepped one by one behind the frictionless ones.
+
+The plant's state, parameters, input and stage derivatives are held by columns (column b:
+the variant of working slot b, :data:`nlcx.kernel.abi.RHS_SIG`), so that the equations and
+the Runge-Kutta sums run in vector code over the batch; the signals the controller and the
+loop elements see (y, r, u, a copy of x, the controller's parameters and state) by rows.
 """
 
 from __future__ import annotations
@@ -77,53 +82,65 @@ SIMULATE_SIG = types.void(
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _add_disturbances(dx, dist, vid, kd, stage, dist_map):  # pragma: no cover - compiled
-    """dx[b] += dist_map @ dist[variant of b, kd, stage] for every active row."""
+def _add_disturbances(dx, nb, dist, vid, kd, stage, dist_map):  # pragma: no cover - compiled
+    """dx[:, b] += dist_map @ dist[variant of b, kd, stage] for the first nb columns."""
     n_d = dist.shape[3]
     if n_d == 0:
         return
-    n = dx.shape[1]
-    for b in range(dx.shape[0]):
+    for b in range(nb):
         bd = shared_row(dist.shape[0], vid[b])
-        for i in range(n):
+        for i in range(dx.shape[0]):
             acc = 0.0
             for j in range(n_d):
                 acc += dist_map[i, j] * dist[bd, kd, stage, j]
-            dx[b, i] += acc
+            dx[i, b] += acc
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _stage_input(xs, x, h, k, nb):  # pragma: no cover - compiled
+    """xs = x + h k on the first nb columns: the input of a classic RK4 stage."""
+    for i in range(x.shape[0]):
+        for b in range(nb):
+            xs[i, b] = x[i, b] + h * k[i, b]
 
 
 @njit(cache=True, error_model="numpy")
-def _rk_step_batch(rhs, t, h, x, x_out, u, p, dist, vid, kd, dist_map, rk_a, rk_b, c, stages, xs):  # pragma: no cover
-    """One explicit Runge-Kutta step of size h for every row, any tableau of at most
-    :data:`MAX_STAGES` stages (u held, no friction). ``stages`` holds one (B, n) array per stage."""
-    nb, n = x.shape
+def _rk_step_batch(
+    rhs, t, h, nb, x, x_out, u, p, dist, vid, kd, dist_map, rk_a, rk_b, c, stages, xs
+):  # pragma: no cover - compiled
+    """One explicit Runge-Kutta step of size h for the first nb columns, any tableau of at most
+    :data:`MAX_STAGES` stages (u held, no friction). ``stages`` holds one (n, B) array per stage."""
+    n = x.shape[0]
     n_stage = rk_b.shape[0]
     for s in range(n_stage):
-        for b in range(nb):
-            for i in range(n):
-                acc = x[b, i]
+        for i in range(n):
+            for b in range(nb):
+                acc = x[i, b]
                 for j in range(s):
                     if rk_a[s, j] != 0.0:
-                        acc += h * rk_a[s, j] * stages[j][b, i]
-                xs[b, i] = acc
-        rhs(t + c[s] * h, xs, u, p, stages[s])
-        _add_disturbances(stages[s], dist, vid, kd, s, dist_map)
-    for b in range(nb):
-        for i in range(n):
-            acc = x[b, i]
+                        acc += h * rk_a[s, j] * stages[j][i, b]
+                xs[i, b] = acc
+        rhs(t + c[s] * h, xs, u, p, stages[s], nb)
+        _add_disturbances(stages[s], nb, dist, vid, kd, s, dist_map)
+    for i in range(n):
+        for b in range(nb):
+            acc = x[i, b]
             for s in range(n_stage):
-                acc += h * rk_b[s] * stages[s][b, i]
-            x_out[b, i] = acc
+                acc += h * rk_b[s] * stages[s][i, b]
+            x_out[i, b] = acc
 
 
 @njit(cache=True, error_model="numpy")
 def _swap_variants(i, j, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode):  # pragma: no cover
-    """Exchange the working rows i and j (two variants' state, parameters and bookkeeping)."""
+    """Exchange the working slots i and j (two variants' state, parameters and bookkeeping):
+    columns of the plant's state and parameters, rows of the rest."""
     if i == j:
         return
     vid[i], vid[j] = vid[j], vid[i]
     stopped[i], stopped[j] = stopped[j], stopped[i]
-    for a in (x, pw, cpw, cs, log, bw, direction, hold):
+    for a in (x, pw, bw):
+        _swap_columns(a, i, j)
+    for a in (cpw, cs, log, direction, hold):
         _swap_rows(a, i, j)
     _swap_rows3(fw, i, j)
     for c in range(mode.shape[1]):
@@ -135,6 +152,13 @@ def _swap_rows(a, i, j):  # pragma: no cover - compiled
     """Exchange rows i and j of a 2-D array."""
     for c in range(a.shape[1]):
         a[i, c], a[j, c] = a[j, c], a[i, c]
+
+
+@njit(cache=True, error_model="numpy")
+def _swap_columns(a, i, j):  # pragma: no cover - compiled
+    """Exchange columns i and j of a 2-D array."""
+    for r in range(a.shape[0]):
+        a[r, i], a[r, j] = a[r, j], a[r, i]
 
 
 @njit(cache=True, error_model="numpy")
@@ -204,28 +228,37 @@ def _row_order(friction, n_batch):  # pragma: no cover - compiled
 
 @njit(cache=True, error_model="numpy")
 def _working_rows(vid, plant, control, friction, n_u):  # pragma: no cover - compiled
-    """The per-row working copies (x, p, cp, cs, friction axes, bounds) in the order of vid."""
+    """The working copies in the order of vid: the plant's state and parameters by columns
+    and the bounds (x (n, B), pw (n_p, B), bw (n, B)); x0's rows (the controller's copy of the
+    state), cp, cs and the friction axes by rows."""
     x0, p, _, bounds = plant
     cp, cs0, _ = control
     n_batch, n = x0.shape
-    x = np.empty((n_batch, n))
-    pw = np.empty((n_batch, p.shape[1]))
+    x = np.empty((n, n_batch))
+    xrow = np.empty((n_batch, n))
+    pw = np.empty((p.shape[1], n_batch))
     cpw = np.empty((n_batch, cp.shape[1]))
     cs = np.empty((n_batch, cs0.shape[1]))
     fw = np.empty((n_batch, n_u, len(FA)))
-    bw = np.empty((n_batch, n))
+    bw = np.empty((n, n_batch))
     for b in range(n_batch):
         v = vid[b]
-        _copy_row(x0, v, x, b)
-        _copy_row(p, shared_row(p.shape[0], v), pw, b)
+        _copy_row(x0, v, xrow, b)
+        bp = shared_row(p.shape[0], v)
+        for i in range(n):
+            x[i, b] = x0[v, i]
+        for i in range(p.shape[1]):
+            pw[i, b] = p[bp, i]
         _copy_row(cp, v, cpw, b)
         _copy_row(cs0, v, cs, b)
-        _copy_row(bounds, shared_row(bounds.shape[0], v), bw, b)
+        bb = shared_row(bounds.shape[0], v)
+        for i in range(n):
+            bw[i, b] = bounds[bb, i]
         fr = shared_row(friction.shape[0], v)
         for j in range(n_u):
             for c in range(len(FA)):
                 fw[b, j, c] = friction[fr, j, c]
-    return x, pw, cpw, cs, fw, bw
+    return x, xrow, pw, cpw, cs, fw, bw
 
 
 @njit(cache=True, error_model="numpy")
@@ -239,8 +272,9 @@ def _copy_row(src, i, dst, j):  # pragma: no cover - compiled
 def _friction_scratch(n, n_u, n_p, n_stage, n_d):  # pragma: no cover - compiled
     """Work space of the one-variant friction path, allocated once per :func:`simulate` call:
     (x, x_new, x_mid, u) of the variant and the scratch tuple of
-    :func:`nlcx.kernel.friction.step_with_friction`."""
-    one = (np.empty((1, n)), np.empty((1, n_u)), np.empty((1, n_p)), np.empty((1, n)))
+    :func:`nlcx.kernel.friction.step_with_friction` (its ``one``: the variant as the single
+    column the plant's right-hand side takes)."""
+    one = (np.empty((n, 1)), np.empty((n_u, 1)), np.empty((n_p, 1)), np.empty((n, 1)))
     k_stage = np.empty((n_stage, n))
     scratch = (
         k_stage, np.empty(n), np.empty(n_u), np.empty(n_u), np.empty(n_u),
@@ -275,46 +309,56 @@ def _hook_counts(table):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _sample(k, nb, vid, x, C, picked, y, ref, r, u, X):  # pragma: no cover - compiled
-    """At t_k, for every active row: record x_k, measure y_k = C x_k, read r_k, clear u."""
-    n = x.shape[1]
+def _sample(k, nb, vid, x, xrow, C, picked, y, ref, r, u, X):  # pragma: no cover - compiled
+    """At t_k, for every active variant: record x_k, copy it into its row of xrow (the
+    controller's), measure y_k = C x_k, read r_k, clear u. Each loop runs over the batch."""
+    n = x.shape[0]
     kr = shared_row(ref.shape[1], k)
-    for b in range(nb):
-        v = vid[b]
-        for i in range(n):
-            X[v, k, i] = x[b, i]
-        for i in range(y.shape[1]):
-            if picked[i] >= 0:  # a row of C that selects one state
-                y[b, i] = x[b, picked[i]]
-            else:
+    for i in range(n):
+        for b in range(nb):
+            X[vid[b], k, i] = x[i, b]
+            xrow[b, i] = x[i, b]
+    for i in range(y.shape[1]):
+        j = picked[i]
+        if j >= 0:  # a row of C that selects one state
+            for b in range(nb):
+                y[b, i] = x[j, b]
+        else:
+            for b in range(nb):
                 acc = 0.0
-                for j in range(n):
-                    acc += C[i, j] * x[b, j]
+                for jj in range(n):
+                    acc += C[i, jj] * x[jj, b]
                 y[b, i] = acc
-        br = shared_row(ref.shape[0], vid[b])
-        for i in range(r.shape[1]):
-            r[b, i] = ref[br, kr, i]
+    for i in range(r.shape[1]):
+        for b in range(nb):
+            r[b, i] = ref[shared_row(ref.shape[0], vid[b]), kr, i]
+    for b in range(nb):
         for j in range(u.shape[1]):
             u[b, j] = 0.0
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _record_inputs(k, nb, n, vid, u, log, stopped, U, LOG, status, n_valid, fail_index):  # pragma: no cover
-    """Record the logs and the applied input u_k of every active row; a row whose input is not
-    finite stops (status, failing input). Returns the number of rows stopped."""
-    record = LOG.shape[1] > 1
+def _record_inputs(k, nb, n, vid, u, uc, log, stopped, U, LOG, status, n_valid, fail_index):  # pragma: no cover
+    """Record the logs and the applied input u_k of every active row and hold it by columns
+    in uc (the plant's input over the step); a row whose input is not finite stops (status,
+    failing input). Returns the number of rows stopped."""
+    if LOG.shape[1] > 1:
+        for b in range(nb):
+            for i in range(log.shape[1]):
+                LOG[vid[b], k, i] = log[b, i]
+    for j in range(u.shape[1]):
+        for b in range(nb):
+            U[vid[b], k, j] = u[b, j]
+            uc[j, b] = u[b, j]
     n_stop = 0
     for b in range(nb):
-        v = vid[b]
-        if record:
-            for i in range(log.shape[1]):
-                LOG[v, k, i] = log[b, i]
         bad_u = -1
         for j in range(u.shape[1]):
-            U[v, k, j] = u[b, j]
-            if bad_u < 0 and not np.isfinite(u[b, j]):
+            if not np.isfinite(u[b, j]):
                 bad_u = j
+                break
         if bad_u >= 0:
+            v = vid[b]
             status[v] = STATUS_NONFINITE
             fail_index[v] = n + bad_u
             n_valid[v] = k + 1
@@ -324,33 +368,33 @@ def _record_inputs(k, nb, n, vid, u, log, stopped, U, LOG, status, n_valid, fail
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _accept_states(k, nb, vid, x, x_new, bw, stopped, status, n_valid, fail_index):  # pragma: no cover - compiled
-    """x_{k+1} for every active row; a row whose state is non-finite or past its bound stops.
-    Returns the number of rows stopped."""
-    n = x.shape[1]
+def _accept_states(k, nb, vid, x, x_new, bw, stopped, flagged, status, n_valid, fail_index):  # pragma: no cover
+    """x_{k+1} for every active variant; one whose state is non-finite or past its bound
+    stops (status and the first failing state). Returns the number of variants stopped.
+
+    One pass over the columns takes the new states and flags the variants with a state not
+    finite or past its bound (vector code); only the flagged ones are then examined."""
+    n = x.shape[0]
+    for b in range(nb):
+        flagged[b] = False
+    for i in range(n):
+        for b in range(nb):
+            v = x_new[i, b]
+            x[i, b] = x[i, b] if stopped[b] else v
+            flagged[b] = flagged[b] | (not abs(v) < np.inf) | (abs(v) > bw[i, b])
     n_stop = 0
     for b in range(nb):
-        if stopped[b]:
+        if stopped[b] or not flagged[b]:
             continue
+        bad = 0
+        while np.isfinite(x[bad, b]) and abs(x[bad, b]) <= bw[bad, b]:
+            bad += 1
         v = vid[b]
-        bad = -1
-        code = STATUS_OK
-        for i in range(n):
-            x[b, i] = x_new[b, i]
-            if bad >= 0:
-                continue
-            if not np.isfinite(x[b, i]):
-                bad = i
-                code = STATUS_NONFINITE
-            elif abs(x[b, i]) > bw[b, i]:
-                bad = i
-                code = STATUS_BOUND
-        if bad >= 0:
-            status[v] = code
-            fail_index[v] = bad
-            n_valid[v] = k + 1
-            stopped[b] = True
-            n_stop += 1
+        status[v] = STATUS_NONFINITE if not np.isfinite(x[bad, b]) else STATUS_BOUND
+        fail_index[v] = bad
+        n_valid[v] = k + 1
+        stopped[b] = True
+        n_stop += 1
     return n_stop
 
 
@@ -376,54 +420,37 @@ def _compact(nb, n_free, vid, rows, fw, state):  # pragma: no cover - compiled
     return nb, n_free
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _free_views(n_free, x, x_new, xs, u, pw, stages):  # pragma: no cover - compiled
-    """Views on the frictionless rows (stepped together), remade only when a variant leaves."""
-    k1, k2, k3, k4 = stages
-    return (
-        x[:n_free], x_new[:n_free], xs[:n_free], u[:n_free], pw[:n_free],
-        k1[:n_free], k2[:n_free], k3[:n_free], k4[:n_free],
-    )  # fmt: skip
-
-
 @njit(cache=True, error_model="numpy")
 def _signal_rows(n_batch, n_y, n_r, n_u, n_log):  # pragma: no cover - compiled
-    """Per-row work arrays of the signals: y, r, u and the controller log (NaN until written)."""
+    """Work arrays of the signals: y, r, u and the controller log (NaN until written) by rows,
+    and u by columns (the plant's input)."""
     return (
         np.empty((n_batch, n_y)),
         np.empty((n_batch, n_r)),
         np.empty((n_batch, n_u)),
         np.full((n_batch, n_log), np.nan),
+        np.empty((n_u, n_batch)),
     )
 
 
 @njit(cache=True, error_model="numpy")
-def _stage_rows(n_batch, n):  # pragma: no cover - compiled
-    """Per-row work arrays of a Runge-Kutta step: x_{k+1}, a stage's input and (up to) four
-    stage derivatives."""
-    stages = (np.empty((n_batch, n)), np.empty((n_batch, n)), np.empty((n_batch, n)), np.empty((n_batch, n)))
-    return np.empty((n_batch, n)), np.empty((n_batch, n)), stages
+def _stage_columns(n_batch, n):  # pragma: no cover - compiled
+    """Work arrays (n, B) of a Runge-Kutta step: x_{k+1}, a stage's input and (up to) four
+    stage derivatives; and the flags of the variants the step took out of bounds."""
+    stages = (np.empty((n, n_batch)), np.empty((n, n_batch)), np.empty((n, n_batch)), np.empty((n, n_batch)))
+    return np.empty((n, n_batch)), np.empty((n, n_batch)), stages, np.zeros(n_batch, dtype=np.bool_)
 
 
 @njit(cache=True, error_model="numpy")
 def _friction_state(fw, x):  # pragma: no cover - compiled
-    """(mode, direction, hold, stopped) of every row's friction axes at t_0 (Appendix A)."""
+    """(mode, direction, hold, stopped) of every row's friction axes at t_0 (Appendix A);
+    x: the initial states by rows."""
     n_batch, n_u = fw.shape[0], fw.shape[1]
     state = (np.zeros((n_batch, n_u), dtype=np.int64), np.zeros((n_batch, n_u)), np.zeros((n_batch, n_u)),
              np.zeros(n_batch, dtype=np.bool_))  # fmt: skip
     for b in range(n_batch):
         initial_modes(fw[b], x[b], state[0][b], state[1][b], state[2][b])
     return state
-
-
-@njit(cache=True, error_model="numpy")
-def _flat_views(x, xs, x_new, stages):  # pragma: no cover - compiled
-    """The rows stepped together are the leading rows: flat views on x, a stage's input,
-    x_{k+1} and the stage derivatives make the RK4 sums one vectorisable loop."""
-    size = x.size
-    k1, k2, k3, k4 = stages
-    return (x.reshape(size), xs.reshape(size), x_new.reshape(size),
-            k1.reshape(size), k2.reshape(size), k3.reshape(size), k4.reshape(size))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
@@ -466,27 +493,25 @@ def simulate(
     classic = _is_classic_rk4(rk_a, rk_b)
     picked = _output_picks(C)
     vid, n_free = _row_order(friction, n_batch)
-    x, pw, cpw, cs, fw, bw = _working_rows(vid, plant, control, friction, n_u)
-    y, r, u, log = _signal_rows(n_batch, C.shape[0], ref.shape[2], n_u, LOG.shape[2])
-    x_new, xs, stages = _stage_rows(n_batch, n)
-    state = _friction_state(fw, x)
+    x, xrow, pw, cpw, cs, fw, bw = _working_rows(vid, plant, control, friction, n_u)
+    y, r, u, log, uc = _signal_rows(n_batch, C.shape[0], ref.shape[2], n_u, LOG.shape[2])
+    x_new, xs, (k1, k2, k3, k4), flagged = _stage_columns(n_batch, n)
+    state = _friction_state(fw, xrow)
     _init_outcome(n_steps, outcome)
     one_path = _friction_scratch(n, n_u, p.shape[1], rk_b.shape[0], dist.shape[3])
     table, ep, es, data = elements[0], elements[1], elements[2].copy(), elements[3]
     n_sensor, n_actuator = _hook_counts(table)
     (status, n_valid, fail_index), FRICTION, stopped, nb = outcome, records[3], state[3], n_batch
-    yv, rv, uv, xv, cpv, csv, logv = y, r, u, x, cpw, cs, log
-    xr, xnr, xsr, ur, pr, k1r, k2r, k3r, k4r = _free_views(n_free, x, x_new, xs, u, pw, stages)
-    xf, xsf, xnf, k1f, k2f, k3f, k4f = _flat_views(x, xs, x_new, stages)
+    yv, rv, uv, xv, cpv, csv, logv = y, r, u, xrow, cpw, cs, log
     for k in range(n_steps + 1):
         t = k * dt
-        _sample(k, nb, vid, x, C, picked, y, ref, r, u, X)
+        _sample(k, nb, vid, x, xrow, C, picked, y, ref, r, u, X)
         if n_sensor > 0:  # (a call handing over the function table costs even when it does nothing)
             _apply_elements(SENSOR, t, dt, k, yv, vid, element_fns, table, ep, es, data)
         controller(t, dt, xv, yv, rv, cpv, csv, uv, logv, callbacks)
         if n_actuator > 0:
             _apply_elements(ACTUATOR, t, dt, k, uv, vid, element_fns, table, ep, es, data)
-        n_stop = _record_inputs(k, nb, n, vid, u, log, stopped, U, LOG, status, n_valid, fail_index)
+        n_stop = _record_inputs(k, nb, n, vid, u, uc, log, stopped, U, LOG, status, n_valid, fail_index)
         if nb > n_free:
             frictional[0](rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records)
         elif FRICTION.shape[1] > 1:
@@ -494,33 +519,29 @@ def simulate(
         if k < n_steps and nb > n_stop:
             kd = shared_row(dist.shape[1], k)
             if n_free > 0 and classic:  # written out here: as a helper it cost 60 % of a step
-                m = n_free * n
-                rhs(t, xr, ur, pr, k1r)
-                _add_disturbances(k1r, dist, vid, kd, 0, dist_map)
-                for q in range(m):
-                    xsf[q] = xf[q] + 0.5 * dt * k1f[q]
-                rhs(t + 0.5 * dt, xsr, ur, pr, k2r)
-                _add_disturbances(k2r, dist, vid, kd, 1, dist_map)
-                for q in range(m):
-                    xsf[q] = xf[q] + 0.5 * dt * k2f[q]
-                rhs(t + 0.5 * dt, xsr, ur, pr, k3r)
-                _add_disturbances(k3r, dist, vid, kd, 2, dist_map)
-                for q in range(m):
-                    xsf[q] = xf[q] + dt * k3f[q]
-                rhs(t + dt, xsr, ur, pr, k4r)
-                _add_disturbances(k4r, dist, vid, kd, 3, dist_map)
-                for q in range(m):
-                    xnf[q] = xf[q] + dt / 6.0 * (k1f[q] + 2.0 * (k2f[q] + k3f[q]) + k4f[q])
+                rhs(t, x, uc, pw, k1, n_free)
+                _add_disturbances(k1, n_free, dist, vid, kd, 0, dist_map)
+                _stage_input(xs, x, 0.5 * dt, k1, n_free)
+                rhs(t + 0.5 * dt, xs, uc, pw, k2, n_free)
+                _add_disturbances(k2, n_free, dist, vid, kd, 1, dist_map)
+                _stage_input(xs, x, 0.5 * dt, k2, n_free)
+                rhs(t + 0.5 * dt, xs, uc, pw, k3, n_free)
+                _add_disturbances(k3, n_free, dist, vid, kd, 2, dist_map)
+                _stage_input(xs, x, dt, k3, n_free)
+                rhs(t + dt, xs, uc, pw, k4, n_free)
+                _add_disturbances(k4, n_free, dist, vid, kd, 3, dist_map)
+                for i in range(n):
+                    for b in range(n_free):
+                        x_new[i, b] = x[i, b] + dt / 6.0 * (k1[i, b] + 2.0 * (k2[i, b] + k3[i, b]) + k4[i, b])
             elif n_free > 0:
-                _rk_step_batch(rhs, t, dt, xr, xnr, ur, pr, dist, vid, kd, dist_map, rk_a, rk_b, c,
-                               (k1r, k2r, k3r, k4r), xsr)  # fmt: skip
+                _rk_step_batch(rhs, t, dt, n_free, x, x_new, uc, pw, dist, vid, kd, dist_map, rk_a, rk_b, c,
+                               (k1, k2, k3, k4), xs)  # fmt: skip
             if nb > n_free:
                 frictional[1](rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path,
                               tableau, c)  # fmt: skip
-            n_stop += _accept_states(k, nb, vid, x, x_new, bw, stopped, status, n_valid, fail_index)
+            n_stop += _accept_states(k, nb, vid, x, x_new, bw, stopped, flagged, status, n_valid, fail_index)
         if n_stop > 0:
             nb, n_free = _compact(nb, n_free, vid, (x, pw, cpw, cs, log, bw), fw, state)
             if nb == 0:
                 break
-            yv, rv, uv, xv, cpv, csv, logv = y[:nb], r[:nb], u[:nb], x[:nb], cpw[:nb], cs[:nb], log[:nb]
-            xr, xnr, xsr, ur, pr, k1r, k2r, k3r, k4r = _free_views(n_free, x, x_new, xs, u, pw, stages)
+            yv, rv, uv, xv, cpv, csv, logv = y[:nb], r[:nb], u[:nb], xrow[:nb], cpw[:nb], cs[:nb], log[:nb]

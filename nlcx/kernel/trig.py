@@ -26,10 +26,10 @@ import math
 import numpy as np
 from numba import njit
 
-#: Batches of at least this many rows take :func:`sincos_column`; smaller ones call
-#: :func:`sincos` per row. Measured on the x pendulum's equations (AVX-512, pendulum angles):
-#: one row at a time about 12 ns a row at any batch size; the column 30 ns a row at 4 rows
-#: (its work array, and no full vector of 8 angles), 11 at 8, 9 at 100.
+#: Batches of at least this many variants take :func:`sincos_column`; smaller ones call
+#: :func:`sincos` per variant. Measured on the x pendulum's equations (AVX-512, pendulum
+#: angles): one variant at a time 17 ns a variant at 4 variants, 13 at 7; the column 27 ns a
+#: variant at 4 (its work array, and no full vector of 8 angles), 12 at 8, 5-6 at 100.
 COLUMN_ROWS = 8
 #: Beyond this |x| (rad) the two-part reduction is not trusted; libm takes over.
 REDUCTION_LIMIT = 1.0e5
@@ -110,19 +110,17 @@ def _sincos_reduced(x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def sincos_column(x, j):  # pragma: no cover - compiled
-    """sc (2, B): sc[0, b] = sin x[b, j], sc[1, b] = cos x[b, j] for every row b of x.
+def sincos_column(angles, nb):  # pragma: no cover - compiled
+    """sc (2, nb): sc[0, b] = sin angles[b], sc[1, b] = cos angles[b] for the first nb angles.
 
-    The angles are copied into sc[0] so that the loop over them reads and writes contiguous
-    memory and vectorises; angles outside the reduction's range then get libm's values."""
-    nb = x.shape[0]
+    ``angles`` is contiguous (an angle's row of a plant's (n, B) state, one entry a variant),
+    so the loop over them reads and writes contiguous memory and vectorises; angles outside
+    the reduction's range then get libm's values."""
     sc = np.empty((2, nb))
     for b in range(nb):
-        sc[0, b] = x[b, j]
+        sc[0, b], sc[1, b] = _sincos_reduced(angles[b])
     for b in range(nb):
-        sc[0, b], sc[1, b] = _sincos_reduced(sc[0, b])
-    for b in range(nb):
-        a = x[b, j]
+        a = angles[b]
         if not abs(a) <= REDUCTION_LIMIT:
             sc[0, b], sc[1, b] = math.sin(a), math.cos(a)
     return sc

@@ -3,8 +3,10 @@
 A registered plant is a :class:`PlantModel` subclass. It names its states, inputs and
 outputs with units, declares its parameters as a pydantic model (the one place their
 defaults live) and supplies a numba-compiled right-hand side with
-:data:`nlcx.kernel.abi.RHS_SIG`. :meth:`PlantModel.build` turns a validated configuration
-into a :class:`Plant`, the numeric instance the engine integrates.
+:data:`nlcx.kernel.abi.RHS_SIG`: it evaluates the first nb columns of its arrays, one variant
+a column (:func:`evaluate_rhs` calls it on one state or on rows of states).
+:meth:`PlantModel.build` turns a validated configuration into a :class:`Plant`, the numeric
+instance the engine integrates.
 """
 
 from __future__ import annotations
@@ -262,28 +264,32 @@ def linearize(
 
 
 def evaluate_rhs(rhs: Any, x: Any, u: Any, p: Any, t: float = 0.0) -> np.ndarray:
-    """Call a compiled right-hand side (:data:`nlcx.kernel.abi.RHS_SIG`, rows are variants) on one
-    state (1-D x, u; returns 1-D) or on rows of states (2-D; p one row or one per row)."""
+    """Call a compiled right-hand side on one state (1-D x, u; returns 1-D) or on rows of
+    states (2-D, one state a row; returns rows; p one row or one per row).
+
+    The right-hand side (:data:`nlcx.kernel.abi.RHS_SIG`) takes the variants as columns: the
+    rows are handed to it transposed, as contiguous columns."""
     x = np.asarray(x, dtype=float)
     single = x.ndim == 1
-    X = np.atleast_2d(x).copy()
+    X = np.atleast_2d(x)
+    nb = X.shape[0]
 
-    def rows(a: Any) -> np.ndarray:
+    def columns(a: Any) -> np.ndarray:
         a = np.atleast_2d(np.asarray(a, dtype=float))
-        return np.broadcast_to(a, (X.shape[0], a.shape[1])).copy()
+        return np.array(np.broadcast_to(a, (nb, a.shape[1])).T, order="C")
 
-    U, P = rows(u), rows(p)
-    out = np.zeros_like(X)
-    rhs(float(t), X, U, P, out)
-    return out[0] if single else out
+    U, P = columns(u), columns(p)
+    out = np.zeros((X.shape[1], nb))
+    rhs(float(t), columns(X), U, P, out, nb)
+    return out[:, 0] if single else out.T.copy()
 
 
 _ROWS_CHECKED: set[int] = set()
 
 
 def check_rows(plant: Plant) -> None:
-    """Guard against a right-hand side written for a single state: two different rows
-    evaluated together must equal each row evaluated alone (rows are variants, see
+    """Guard against a right-hand side written for a single state: two different variants
+    evaluated together must equal each evaluated alone (columns are variants, see
     :data:`nlcx.kernel.abi.RHS_SIG`). Checked once per compiled function."""
     key = id(plant.rhs)
     if key in _ROWS_CHECKED:
@@ -299,7 +305,7 @@ def check_rows(plant: Plant) -> None:
         raise ConfigError(
             "plant.name",
             plant.name,
-            "its right-hand side does not evaluate the rows of x independently; it must loop "
-            "over the rows (variants) as nlcx.kernel.abi.RHS_SIG documents",
+            "its right-hand side does not evaluate the variants of x independently; it must loop "
+            "over the first nb columns (variants) as nlcx.kernel.abi.RHS_SIG documents",
         )
     _ROWS_CHECKED.add(key)

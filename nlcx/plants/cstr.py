@@ -37,14 +37,15 @@ K = PARAMS.at
 
 
 @njit(cache=True, error_model="numpy")
-def cstr_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-    """Eqs. 5.1-5.2 for every row b: p[b] a :data:`PARAMS` block, u[b] = (F/V,)."""
-    for b in range(x.shape[0]):
-        k1, k2, k3, caf = p[b, K.k1], p[b, K.k2], p[b, K.k3], p[b, K.CAf]
-        ca, cb = x[b, 0], x[b, 1]
-        d = u[b, 0]
-        dx[b, 0] = d * (caf - ca) - k1 * ca - k3 * ca * ca  # eq. 5.1
-        dx[b, 1] = -d * cb + k1 * ca - k2 * cb  # eq. 5.2
+def cstr_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+    """Eqs. 5.1-5.2 for each of the first nb columns (variants) b: p[:, b] a :data:`PARAMS`
+    block, u[:, b] = (F/V,)."""
+    for b in range(nb):
+        k1, k2, k3, caf = p[K.k1, b], p[K.k2, b], p[K.k3, b], p[K.CAf, b]
+        ca, cb = x[0, b], x[1, b]
+        d = u[0, b]
+        dx[0, b] = d * (caf - ca) - k1 * ca - k3 * ca * ca  # eq. 5.1
+        dx[1, b] = -d * cb + k1 * ca - k2 * cb  # eq. 5.2
 
 
 def steady_state(params: CSTRParams) -> tuple[float, float]:

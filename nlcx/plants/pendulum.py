@@ -20,6 +20,7 @@ from collections.abc import Callable
 from typing import Any, ClassVar, Literal
 
 import numpy as np
+from numba import njit
 from pydantic import Field
 
 from nlcx.layout import Layout
@@ -73,6 +74,30 @@ def force_signals(*axes: str) -> tuple[Signal, ...]:
 #: The parameter vector p of every pendulum (Tables 2.1, 3.1's setup): the printed right-hand
 #: sides read it by name; the generated ones (scripts/derive_pendulums.py) in this order.
 PARAMS = Layout("pendulum", ("M", "m", "l", "g"))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def by_variant(equations, t, x, u, p, dx, nb):  # pragma: no cover - compiled
+    """A right-hand side (:data:`nlcx.kernel.abi.RHS_SIG`) from ``equations(t, x, u, p, dx)``
+    written for one variant's 1-D vectors, as the printed equations are. For each of the first
+    nb columns b, column b of x, u and p is copied into vectors (one allocation per call, no
+    array view per variant), the equations are evaluated and their dx is copied to dx[:, b].
+
+    Inlined into its caller so that the caller, which hands it a compiled function, can be
+    cached."""
+    n, n_u, n_p = x.shape[0], u.shape[0], p.shape[0]
+    scratch = np.empty(2 * n + n_u + n_p)
+    x_b, dx_b, u_b, p_b = scratch[:n], scratch[n : 2 * n], scratch[2 * n : 2 * n + n_u], scratch[2 * n + n_u :]
+    for b in range(nb):
+        for i in range(n):
+            x_b[i] = x[i, b]
+        for j in range(n_u):
+            u_b[j] = u[j, b]
+        for k in range(n_p):
+            p_b[k] = p[k, b]
+        equations(t, x_b, u_b, p_b, dx_b)
+        for i in range(n):
+            dx[i, b] = dx_b[i]
 
 
 class PendulumModel(PlantModel):

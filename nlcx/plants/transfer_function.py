@@ -47,17 +47,18 @@ class TransferFunctionParams(PlantParams):
 
 
 @njit(cache=True, error_model="numpy")
-def companion_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-    """Controllable canonical form for every row b: x_i' = x_{i+1},
-    x_n' = -sum_j a_j x_{j+1} + u, p[b] = a_0..a_{n-1}."""
-    n = x.shape[1]
-    for b in range(x.shape[0]):
-        acc = u[b, 0]
-        for j in range(n):
-            acc -= p[b, j] * x[b, j]
-        for i in range(n - 1):
-            dx[b, i] = x[b, i + 1]
-        dx[b, n - 1] = acc
+def companion_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+    """Controllable canonical form for each of the first nb columns (variants) b:
+    x_i' = x_{i+1}, x_n' = -sum_j a_j x_{j+1} + u, p[:, b] = a_0..a_{n-1}."""
+    n = x.shape[0]
+    for b in range(nb):
+        dx[n - 1, b] = u[0, b]
+    for j in range(n):  # each loop runs along a row, over the variants
+        for b in range(nb):
+            dx[n - 1, b] -= p[j, b] * x[j, b]
+    for i in range(n - 1):
+        for b in range(nb):
+            dx[i, b] = x[i + 1, b]
 
 
 def canonical_form(num: list[float], den: list[float]) -> tuple[np.ndarray, np.ndarray]:

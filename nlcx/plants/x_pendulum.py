@@ -16,7 +16,7 @@ from types import MappingProxyType
 
 from numba import njit
 
-from nlcx.kernel.trig import sincos
+from nlcx.kernel.trig import COLUMN_ROWS, sincos, sincos_column
 from nlcx.plants.generated.pendulums import x_derived_rhs, x_energy
 from nlcx.plants.pendulum import (
     ANGLE_BOUND,
@@ -34,19 +34,34 @@ class XPendulumParams(PendulumParams):
     """Table 2.1 parameters."""
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _x_printed_column(b, x, u, p, dx, s, c):  # pragma: no cover - compiled
+    """Eqs. 2.8-2.11 as printed for column (variant) b: p[:, b] = (M, m, l, g), u[:, b] = (F_x,),
+    s and c the sine and cosine of its theta."""
+    M, m, l, g = p[P.M, b], p[P.m, b], p[P.l, b], p[P.g, b]
+    theta_dot = x[3, b]
+    F = u[0, b]
+    den = M + m * s * s
+    dx[0, b] = x[1, b]  # eq. 2.8
+    dx[1, b] = (-m * g * c * s + m * l * s * theta_dot * theta_dot + F) / den  # eq. 2.9
+    dx[2, b] = theta_dot  # eq. 2.10
+    dx[3, b] = (-m * l * c * s * theta_dot * theta_dot - c * F + (M + m) * g * s) / (l * den)  # eq. 2.11
+
+
 @njit(cache=True, error_model="numpy")
-def x_pendulum_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-    """Eqs. 2.8-2.11 as printed, for every row b: p[b] = (M, m, l, g), u[b] = (F_x,)."""
-    for b in range(x.shape[0]):
-        M, m, l, g = p[b, P.M], p[b, P.m], p[b, P.l], p[b, P.g]
-        theta, theta_dot = x[b, 2], x[b, 3]
-        F = u[b, 0]
-        s, c = sincos(theta)
-        den = M + m * s * s
-        dx[b, 0] = x[b, 1]  # eq. 2.8
-        dx[b, 1] = (-m * g * c * s + m * l * s * theta_dot * theta_dot + F) / den  # eq. 2.9
-        dx[b, 2] = theta_dot  # eq. 2.10
-        dx[b, 3] = (-m * l * c * s * theta_dot * theta_dot - c * F + (M + m) * g * s) / (l * den)  # eq. 2.11
+def x_pendulum_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+    """Eqs. 2.8-2.11 as printed, for each of the first nb columns (variants) of x.
+
+    sin and cos of theta from nlcx.kernel.trig as for the derived equations: for the whole
+    batch in vector code, or one at a time for fewer than COLUMN_ROWS variants."""
+    if nb < COLUMN_ROWS:
+        for b in range(nb):
+            s, c = sincos(x[2, b])
+            _x_printed_column(b, x, u, p, dx, s, c)
+        return
+    sc = sincos_column(x[2], nb)
+    for b in range(nb):
+        _x_printed_column(b, x, u, p, dx, sc[0, b], sc[1, b])
 
 
 #: The printed variant under the name the other pendulums use.

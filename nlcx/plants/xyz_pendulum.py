@@ -19,7 +19,14 @@ from numba import njit
 
 from nlcx.kernel.trig import sincos
 from nlcx.plants.generated.pendulums import xyz_derived_rhs, xyz_energy
-from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
+from nlcx.plants.pendulum import (
+    ANGLE_BOUND,
+    PARAMS,
+    PendulumModel,
+    by_variant,
+    coordinate_signals,
+    force_signals,
+)
 
 P = PARAMS.at
 
@@ -94,10 +101,10 @@ def _xyz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def xyz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-    """The printed equations for every row (variant) b of x (one row: :func:`_xyz_printed_row`)."""
-    for b in range(x.shape[0]):
-        _xyz_printed_row(t, x[b], u[b], p[b], dx[b])
+def xyz_printed_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+    """The printed equations for each of the first nb columns (variants) b of x (one variant:
+    :func:`_xyz_printed_row`)."""
+    by_variant(_xyz_printed_row, t, x, u, p, dx, nb)
 
 
 class XYZPendulum(PendulumModel):

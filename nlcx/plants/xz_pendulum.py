@@ -19,7 +19,14 @@ from numba import njit
 
 from nlcx.kernel.trig import sincos
 from nlcx.plants.generated.pendulums import xz_derived_rhs, xz_energy
-from nlcx.plants.pendulum import ANGLE_BOUND, PARAMS, PendulumModel, coordinate_signals, force_signals
+from nlcx.plants.pendulum import (
+    ANGLE_BOUND,
+    PARAMS,
+    PendulumModel,
+    by_variant,
+    coordinate_signals,
+    force_signals,
+)
 
 P = PARAMS.at
 
@@ -47,10 +54,10 @@ def _xz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def xz_printed_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
-    """The printed equations for every row (variant) b of x (one row: :func:`_xz_printed_row`)."""
-    for b in range(x.shape[0]):
-        _xz_printed_row(t, x[b], u[b], p[b], dx[b])
+def xz_printed_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+    """The printed equations for each of the first nb columns (variants) b of x (one variant:
+    :func:`_xz_printed_row`)."""
+    by_variant(_xz_printed_row, t, x, u, p, dx, nb)
 
 
 class XZPendulum(PendulumModel):
