@@ -19,8 +19,7 @@ much of the distance between nlcx's kernel and the limit is the kernel's design 
 in lock step, states in arrays, sin and cos in vector code) and how much is nlcx's generic PID.
 :func:`simulate_lockstep` is the limit's loop stepped as nlcx's kernel steps a batch, every
 variant together, with nlcx's sin and cos: nlcx's bits at the speed a kernel with the plant and
-the PID compiled into it would have. :func:`simulate_columns` is nlcx's kernel for this loop with
-one change, the plant's state in (n, B) order: what that layout alone would save.
+the PID compiled into it would have.
 """
 
 from __future__ import annotations
@@ -29,12 +28,11 @@ import math
 from pathlib import Path
 
 import numpy as np
-from numba import njit, types
+from numba import njit
 
 from nlcx import compiled_cache
 from nlcx.controllers.pid import DIRECT_CONSTANT, DIRECT_ERROR_AGS, DIRECT_TIME_AGS, G, H, I, L, S, _update_period
 from nlcx.controllers.schedules import constant_gains, error_ags_gains, time_ags_gains
-from nlcx.kernel.abi import F64, I64, MAT, CallbackTuple, ControllerFn
 from nlcx.kernel.trig import _sincos_reduced, sincos
 from nlcx.layout import Layout
 
@@ -155,10 +153,10 @@ Q = LOCKSTEP_ROWS.at
 
 
 @njit(cache=True, error_model="numpy")
-def _leave(nb, vid, stopped, n_valid, samples, by_column, by_row):  # pragma: no cover - compiled
+def _leave(nb, vid, stopped, n_valid, samples, q):  # pragma: no cover - compiled
     """Move the stopped variants behind the active ones: a stopped one trades places with the
-    last active one in every array of ``by_column`` (a column per variant) and of ``by_row`` (a
-    row per variant) and gets its number of valid samples; returns the number still active."""
+    last active one in q (a column per variant) and gets its number of valid samples; returns
+    the number still active."""
     b = 0
     while b < nb:
         if not stopped[b]:
@@ -166,12 +164,8 @@ def _leave(nb, vid, stopped, n_valid, samples, by_column, by_row):  # pragma: no
             continue
         n_valid[vid[b]] = samples
         nb -= 1
-        for a in by_column:
-            for i in range(a.shape[0]):
-                a[i, b] = a[i, nb]
-        for a in by_row:
-            for c in range(a.shape[1]):
-                a[b, c] = a[nb, c]
+        for i in range(q.shape[0]):
+            q[i, b] = q[i, nb]
         vid[b], stopped[b] = vid[nb], stopped[nb]
     return nb
 
@@ -196,7 +190,6 @@ def simulate_lockstep(p, theta_loop, x_loop, dt, n_steps, bound, X, U, n_valid):
         q[Q.M, b], q[Q.m, b], q[Q.l, b], q[Q.g, b] = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
         n_valid[b] = n_steps + 1
     vid, stopped, F = np.arange(n_batch), np.zeros(n_batch, dtype=np.bool_), np.empty(n_batch)
-    nothing_by_row = np.empty((n_batch, 0))  # every quantity is a row of q
     x, xd, th, thd = q[Q.x], q[Q.x_dot], q[Q.theta], q[Q.theta_dot]
     i_th, i_x, e_th_prev, e_x_prev = q[Q.i_theta], q[Q.i_x], q[Q.e_theta_prev], q[Q.e_x_prev]
     M, m, l, g = q[Q.M], q[Q.m], q[Q.l], q[Q.g]
@@ -226,87 +219,7 @@ def simulate_lockstep(p, theta_loop, x_loop, dt, n_steps, bound, X, U, n_valid):
             stopped[b] = _stops(x[b], xd[b], th[b], thd[b], bound)
             n_stop += stopped[b]
         if n_stop > 0:
-            nb = _leave(nb, vid, stopped, n_valid, k + 1, (q,), (nothing_by_row,))
-            if nb == 0:
-                break
-
-
-#: The x pendulum's equations with the state in (n, B) order, a column per variant:
-#: (t, x (n, B), u (n_u, B), p (n_p, B), dx (n, B), active columns).
-COLUMNS_RHS_SIG = types.void(F64, MAT, MAT, MAT, MAT, I64)
-ColumnsRhs = types.FunctionType(COLUMNS_RHS_SIG)
-
-
-@njit(COLUMNS_RHS_SIG, cache=True, error_model="numpy")
-def x_pendulum_columns(t, x, u, p, dx, nb):  # pragma: no cover - compiled
-    """dx[:, b] for the first nb columns: :func:`_rhs` (nlcx's generated equations, the same
-    operations) with nlcx's branch-free sin and cos, so the loop over the columns runs in vector
-    code. The inputs are columns too: read through the strided column u[:, 0] of nlcx's (B, n_u)
-    inputs, the loop stays scalar (17.6 against 4.5 ns a variant)."""
-    for b in range(nb):
-        dx[0, b], dx[2, b] = x[1, b], x[3, b]
-        dx[1, b], dx[3, b] = _rhs(p[0, b], p[1, b], p[2, b], p[3, b], x[2, b], x[3, b], u[0, b], NLCX_VECTOR)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _stage_input(xs, x, h, k, nb):  # pragma: no cover - compiled
-    """xs = x + h k on the first nb columns: a Runge-Kutta stage's input."""
-    for i in range(x.shape[0]):
-        for b in range(nb):
-            xs[i, b] = x[i, b] + h * k[i, b]
-
-
-#: (rhs, controller, pid = (cp, cs, log, callbacks), p, x0, ref, dt, n_steps, bound, X, U, n_valid)
-COLUMNS_SIG = types.void(
-    ColumnsRhs, ControllerFn, types.Tuple((MAT, MAT, MAT, CallbackTuple)), MAT, MAT, types.float64[:, :],
-    F64, I64, F64, types.float64[:, :, ::1], MAT, types.int64[::1],
-)  # fmt: skip
-
-
-@njit(COLUMNS_SIG, cache=True, error_model="numpy")
-def simulate_columns(rhs, controller, pid, p, x0, ref, dt, n_steps, bound, X, U, n_valid):  # pragma: no cover
-    """nlcx's kernel for this loop (classic RK4 in flat loops over the batch, nlcx's PID, every
-    variant in lock step, the records, a stopped variant leaving the batch) with one change:
-    the plant's state and its input in (n, B) order, so that its equations (``rhs``, called as
-    a compiled-function value as nlcx calls a plant) run in vector code. ``controller``: nlcx's
-    PID step with ``pid`` = (cp, cs, log, callbacks) as :func:`packed_pid` packs them; ``ref``
-    (K+1, 2) the references of x and theta. It computes nlcx's bits (the benchmark and
-    ``tests/test_reference_loops.py`` check) and measures what the layout alone would save."""
-    cp, cs, log, callbacks = pid
-    nb, n = x0.shape
-    x, pt = np.ascontiguousarray(x0.T), np.ascontiguousarray(p.T)
-    xs, k1, k2, k3, k4 = np.empty((n, nb)), np.empty((n, nb)), np.empty((n, nb)), np.empty((n, nb)), np.empty((n, nb))
-    y, r, u, force = np.empty((nb, 2)), np.empty((nb, 2)), np.empty((nb, 1)), np.empty((1, nb))
-    vid, stopped = np.arange(nb), np.zeros(nb, dtype=np.bool_)
-    for b in range(nb):
-        n_valid[b] = n_steps + 1
-    for k in range(n_steps + 1):
-        for b in range(nb):
-            for i in range(n):
-                X[vid[b], k, i] = x[i, b]
-            y[b, 0], y[b, 1], r[b, 0], r[b, 1], u[b, 0] = x[0, b], x[2, b], ref[k, 0], ref[k, 1], 0.0
-        controller(k * dt, dt, y[:nb], y[:nb], r[:nb], cp[:nb], cs[:nb], u[:nb], log[:nb], callbacks)
-        for b in range(nb):
-            U[vid[b], k], force[0, b] = u[b, 0], u[b, 0]
-        if k == n_steps:
-            break
-        t = k * dt
-        rhs(t, x, force, pt, k1, nb)
-        _stage_input(xs, x, 0.5 * dt, k1, nb)
-        rhs(t + 0.5 * dt, xs, force, pt, k2, nb)
-        _stage_input(xs, x, 0.5 * dt, k2, nb)
-        rhs(t + 0.5 * dt, xs, force, pt, k3, nb)
-        _stage_input(xs, x, dt, k3, nb)
-        rhs(t + dt, xs, force, pt, k4, nb)
-        n_stop = 0
-        for i in range(n):
-            for b in range(nb):
-                x[i, b] = x[i, b] + dt / 6.0 * (k1[i, b] + 2.0 * (k2[i, b] + k3[i, b]) + k4[i, b])
-        for b in range(nb):
-            stopped[b] = _stops(x[0, b], x[1, b], x[2, b], x[3, b], bound)
-            n_stop += stopped[b]
-        if n_stop > 0:
-            nb = _leave(nb, vid, stopped, n_valid, k + 1, (x, pt), (cp, cs))
+            nb = _leave(nb, vid, stopped, n_valid, k + 1, q)
             if nb == 0:
                 break
 

@@ -15,9 +15,7 @@
     floor of the sweep at this kernel's speed: the parent's serial time (its manifest.json's
     timings) plus the kernel's CPU time on two cores; and the limit's loop stepped in lock step
     (reference.simulate_lockstep, checked bit for bit against nlcx): what nlcx's kernel would cost
-    with the plant and the PID compiled into it, and the sweep's time at that kernel speed; and
-    nlcx's kernel with the plant's state in (n, B) order (reference.simulate_columns, checked bit
-    for bit): what that layout alone would save.
+    with the plant and the PID compiled into it, and the sweep's time at that kernel speed.
 (c) `nlcx reproduce` of every thesis figure and table, calibration excluded (target <= 120 s).
 (d) the experiment of (a), proposed controller, through python-control's input_output_response
     and scipy's solve_ivp (RK45, the PID integrators in the ODE), with the speed ratios and the
@@ -287,11 +285,6 @@ def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[s
                 reference.simulate_nlcx_pid(p, pid, items[0].ref, dt, n_k - 1, np.pi / 2, X, U, n_valid)
             elif loop == "lockstep":
                 reference.simulate_lockstep(p, theta_loop, x_loop, dt, n_k - 1, np.pi / 2, X, U, n_valid)
-            elif loop == "columns":
-                pid = reference.packed_pid([item.controller for item in items])
-                x0 = np.stack([item.plant.x0 for item in items])
-                reference.simulate_columns(reference.x_pendulum_columns, items[0].controller.step, pid, p, x0,
-                                           items[0].ref, dt, n_k - 1, np.pi / 2, X, U, n_valid)  # fmt: skip
             else:
                 reference.simulate(p, theta_loop, x_loop, dt, n_k - 1, np.pi / 2, X, U, n_valid, True)
             if keep:
@@ -303,22 +296,19 @@ def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[s
     steps = sum(run.t.size - 1 for run in ours)
     xs, us = register_level("nlcx_pid", keep=True)
     same = all(np.array_equal(r.x, x) and np.array_equal(r.u[:, 0], u) for r, x, u in zip(ours, xs, us, strict=True))
-    same_as_nlcx = {}
-    for loop in ("lockstep", "columns"):
-        xs, us = register_level(loop, keep=True)
-        bits = zip(ours, xs, us, strict=True)
-        same_as_nlcx[loop] = all(_same_bits(r.x, x) and _same_bits(r.u[:, 0], u) for r, x, u in bits)
+    xs, us = register_level("lockstep", keep=True)
+    lockstep_same = all(_same_bits(r.x, x) and _same_bits(r.u[:, 0], u) for r, x, u in zip(ours, xs, us, strict=True))
     xs, _ = register_level("limit", keep=True)
     pairs = zip(ours, xs, strict=True)
     limit_dev = max(float(np.max(np.abs(r.x - x))) if r.x.shape == x.shape else np.inf for r, x in pairs)
-    cpu: dict[str, list[float]] = {"nlcx": [], "nlcx_pid": [], "lockstep": [], "columns": [], "limit": []}
+    cpu: dict[str, list[float]] = {"nlcx": [], "nlcx_pid": [], "lockstep": [], "limit": []}
     for _ in range(repeats):
         for name in cpu:
             start = time.process_time()
             nlcx_kernel() if name == "nlcx" else register_level(name)
             cpu[name].append(time.process_time() - start)
     ns = {name: 1e9 * min(times) / steps for name, times in cpu.items()}
-    return {"variants": n, "ns": ns, "same": same, "same_as_nlcx": same_as_nlcx, "limit_dev": limit_dev}
+    return {"variants": n, "ns": ns, "same": same, "lockstep_same": lockstep_same, "limit_dev": limit_dev}
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
@@ -482,15 +472,10 @@ def print_b(b: dict[str, Any]) -> None:
         f"    the limit's loop in lock step (every variant of a batch stepped together as nlcx's kernel steps "
         f"them, plant and PID written out, nlcx's sin/cos): {ns['lockstep']:.0f} ns per variant-step, "
         f"{ns['lockstep'] / ns['limit']:.2f}x the limit, bit-identical to nlcx's (X, U): "
-        f"{alone['same_as_nlcx']['lockstep']}; "
+        f"{alone['lockstep_same']}; "
         f"nlcx's sweep with a kernel that fast, all else as measured: ~{projected:.1f} s "
         f"({b['wall_s']:.1f} - ({b['kernel_cpu_s']:.1f} - {lockstep_cpu_s:.1f}) / 2), "
         f"{projected / b['limit_s']:.2f}x the limit"
-    )
-    print(
-        f"    nlcx's kernel with the plant's state in (n, B) order, its equations in vector code (nlcx's PID, "
-        f"all else as nlcx): {ns['columns']:.0f} ns per variant-step, {ns['columns'] / ns['nlcx']:.2f}x nlcx's "
-        f"kernel, bit-identical to nlcx's (X, U): {alone['same_as_nlcx']['columns']}"
     )
     print(
         f"    where the sweep's time goes: its processes used {b['cpu_s']:.1f} s of CPU in {b['wall_s']:.1f} s on 2 "

@@ -2,8 +2,7 @@
 the speeds the benchmark compares are those of the same computation: the loop with nlcx's PID
 equals nlcx's kernel bit for bit; the limit, with libm's sin and cos where nlcx has its own
 (within 1 ulp, nlcx.kernel.trig), stops at the same samples and differs by rounding; the limit's
-loop stepped in lock step with nlcx's sin and cos, and nlcx's kernel with the plant's state in
-(n, B) order, equal nlcx's kernel bit for bit."""
+loop stepped in lock step with nlcx's sin and cos equals nlcx's kernel bit for bit."""
 
 from __future__ import annotations
 
@@ -80,17 +79,6 @@ def test_lockstep_loop_computes_nlcx_bits_in_vector_code_and_its_remainder(batch
     )
     X, U, n_valid = np.full((37, n_k, 4), np.nan), np.full((37, n_k), np.nan), np.empty(37, int)
     reference.simulate_lockstep(p, theta, x, dt, n_k - 1, np.pi / 2, X, U, n_valid)
-    _assert_same_bits(ours, X, U, n_valid)
-
-
-def test_columns_kernel_computes_nlcx_bits_in_vector_code_and_its_remainder(batch_of_37: tuple) -> None:
-    raw, items, ours, p = batch_of_37
-    dt, n_k = raw["simulation"]["dt"], ours[0].t.size
-    X, U, n_valid = np.full((37, n_k, 4), np.nan), np.full((37, n_k), np.nan), np.empty(37, int)
-    x0 = np.stack([item.plant.x0 for item in items])
-    pid = reference.packed_pid([item.controller for item in items])
-    reference.simulate_columns(reference.x_pendulum_columns, items[0].controller.step, pid, p, x0, items[0].ref, dt,
-                               n_k - 1, np.pi / 2, X, U, n_valid)  # fmt: skip
     _assert_same_bits(ours, X, U, n_valid)
 
 
