@@ -96,14 +96,6 @@ def _add_disturbances(dx, nb, dist, vid, kd, stage, dist_map):  # pragma: no cov
             dx[i, b] += acc
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _stage_input(xs, x, h, k, nb):  # pragma: no cover - compiled
-    """xs = x + h k on the first nb columns: the input of a classic RK4 stage."""
-    for i in range(x.shape[0]):
-        for b in range(nb):
-            xs[i, b] = x[i, b] + h * k[i, b]
-
-
 @njit(cache=True, error_model="numpy")
 def _rk_step_batch(
     rhs, t, h, nb, x, x_out, u, p, dist, vid, kd, dist_map, rk_a, rk_b, c, stages, xs
@@ -311,28 +303,25 @@ def _hook_counts(table):  # pragma: no cover - compiled
 @njit(cache=True, inline="always", error_model="numpy")
 def _sample(k, nb, vid, x, xrow, C, picked, y, ref, r, u, X):  # pragma: no cover - compiled
     """At t_k, for every active variant: record x_k, copy it into its row of xrow (the
-    controller's), measure y_k = C x_k, read r_k, clear u. Each loop runs over the batch."""
+    controller's), measure y_k = C x_k, read r_k, clear u."""
     n = x.shape[0]
     kr = shared_row(ref.shape[1], k)
-    for i in range(n):
-        for b in range(nb):
-            X[vid[b], k, i] = x[i, b]
-            xrow[b, i] = x[i, b]
-    for i in range(y.shape[1]):
-        j = picked[i]
-        if j >= 0:  # a row of C that selects one state
-            for b in range(nb):
-                y[b, i] = x[j, b]
-        else:
-            for b in range(nb):
-                acc = 0.0
-                for jj in range(n):
-                    acc += C[i, jj] * x[jj, b]
-                y[b, i] = acc
-    for i in range(r.shape[1]):
-        for b in range(nb):
-            r[b, i] = ref[shared_row(ref.shape[0], vid[b]), kr, i]
     for b in range(nb):
+        v = vid[b]
+        for i in range(n):
+            X[v, k, i] = x[i, b]
+            xrow[b, i] = x[i, b]
+        for i in range(y.shape[1]):
+            if picked[i] >= 0:  # a row of C that selects one state
+                y[b, i] = x[picked[i], b]
+            else:
+                acc = 0.0
+                for j in range(n):
+                    acc += C[i, j] * x[j, b]
+                y[b, i] = acc
+        br = shared_row(ref.shape[0], vid[b])
+        for i in range(r.shape[1]):
+            r[b, i] = ref[br, kr, i]
         for j in range(u.shape[1]):
             u[b, j] = 0.0
 
@@ -342,23 +331,20 @@ def _record_inputs(k, nb, n, vid, u, uc, log, stopped, U, LOG, status, n_valid, 
     """Record the logs and the applied input u_k of every active row and hold it by columns
     in uc (the plant's input over the step); a row whose input is not finite stops (status,
     failing input). Returns the number of rows stopped."""
-    if LOG.shape[1] > 1:
-        for b in range(nb):
-            for i in range(log.shape[1]):
-                LOG[vid[b], k, i] = log[b, i]
-    for j in range(u.shape[1]):
-        for b in range(nb):
-            U[vid[b], k, j] = u[b, j]
-            uc[j, b] = u[b, j]
+    record = LOG.shape[1] > 1
     n_stop = 0
     for b in range(nb):
+        v = vid[b]
+        if record:
+            for i in range(log.shape[1]):
+                LOG[v, k, i] = log[b, i]
         bad_u = -1
         for j in range(u.shape[1]):
-            if not np.isfinite(u[b, j]):
+            U[v, k, j] = u[b, j]
+            uc[j, b] = u[b, j]
+            if bad_u < 0 and not np.isfinite(u[b, j]):
                 bad_u = j
-                break
         if bad_u >= 0:
-            v = vid[b]
             status[v] = STATUS_NONFINITE
             fail_index[v] = n + bad_u
             n_valid[v] = k + 1
@@ -367,28 +353,43 @@ def _record_inputs(k, nb, n, vid, u, uc, log, stopped, U, LOG, status, n_valid, 
     return n_stop
 
 
+@njit(cache=True, error_model="numpy")
+def _clear_columns(start, stop, arrays):  # pragma: no cover - compiled
+    """Zero columns start..stop-1 (variants that just left the batch) of ``arrays``: the state,
+    x_{k+1} and the stage derivatives. The flat loops over every column then keep them zero and
+    within bounds, whichever tableau integrates."""
+    for a in arrays:
+        for i in range(a.shape[0]):
+            for b in range(start, stop):
+                a[i, b] = 0.0
+
+
 @njit(cache=True, inline="always", error_model="numpy")
-def _accept_states(k, nb, vid, x, x_new, bw, stopped, flagged, status, n_valid, fail_index):  # pragma: no cover
+def _accept_states(k, nb, vid, x, x_new, bw, flat, stopped, status, n_valid, fail_index):  # pragma: no cover
     """x_{k+1} for every active variant; one whose state is non-finite or past its bound
     stops (status and the first failing state). Returns the number of variants stopped.
 
-    One pass over the columns takes the new states and flags the variants with a state not
-    finite or past its bound (vector code); only the flagged ones are then examined."""
-    n = x.shape[0]
-    for b in range(nb):
-        flagged[b] = False
-    for i in range(n):
-        for b in range(nb):
-            v = x_new[i, b]
-            x[i, b] = x[i, b] if stopped[b] else v
-            flagged[b] = flagged[b] | (not abs(v) < np.inf) | (abs(v) > bw[i, b])
+    One loop over the flat views ``flat`` = (x, x_new, bw) takes the new states of every column
+    and counts the states not finite or past their bounds (vector code); only if there are any
+    are the active variants examined one by one. The columns from nb on hold zeros
+    (:func:`_clear_columns`), and a variant its input stopped is not read again."""
+    xf, xnf, bwf = flat
+    n_bad = 0
+    for q in range(xf.shape[0]):
+        v = xnf[q]
+        xf[q] = v
+        n_bad += (not abs(v) < np.inf) | (abs(v) > bwf[q])
+    if n_bad == 0:
+        return 0
     n_stop = 0
     for b in range(nb):
-        if stopped[b] or not flagged[b]:
+        if stopped[b]:
             continue
         bad = 0
-        while np.isfinite(x[bad, b]) and abs(x[bad, b]) <= bw[bad, b]:
+        while bad < x.shape[0] and np.isfinite(x[bad, b]) and abs(x[bad, b]) <= bw[bad, b]:
             bad += 1
+        if bad == x.shape[0]:
+            continue
         v = vid[b]
         status[v] = STATUS_NONFINITE if not np.isfinite(x[bad, b]) else STATUS_BOUND
         fail_index[v] = bad
@@ -436,9 +437,10 @@ def _signal_rows(n_batch, n_y, n_r, n_u, n_log):  # pragma: no cover - compiled
 @njit(cache=True, error_model="numpy")
 def _stage_columns(n_batch, n):  # pragma: no cover - compiled
     """Work arrays (n, B) of a Runge-Kutta step: x_{k+1}, a stage's input and (up to) four
-    stage derivatives; and the flags of the variants the step took out of bounds."""
-    stages = (np.empty((n, n_batch)), np.empty((n, n_batch)), np.empty((n, n_batch)), np.empty((n, n_batch)))
-    return np.empty((n, n_batch)), np.empty((n, n_batch)), stages, np.zeros(n_batch, dtype=np.bool_)
+    stage derivatives, the latter zero where no right-hand side writes them (the columns of
+    variants with friction)."""
+    stages = (np.zeros((n, n_batch)), np.zeros((n, n_batch)), np.zeros((n, n_batch)), np.zeros((n, n_batch)))
+    return np.empty((n, n_batch)), np.empty((n, n_batch)), stages
 
 
 @njit(cache=True, error_model="numpy")
@@ -451,6 +453,18 @@ def _friction_state(fw, x):  # pragma: no cover - compiled
     for b in range(n_batch):
         initial_modes(fw[b], x[b], state[0][b], state[1][b], state[2][b])
     return state
+
+
+@njit(cache=True, error_model="numpy")
+def _flat_views(x, xs, x_new, bw, stages):  # pragma: no cover - compiled
+    """Flat views, made once, on the (n, B) arrays of a step: x, a stage's input, x_{k+1}, the
+    bounds and the stage derivatives. The RK4 sums and the acceptance of x_{k+1} are one loop
+    over every column, the inactive ones included (their values are never read again): a loop
+    per state costs more than its work in a batch of a few variants."""
+    size = x.size
+    k1, k2, k3, k4 = stages
+    return (x.reshape(size), xs.reshape(size), x_new.reshape(size), bw.reshape(size),
+            k1.reshape(size), k2.reshape(size), k3.reshape(size), k4.reshape(size))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
@@ -495,7 +509,9 @@ def simulate(
     vid, n_free = _row_order(friction, n_batch)
     x, xrow, pw, cpw, cs, fw, bw = _working_rows(vid, plant, control, friction, n_u)
     y, r, u, log, uc = _signal_rows(n_batch, C.shape[0], ref.shape[2], n_u, LOG.shape[2])
-    x_new, xs, (k1, k2, k3, k4), flagged = _stage_columns(n_batch, n)
+    x_new, xs, (k1, k2, k3, k4) = _stage_columns(n_batch, n)
+    xf, xsf, xnf, bwf, k1f, k2f, k3f, k4f = _flat_views(x, xs, x_new, bw, (k1, k2, k3, k4))
+    m = n * n_batch
     state = _friction_state(fw, xrow)
     _init_outcome(n_steps, outcome)
     one_path = _friction_scratch(n, n_u, p.shape[1], rk_b.shape[0], dist.shape[3])
@@ -521,27 +537,31 @@ def simulate(
             if n_free > 0 and classic:  # written out here: as a helper it cost 60 % of a step
                 rhs(t, x, uc, pw, k1, n_free)
                 _add_disturbances(k1, n_free, dist, vid, kd, 0, dist_map)
-                _stage_input(xs, x, 0.5 * dt, k1, n_free)
+                for q in range(m):
+                    xsf[q] = xf[q] + 0.5 * dt * k1f[q]
                 rhs(t + 0.5 * dt, xs, uc, pw, k2, n_free)
                 _add_disturbances(k2, n_free, dist, vid, kd, 1, dist_map)
-                _stage_input(xs, x, 0.5 * dt, k2, n_free)
+                for q in range(m):
+                    xsf[q] = xf[q] + 0.5 * dt * k2f[q]
                 rhs(t + 0.5 * dt, xs, uc, pw, k3, n_free)
                 _add_disturbances(k3, n_free, dist, vid, kd, 2, dist_map)
-                _stage_input(xs, x, dt, k3, n_free)
+                for q in range(m):
+                    xsf[q] = xf[q] + dt * k3f[q]
                 rhs(t + dt, xs, uc, pw, k4, n_free)
                 _add_disturbances(k4, n_free, dist, vid, kd, 3, dist_map)
-                for i in range(n):
-                    for b in range(n_free):
-                        x_new[i, b] = x[i, b] + dt / 6.0 * (k1[i, b] + 2.0 * (k2[i, b] + k3[i, b]) + k4[i, b])
+                for q in range(m):
+                    xnf[q] = xf[q] + dt / 6.0 * (k1f[q] + 2.0 * (k2f[q] + k3f[q]) + k4f[q])
             elif n_free > 0:
                 _rk_step_batch(rhs, t, dt, n_free, x, x_new, uc, pw, dist, vid, kd, dist_map, rk_a, rk_b, c,
                                (k1, k2, k3, k4), xs)  # fmt: skip
             if nb > n_free:
                 frictional[1](rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path,
                               tableau, c)  # fmt: skip
-            n_stop += _accept_states(k, nb, vid, x, x_new, bw, stopped, flagged, status, n_valid, fail_index)
+            n_stop += _accept_states(k, nb, vid, x, x_new, bw, (xf, xnf, bwf), stopped, status, n_valid, fail_index)
         if n_stop > 0:
+            nb_before = nb
             nb, n_free = _compact(nb, n_free, vid, (x, pw, cpw, cs, log, bw), fw, state)
+            _clear_columns(nb, nb_before, (x, x_new, k1, k2, k3, k4))
             if nb == 0:
                 break
             yv, rv, uv, xv, cpv, csv, logv = y[:nb], r[:nb], u[:nb], xrow[:nb], cpw[:nb], cs[:nb], log[:nb]
