@@ -257,6 +257,30 @@ def test_a_right_hand_side_that_ignores_the_columns_is_refused() -> None:
     check_rows(prep.plant)  # the companion form loops over the columns
 
 
+@pytest.mark.parametrize("declared", [False, True])
+def test_a_right_hand_side_written_for_rows_is_refused_in_one_line(declared: bool) -> None:
+    """A plant with the ABI before columns, rhs(t, x, u, p, dx) over the rows, is refused with a
+    one-line config error naming the plant, whether numba compiles it lazily or it declares the
+    old signature, instead of a numba traceback."""
+    from numba import njit, types
+
+    from nlcx.kernel.abi import F64, MAT
+    from nlcx.plants.base import check_rows
+
+    def rows_rhs(t, x, u, p, dx):  # pragma: no cover - compiled
+        for b in range(x.shape[0]):
+            dx[b, 0] = x[b, 1]
+            dx[b, 1] = -p[b, 0] * x[b, 0] + u[b, 0]
+
+    compiled = njit(types.void(F64, MAT, MAT, MAT, MAT))(rows_rhs) if declared else njit(rows_rhs)
+    prep = engine.prepare(config.build(tf_raw(CSTR, {"ol": {"kind": "open_loop"}}, {"u": {"kind": "step"}}, 1, 0.1)))
+    plant = dataclasses.replace(prep.plant, rhs=compiled)
+    with pytest.raises(ConfigError) as info:
+        check_rows(plant)
+    message = str(info.value)
+    assert "\n" not in message and "plant.name" in message and "rhs(t, x, u, p, dx, nb)" in message
+
+
 def test_same_config_same_bytes(x_time_raw: dict, tmp_path) -> None:
     a, b = run_raw(x_time_raw), run_raw(x_time_raw)
     write_csv(tmp_path / "a.csv", a.metrics)

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
+from numba.core.errors import NumbaError
 from pydantic import BaseModel, ConfigDict
 
 from nlcx.errors import ConfigError
@@ -299,7 +300,16 @@ def check_rows(plant: Plant) -> None:
     X = np.stack([base, base + 0.01 * (1 + np.arange(n))])
     U = np.stack([np.zeros(m), 0.5 + np.arange(m)])
     P = np.stack([plant.p, plant.p * 1.01])
-    together = evaluate_rhs(plant.rhs, X, U, P)
+    try:
+        together = evaluate_rhs(plant.rhs, X, U, P)
+    except (TypeError, NumbaError) as exc:  # e.g. rhs(t, x, u, p, dx), the ABI before columns
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ConfigError(
+            "plant.name",
+            plant.name,
+            f"its right-hand side cannot be called as rhs(t, x, u, p, dx, nb) with (n, B) arrays "
+            f"(nlcx.kernel.abi.RHS_SIG; a plant written for rows, rhs(t, x, u, p, dx), needs rewriting): {first}",
+        ) from None
     alone = np.stack([evaluate_rhs(plant.rhs, X[i], U[i], P[i]) for i in range(2)])
     if not np.array_equal(together, alone, equal_nan=True):
         raise ConfigError(
