@@ -446,8 +446,8 @@ def identify(
 @app.command()
 @one_line_errors
 def diff(
-    base: Annotated[Path, typer.Argument(help="Baseline directory (or CSV file).", show_default=False)],
-    new: Annotated[Path, typer.Argument(help="Directory (or CSV file) to check.", show_default=False)],
+    base: Annotated[Path, typer.Argument(help="Baseline directory (or CSV or Parquet file).", show_default=False)],
+    new: Annotated[Path, typer.Argument(help="Directory (or CSV or Parquet file) to check.", show_default=False)],
     rtol: Annotated[
         list[str] | None, typer.Option("--rtol", help="Relative tolerance: VALUE (default) or METRIC=VALUE.")
     ] = None,
@@ -455,7 +455,7 @@ def diff(
         list[str] | None, typer.Option("--atol", help="Absolute tolerance: VALUE (default) or METRIC=VALUE.")
     ] = None,
 ) -> None:
-    """Compare metric CSVs of NEW against BASE; exit 1 and list the drift if any cell moved."""
+    """Compare the CSV (and Parquet) files of NEW against BASE; exit 1 and list the drift if any cell moved."""
     from nlcx.diff import diff_dirs, parse_tolerances, render
 
     tol = parse_tolerances(rtol or [], atol or [])
@@ -500,18 +500,23 @@ def _csv_column(frame: Any, column: str, key: str, file: Path) -> Any:
 
 
 def _read_step_data(file: Path, time_column: str, signals: list[str], t_step: float) -> tuple[Any, Any, list[str]]:
-    """The times ``(T,)``, the signals ``(B, T)`` and their names from the CSV ``file``, checked
-    for :func:`nlcx.metrics.step_info`; the first problem found is a one-line error."""
+    """The times ``(T,)``, the signals ``(B, T)`` and their names from the CSV (or Parquet)
+    ``file``, checked for :func:`nlcx.metrics.step_info`; the first problem found is a
+    one-line error."""
     import numpy as np
     import pandas as pd
 
+    allowed = "a CSV file with a header row, or a Parquet file"
     if not file.is_file():
         problem = "not a file" if file.exists() else "no such file"
-        raise _metrics_error("FILE", file, problem, "a CSV file with a header row")
+        raise _metrics_error("FILE", file, problem, allowed)
+    parquet = file.suffix == ".parquet"
     try:
-        frame = pd.read_csv(file)
-    except (OSError, ValueError) as exc:  # pandas' parser errors are ValueErrors
-        raise _metrics_error("FILE", file, f"not readable as CSV ({exc})", "a CSV file with a header row") from None
+        frame = pd.read_parquet(file) if parquet else pd.read_csv(file)
+    except (OSError, ValueError) as exc:  # pandas' and pyarrow's parser errors are ValueErrors or OSErrors
+        raise _metrics_error(
+            "FILE", file, f"not readable as {'Parquet' if parquet else 'CSV'} ({exc})", allowed
+        ) from None
     columns = [str(c) for c in frame.columns]
     frame.columns = columns
     if time_column not in columns:
@@ -542,7 +547,7 @@ def _read_step_data(file: Path, time_column: str, signals: list[str], t_step: fl
 @app.command("metrics")
 @one_line_errors
 def metrics_command(
-    file: Annotated[Path, typer.Argument(help="CSV file with a header row.", show_default=False)],
+    file: Annotated[Path, typer.Argument(help="CSV file with a header row, or a Parquet file.", show_default=False)],
     time_column: Annotated[str, typer.Option("--time", help="Time column, in seconds.")] = "t",
     signals: Annotated[
         list[str] | None, typer.Option("--signal", help="Column to measure; repeat for several.", show_default=False)

@@ -81,8 +81,11 @@ class MetricsSection(Section):
 class OutputsSection(Section):
     #: Run directory; default results/<name>. ``--out`` overrides it.
     dir: str | None = None
-    #: Write timeseries.csv (every sample of every controller).
+    #: Write the time series (every sample of every controller).
     timeseries: bool = True
+    #: Its file: timeseries.csv, or timeseries.parquet (binary, every float exact, zstd:
+    #: ~40 % of the CSV's size and a third of its writing time; for long or many runs).
+    timeseries_format: Literal["csv", "parquet"] = "csv"
     #: Write the thesis-style figure (figure.png).
     figure: bool = True
     #: Also write gains.png: every input and every logged gain against time (one panel each;

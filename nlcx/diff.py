@@ -1,6 +1,7 @@
 """``nlcx diff BASE NEW``: compare metric CSVs cell by cell, with per-metric tolerances.
 
-Every CSV under BASE is matched with the file at the same relative path under NEW. Rows
+Every CSV (and Parquet time series, ``outputs.timeseries_format: parquet``) under BASE is
+matched with the file at the same relative path under NEW. Rows
 are matched on their text columns (e.g. controller, signal, metric) and every numeric
 column is compared: a cell drifts when |new - base| > atol + rtol |base| (NaN equals NaN).
 Tolerances are given per metric: in long-form files the ``metric`` column names the metric,
@@ -61,7 +62,14 @@ class Drift:
             return math.nan
 
 
+#: The files compared: CSVs and Parquet time series.
+SUFFIXES = (".csv", ".parquet")
+
+
 def _read(path: Path) -> pd.DataFrame:
+    """A CSV (an empty cell is NaN, any other text is kept) or a Parquet file (null is NaN)."""
+    if path.suffix == ".parquet":
+        return pd.read_parquet(path)
     return pd.read_csv(path, keep_default_na=False, na_values=[""])
 
 
@@ -101,12 +109,13 @@ def compare_frames(name: str, base: pd.DataFrame, new: pd.DataFrame, tol: Tolera
 
 
 def diff_dirs(base: Path, new: Path, tol: Tolerances) -> tuple[list[Drift], int]:
-    """All drifts between the CSVs under ``base`` and ``new``; and how many files were compared."""
+    """All drifts between the CSV and Parquet files under ``base`` and ``new``; and how many
+    files were compared."""
     if not base.exists():
         raise NlcxError(f"{base}: no such baseline directory or file")
     if not new.exists():
         raise NlcxError(f"{new}: no such directory or file")
-    files = [base] if base.is_file() else sorted(base.rglob("*.csv"))
+    files = [base] if base.is_file() else sorted(p for p in base.rglob("*") if p.suffix in SUFFIXES)
     drifts: list[Drift] = []
     for path in files:
         rel = path.name if base.is_file() else str(path.relative_to(base))

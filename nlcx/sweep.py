@@ -287,8 +287,9 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
         if unstable:
             row.update(status="unstable", message=f"{unstable[0].label}: {unstable[0].reason}")
         if batch.timeseries:
-            name = f"variant_{batch.variants[pos].index:06d}.csv"
-            report.write_columns(batch.out_dir / "timeseries" / name, report.timeseries_columns(result))
+            stem = batch.out_dir / "timeseries" / f"variant_{batch.variants[pos].index:06d}"
+            fmt = result.prepared.experiment.section.outputs.timeseries_format
+            report.write_timeseries(stem, report.timeseries_columns(result), fmt)
     metrics = engine.shared_metrics(results)
     index_of = np.array([batch.variants[pos].index for pos in members], dtype=int)
     metrics.insert(0, "variant", index_of[metrics.pop("experiment").to_numpy(dtype=int)])

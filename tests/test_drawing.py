@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 
 from nlcx import drawing, report
 from tests.conftest import run_raw
@@ -69,14 +70,16 @@ def test_the_output_plan_holds_each_runs_output_and_the_reference(x_error_raw: d
         assert lines[-1].label == "reference"
 
 
-def test_nlcx_run_leaves_matplotlib_to_the_painter_and_needs_no_pandas(tmp_path: Path) -> None:
+@pytest.mark.parametrize("fmt", ["csv", "parquet"])
+def test_nlcx_run_leaves_matplotlib_to_the_painter_and_needs_no_pandas(tmp_path: Path, fmt: str) -> None:
     root = Path(__file__).resolve().parent.parent
     out = tmp_path / "run"
+    args = ["run", "configs/x_error_ags.yaml", "simulation.t_end=2", f"outputs.timeseries_format={fmt}"]
     code = (
         "import atexit, sys\n"
         "atexit.register(lambda: print('imported:', sorted({'matplotlib', 'pandas'} & set(sys.modules))))\n"
         "from nlcx.cli import main\n"
-        f"sys.argv = ['nlcx', 'run', 'configs/x_error_ags.yaml', 'simulation.t_end=2', '--out', {str(out)!r}]\n"
+        f"sys.argv = ['nlcx', *{args!r}, '--out', {str(out)!r}]\n"
         "main()\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=300)
@@ -84,6 +87,7 @@ def test_nlcx_run_leaves_matplotlib_to_the_painter_and_needs_no_pandas(tmp_path:
     assert "imported: []" in done.stdout  # the summary, the CSV files and the report page included
     assert "proposed" in done.stdout and (out / "report.html").is_file()
     assert (out / "figure.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (out / f"timeseries.{fmt}").is_file()
 
 
 def test_a_painter_closed_without_figures_stops_at_once() -> None:
