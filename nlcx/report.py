@@ -82,22 +82,26 @@ def _arrow_column(values: np.ndarray | Sequence[str]) -> pa.Array:
     return pa.Array.from_buffers(pa.large_string(), len(encoded), buffers)
 
 
+def _arrow_table(columns: dict[str, np.ndarray | Sequence[str]]) -> pa.Table:
+    """Columns (name -> float array or strings) as an Arrow table (:func:`_arrow_column`)."""
+    import pyarrow as pa
+
+    return pa.table({name: _arrow_column(values) for name, values in columns.items()})
+
+
 def write_columns(path: Path, columns: dict[str, np.ndarray | Sequence[str]]) -> None:
     """Columns (name -> float array or strings) as a CSV without importing pandas: the bytes
     :func:`write_csv` writes for the DataFrame of the same columns."""
-    import pyarrow as pa
-
-    _write_table(path, pa.table({name: _arrow_column(values) for name, values in columns.items()}))
+    _write_table(path, _arrow_table(columns))
 
 
 def write_parquet(path: Path, columns: dict[str, np.ndarray | Sequence[str]]) -> None:
-    """Columns (name -> float array or strings) as a Parquet file, zstd-compressed: the
-    columns :func:`write_columns` writes as CSV (NaN as null), every float as its 8 bytes, and
-    the same bytes for the same columns (and pyarrow version)."""
-    import pyarrow as pa
+    """Columns (name -> float array or strings) as a Parquet file, zstd-compressed: the table
+    :func:`write_columns` writes as CSV (NaN as null), every float as its 8 bytes, and the
+    same bytes for the same columns (and pyarrow version)."""
     import pyarrow.parquet as pq
 
-    table = pa.table({name: _arrow_column(values) for name, values in columns.items()})
+    table = _arrow_table(columns)
     atomic_write(path, lambda tmp: pq.write_table(table, str(tmp), compression="zstd"))
 
 
