@@ -384,16 +384,23 @@ def _emit_batch(d: Derivation, angles: list[tuple[str, int]], trig: str) -> str:
     key, head = d.spec.key, "    "
     ind = head * 2
     column = f"_{key}_derived_column"
-    batch_trig = ", ".join(f"sc_{name}[0, b], sc_{name}[1, b]" for name, _ in angles)
+    # sin and cos of angle a go to the rows 4a + 1 and 4a + 3 of dx, rows of q'' that the column
+    # function writes only after it has read them (its arguments)
+    rows = [(4 * a + 1, 4 * a + 3) for a in range(len(angles))]
+    if rows and rows[-1][1] > 2 * len(d.q) - 1:
+        raise ValueError(f"{key}: {len(angles)} angles need {2 * len(angles)} rows of q'', it has {len(d.q)}")
+    batch_trig = ", ".join(f"dx[{s}, b], dx[{c}, b]" for s, c in rows)
     lines = [
-        '@njit(cache=True, error_model="numpy")',
+        '@njit(cache=True, error_model="numpy", _nrt=False)',
         f"def {key}_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled",
         f'{head}"""The {d.spec.title} derived from {d.spec.source}.\n',
         f"{head}Column b of x is one variant: state ({', '.join(s.name for s in d.states)}),",
         f"{head}input ({', '.join(s.name for s in d.u)}), p[:, b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)",
         f"{head}for the first nb columns; the others are neither read nor written.",
         f"{head}sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,",
-        f"{head}or one at a time for fewer than COLUMN_ROWS variants (the same bits either way).",
+        f"{head}into rows of dx that receive q'' later, or one at a time for fewer than COLUMN_ROWS",
+        f"{head}variants (the same bits either way). Nothing is allocated: compiled without numba's",
+        f"{head}reference counting.",
         f'{head}"""',
         f"{head}for b in range(nb):  # the coordinates' derivatives are their rates",
         *(f"{ind}dx[{2 * i}, b] = x[{2 * i + 1}, b]" for i in range(len(d.q))),
@@ -402,7 +409,7 @@ def _emit_batch(d: Derivation, angles: list[tuple[str, int]], trig: str) -> str:
         *(f"{ind}{head}sin_{name}, cos_{name} = sincos(x[{i}, b])" for name, i in angles),
         f"{ind}{head}{column}(b, x, u, p, dx, {trig})",
         f"{ind}return",
-        *(f"{head}sc_{name} = sincos_column(x[{i}], nb)" for name, i in angles),
+        *(f"{head}sincos_column(x[{i}], nb, dx[{s}], dx[{c}])" for (_, i), (s, c) in zip(angles, rows, strict=True)),
         f"{head}for b in range(nb):",
         f"{ind}{column}(b, x, u, p, dx, {batch_trig})",
     ]

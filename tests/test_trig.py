@@ -36,8 +36,12 @@ def _one_at_a_time(a):  # pragma: no cover - compiled
     return out
 
 
-def _column(a: np.ndarray) -> np.ndarray:
-    return sincos_column(np.ascontiguousarray(a, dtype=float), a.size)
+def _column(a: np.ndarray, n: int | None = None) -> np.ndarray:
+    """(sin a, cos a) of the first n angles (all by default) by :func:`sincos_column`, (2, n)."""
+    n = a.size if n is None else n
+    out = np.full((2, n), np.nan)
+    sincos_column(np.ascontiguousarray(a, dtype=float), n, out[0], out[1])
+    return out
 
 
 def _ulps(value: np.ndarray, exact: np.ndarray) -> np.ndarray:
@@ -74,8 +78,12 @@ def test_same_bits_in_any_batch_and_alone() -> None:
         for start in range(0, a.size - n, 89):
             assert np.array_equal(_column(a[start : start + n]), full[:, start : start + n]), (n, start)
     states = np.stack([RNG.normal(size=a.size), a, RNG.normal(size=a.size)])
-    assert np.array_equal(sincos_column(states[1], a.size), full)
-    assert np.array_equal(sincos_column(states[1], 37), full[:, :37])
+    assert np.array_equal(_column(states[1]), full)
+    assert np.array_equal(_column(states[1], 37), full[:, :37])
+    rows = np.full((4, a.size), -7.0)  # into rows of a (n, B) array, as a plant's dx: the rest untouched
+    sincos_column(states[1], 37, rows[1], rows[3])
+    assert np.array_equal(rows[[1, 3], :37], full[:, :37])
+    assert np.all(rows[[0, 2]] == -7.0) and np.all(rows[:, 37:] == -7.0)
     assert np.array_equal(_one_at_a_time(a), full)
 
 
@@ -167,7 +175,7 @@ def test_no_contraction_in_the_compiled_code() -> None:
     afresh with the same options: numba cannot show the IR of code it loaded from its cache."""
     options = {k: v for k, v in sincos_column.targetoptions.items() if k != "nopython"}
     fresh = njit(**options)(sincos_column.py_func)
-    fresh(np.zeros(3), 3)
+    fresh(np.zeros(3), 3, np.zeros(3), np.zeros(3))
     ir = fresh.inspect_llvm(fresh.signatures[0])
     assert "fadd" in ir and "fmul" in ir
     for marker in ("contract", "fast ", "llvm.fma", "llvm.fmuladd"):

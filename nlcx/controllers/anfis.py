@@ -156,7 +156,7 @@ def _anfis_gain(p, o, which, e, edot, clip):  # pragma: no cover - compiled
     return g
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def anfis_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     """Eq. 5.12-5.14's gains from three TS models: p[row, o:] = an :data:`ANFIS_HEAD` (its
     model offsets relative to o), then the three packed models (:data:`MODEL` layout)."""

@@ -459,7 +459,7 @@ def _set_mu(x, sp, ranges, i, umin, umax):  # pragma: no cover - compiled
     return _mf(x, sp[at + R.lower], sp[at + R.upper], i, umin, umax)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def fuzzy_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     """Mamdani self-tuning PID, section 5.4.1: (e, de/dt) -> (k_p1, k_i1, k_d1) -> eqs. 5.12-5.14.
 

@@ -109,7 +109,7 @@ def _neuron_row(t, dt, y, r, cp, cs, u, log):  # pragma: no cover - compiled
     log[3] = cs[S.u1]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def neuron_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """The single-neuron adaptive PID (eqs. 5.15-5.19), every row."""
     for b in range(y.shape[0]):

@@ -15,7 +15,7 @@ class OpenLoopConfig(ControllerConfig):
     kind: Literal["open_loop"] = "open_loop"
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def open_loop_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """u_j(t) = r_j(t): the reference channels are the plant inputs (every row)."""
     for b in range(u.shape[0]):

@@ -153,7 +153,7 @@ class PIDConfig(ControllerConfig):
     sample_time: float = Field(0.0, ge=0)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _saturate(row, dt, cp, cs, u, log):  # pragma: no cover - compiled
     """Clip each limited input to [-limit, limit] and correct the integrators of the loops on
     it that updated at this step (clamping: undo this sample's increment if it pushes further
@@ -185,7 +185,7 @@ def _saturate(row, dt, cp, cs, u, log):  # pragma: no cover - compiled
         u[row, j] = min(max(u[row, j], -limit), limit)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _update_period(t, dt, sample_time, cs, row, c):  # pragma: no cover - compiled
     """The period a loop updates over at t: dt for a continuous PID (T_s = 0); T_s at a
     discrete PID's sampling instant (the next one scheduled T_s later); 0 while it holds."""
@@ -197,7 +197,7 @@ def _update_period(t, dt, sample_time, cs, row, c):  # pragma: no cover - compil
     return sample_time
 
 
-@njit(CONTROLLER_SIG, cache=True, error_model="numpy")
+@njit(CONTROLLER_SIG, cache=True, error_model="numpy", _nrt=False)
 def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """Multi-loop PID with pluggable gain schedules, one sample (zero-order hold), every row.
 

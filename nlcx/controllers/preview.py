@@ -447,7 +447,7 @@ def _preview_row(t, dt, x, r, cp, cs, u, log):  # pragma: no cover - compiled
     log[LOG_SIZE * m] = cs[S.integral]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def preview_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """The preview servo (eq. 5.21), every row (full state information: it reads x)."""
     for b in range(x.shape[0]):

@@ -34,10 +34,16 @@ The signal path of one sampling step t_k, with its hook points::
 Hot-loop rules (they decide the speed, see benchmarks/): no array view is made per step and
 per variant (a view handed to a compiled-function value costs a reference-count round
 trip); a function that calls a compiled-function value does so inside its loop over the
-rows, so its own reference counting is paid once per call, not once per variant; and a
-plant's loop over its columns reads and writes unit-stride memory only (a strided read, a
-branch or numba's integer power ``x**2`` in it keeps the loop scalar: 7 against 4 ns a
-variant for the x pendulum).
+rows, so its own reference counting is paid once per call, not once per variant; a plant's
+loop over its columns reads and writes unit-stride memory only (a strided read, a branch or
+numba's integer power ``x**2`` in it keeps the loop scalar: 7 against 4 ns a variant for the
+x pendulum); and a function called every step that allocates nothing is compiled with
+``_nrt=False``, numba's switch for its reference counting. A function counts every array it
+receives on entry and on exit, and an inlined helper at each of its call sites: that was
+~50 ns a call of the PID step, more than its arithmetic for one or two variants
+(``benchmarks/components.py``). Such a function may slice and pass views on, but must not
+allocate, nor keep an array it did not get (nothing frees it); ``tests/test_hot_loop.py``
+holds the built-in plugins to this rule.
 """
 
 from __future__ import annotations
@@ -124,13 +130,13 @@ def shared_row(axis_length: int, b: int) -> int:  # pragma: no cover - compiled
     return b if axis_length > 1 else 0
 
 
-@njit(CALLBACK_SIG, cache=True, error_model="numpy")
+@njit(CALLBACK_SIG, cache=True, error_model="numpy", _nrt=False)
 def no_callback(t, e, edot, p, row, offset):  # pragma: no cover - compiled
     """Padding of an unused callback slot."""
     return 0.0, 0.0, 0.0
 
 
-@njit(ELEMENT_SIG, cache=True, error_model="numpy")
+@njit(ELEMENT_SIG, cache=True, error_model="numpy", _nrt=False)
 def no_element(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
     """Padding of an unused element slot."""
     return

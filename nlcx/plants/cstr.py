@@ -36,7 +36,7 @@ PARAMS = Layout("cstr", ("k1", "k2", "k3", "CAf"))
 K = PARAMS.at
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def cstr_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """Eqs. 5.1-5.2 for each of the first nb columns (variants) b: p[:, b] a :data:`PARAMS`
     block, u[:, b] = (F/V,)."""

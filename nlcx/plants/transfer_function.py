@@ -46,7 +46,7 @@ class TransferFunctionParams(PlantParams):
         return self
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def companion_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """Controllable canonical form for each of the first nb columns (variants) b:
     x_i' = x_{i+1}, x_n' = -sum_j a_j x_{j+1} + u, p[:, b] = a_0..a_{n-1}."""

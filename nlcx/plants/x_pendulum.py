@@ -48,7 +48,7 @@ def _x_printed_column(b, x, u, p, dx, s, c):  # pragma: no cover - compiled
     dx[3, b] = (-m * l * c * s * theta_dot * theta_dot - c * F + (M + m) * g * s) / (l * den)  # eq. 2.11
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def x_pendulum_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """Eqs. 2.8-2.11 as printed, for each of the first nb columns (variants) of x.
 
@@ -59,9 +59,9 @@ def x_pendulum_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
             s, c = sincos(x[2, b])
             _x_printed_column(b, x, u, p, dx, s, c)
         return
-    sc = sincos_column(x[2], nb)
+    sincos_column(x[2], nb, dx[1], dx[3])  # rows the column writes after reading them
     for b in range(nb):
-        _x_printed_column(b, x, u, p, dx, sc[0, b], sc[1, b])
+        _x_printed_column(b, x, u, p, dx, dx[1, b], dx[3, b])
 
 
 #: The printed variant under the name the other pendulums use.

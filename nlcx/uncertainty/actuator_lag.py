@@ -39,7 +39,7 @@ class ActuatorLagConfig(UncertaintyConfig):
     inputs: list[str] | None = None
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def first_order_lag(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
     """v = v + alpha (u - v) on every lagged input of every row; u becomes v."""
     for b in range(signal.shape[0]):

@@ -33,7 +33,7 @@ class ActuatorSaturationConfig(UncertaintyConfig):
     inputs: list[str] | None = None
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def saturate_inputs(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
     """Clip every limited input of every row to [-u_max, u_max]."""
     for b in range(signal.shape[0]):

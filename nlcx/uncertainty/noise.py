@@ -64,7 +64,7 @@ class Noise(UncertaintyModel):
         add_sequence(hooks, "sensor" if measured else "actuator", values)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def add_samples(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
     """signal[b, j] += data[variant of b, k, d_off + j]: a sampled sequence added to every
     channel of the signal (the noise sample of each output or input at t_k)."""

@@ -54,7 +54,7 @@ def _x_derived_column(b, x, u, p, dx, sin_theta, cos_theta):  # pragma: no cover
     dx[3, b] = a1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def x_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """The x inverted pendulum derived from eqs. 2.1, 2.4-2.6 (Lagrange eqs. 2.2, 2.7).
 
@@ -62,7 +62,9 @@ def x_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     input (F_x), p[:, b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)
     for the first nb columns; the others are neither read nor written.
     sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,
-    or one at a time for fewer than COLUMN_ROWS variants (the same bits either way).
+    into rows of dx that receive q'' later, or one at a time for fewer than COLUMN_ROWS
+    variants (the same bits either way). Nothing is allocated: compiled without numba's
+    reference counting.
     """
     for b in range(nb):  # the coordinates' derivatives are their rates
         dx[0, b] = x[1, b]
@@ -72,9 +74,9 @@ def x_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
             sin_theta, cos_theta = sincos(x[2, b])
             _x_derived_column(b, x, u, p, dx, sin_theta, cos_theta)
         return
-    sc_theta = sincos_column(x[2], nb)
+    sincos_column(x[2], nb, dx[1], dx[3])
     for b in range(nb):
-        _x_derived_column(b, x, u, p, dx, sc_theta[0, b], sc_theta[1, b])
+        _x_derived_column(b, x, u, p, dx, dx[1, b], dx[3, b])
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -143,7 +145,7 @@ def _xy_derived_column(b, x, u, p, dx, sin_theta, cos_theta, sin_phi, cos_phi): 
     dx[7, b] = a3
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def xy_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """The x-y inverted pendulum derived from eqs. 3.1, 3.4-3.6 (Lagrange eqs. 3.2, 3.7-3.10).
 
@@ -151,7 +153,9 @@ def xy_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     input (F_x, F_y), p[:, b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)
     for the first nb columns; the others are neither read nor written.
     sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,
-    or one at a time for fewer than COLUMN_ROWS variants (the same bits either way).
+    into rows of dx that receive q'' later, or one at a time for fewer than COLUMN_ROWS
+    variants (the same bits either way). Nothing is allocated: compiled without numba's
+    reference counting.
     """
     for b in range(nb):  # the coordinates' derivatives are their rates
         dx[0, b] = x[1, b]
@@ -164,10 +168,10 @@ def xy_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
             sin_phi, cos_phi = sincos(x[6, b])
             _xy_derived_column(b, x, u, p, dx, sin_theta, cos_theta, sin_phi, cos_phi)
         return
-    sc_theta = sincos_column(x[4], nb)
-    sc_phi = sincos_column(x[6], nb)
+    sincos_column(x[4], nb, dx[1], dx[3])
+    sincos_column(x[6], nb, dx[5], dx[7])
     for b in range(nb):
-        _xy_derived_column(b, x, u, p, dx, sc_theta[0, b], sc_theta[1, b], sc_phi[0, b], sc_phi[1, b])
+        _xy_derived_column(b, x, u, p, dx, dx[1, b], dx[3, b], dx[5, b], dx[7, b])
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -219,7 +223,7 @@ def _xz_derived_column(b, x, u, p, dx, sin_theta, cos_theta):  # pragma: no cove
     dx[5, b] = a2
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def xz_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """The x-z inverted pendulum derived from eqs. 3.36-3.38 (Lagrange eqs. 3.34, 3.39-3.41).
 
@@ -227,7 +231,9 @@ def xz_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     input (F_x, F_z), p[:, b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)
     for the first nb columns; the others are neither read nor written.
     sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,
-    or one at a time for fewer than COLUMN_ROWS variants (the same bits either way).
+    into rows of dx that receive q'' later, or one at a time for fewer than COLUMN_ROWS
+    variants (the same bits either way). Nothing is allocated: compiled without numba's
+    reference counting.
     """
     for b in range(nb):  # the coordinates' derivatives are their rates
         dx[0, b] = x[1, b]
@@ -238,9 +244,9 @@ def xz_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
             sin_theta, cos_theta = sincos(x[4, b])
             _xz_derived_column(b, x, u, p, dx, sin_theta, cos_theta)
         return
-    sc_theta = sincos_column(x[4], nb)
+    sincos_column(x[4], nb, dx[1], dx[3])
     for b in range(nb):
-        _xz_derived_column(b, x, u, p, dx, sc_theta[0, b], sc_theta[1, b])
+        _xz_derived_column(b, x, u, p, dx, dx[1, b], dx[3, b])
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -326,7 +332,7 @@ def _xyz_derived_column(
     dx[9, b] = a4
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def xyz_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """The x-y-z inverted pendulum derived from eqs. 4.1, 4.4-4.5 (Lagrange eqs. 4.2, 4.8-4.12).
 
@@ -334,7 +340,9 @@ def xyz_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     input (F_x, F_y, F_z), p[:, b] = (M, m, l, g). Solves M(q) q'' = b(q, q', u)
     for the first nb columns; the others are neither read nor written.
     sin and cos of the angles from nlcx.kernel.trig: for the whole batch in vector code,
-    or one at a time for fewer than COLUMN_ROWS variants (the same bits either way).
+    into rows of dx that receive q'' later, or one at a time for fewer than COLUMN_ROWS
+    variants (the same bits either way). Nothing is allocated: compiled without numba's
+    reference counting.
     """
     for b in range(nb):  # the coordinates' derivatives are their rates
         dx[0, b] = x[1, b]
@@ -348,10 +356,10 @@ def xyz_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
             sin_phi, cos_phi = sincos(x[8, b])
             _xyz_derived_column(b, x, u, p, dx, sin_theta, cos_theta, sin_phi, cos_phi)
         return
-    sc_theta = sincos_column(x[6], nb)
-    sc_phi = sincos_column(x[8], nb)
+    sincos_column(x[6], nb, dx[1], dx[3])
+    sincos_column(x[8], nb, dx[5], dx[7])
     for b in range(nb):
-        _xyz_derived_column(b, x, u, p, dx, sc_theta[0, b], sc_theta[1, b], sc_phi[0, b], sc_phi[1, b])
+        _xyz_derived_column(b, x, u, p, dx, dx[1, b], dx[3, b], dx[5, b], dx[7, b])
 
 
 def x_energy(x: np.ndarray, p: Sequence[float]) -> np.ndarray:
