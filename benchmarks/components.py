@@ -29,7 +29,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from numba import njit, types
 
 from nlcx import config, engine, report, sweep
@@ -38,7 +37,7 @@ from nlcx.kernel.abi import ARR3, F64, I64, MAT, CallbackTuple, ControllerFn, Rh
 from nlcx.kernel.trig import sincos_column
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from run import scratch, sweep_config
+from run import kernel_batches, kernel_pass, planned_batches, prepared_variants, sweep_config
 
 
 def cpu_best(fn: Callable[[], Any], repeats: int = 5) -> float:
@@ -109,32 +108,14 @@ def drive_exp(arguments, calls):  # pragma: no cover - compiled
     return total
 
 
-def variants(n: int) -> tuple[list[engine.Prepared], dict[str, Any]]:
-    """The first n variants of benchmark (b), prepared, and the sweep's raw config."""
-    raw = sweep_config(n)
-    base_raw = {k: v for k, v in raw.items() if k != "sweep"}
-    spec = sweep.SweepSection.model_validate(raw["sweep"])
-    base = config.build(config.interpolate(base_raw))
-    found = sweep.expand(spec, config.interpolate(base_raw))
-    return [engine.prepare(config.build(v.resolve(base_raw), like=base)) for v in found], raw
-
-
 def kernel_parts(prepared: list[engine.Prepared]) -> dict[str, float]:
     """ns per variant-step of the closed loop and of its parts (see the module docstring)."""
     grid = prepared[0].grid
-    batches = [
-        [item for p in prepared[k : k + 100] for item in engine.items_of(p)] for k in range(0, len(prepared), 100)
-    ]
+    batches = kernel_batches(prepared)
     arena = engine.RecordArena()
     runs = [run for items in batches for run in engine.simulate_items(items, grid, "rk4", record_logs=False)]
     steps = sum(run.t.size - 1 for run in runs)
-
-    def closed_loop() -> None:
-        for items in batches:
-            engine.simulate_items(items, grid, "rk4", record_logs=False, arena=arena)
-            arena.release()
-
-    out = {"closed loop": 1e9 * cpu_best(closed_loop) / steps}
+    out = {"closed loop": 1e9 * cpu_best(lambda: kernel_pass(batches, grid, arena)) / steps}
     items = [item for items in batches for item in items]
     ok = [i for i, run in enumerate(runs) if run.status == "ok"][:100]
     plant = items[0].plant
@@ -175,7 +156,7 @@ def kernel_parts(prepared: list[engine.Prepared]) -> dict[str, float]:
     return out
 
 
-def batch_stages(raw: dict[str, Any], batches: int = 6) -> dict[str, float]:
+def batch_stages(batches: int = 6) -> dict[str, float]:
     """ms per batch of 100 variants of each stage of a sweep batch (timers around each)."""
     spent: dict[str, float] = {}
     originals = []
@@ -194,14 +175,7 @@ def batch_stages(raw: dict[str, Any], batches: int = 6) -> dict[str, float]:
 
         setattr(owner, name, wrapper)
 
-    work = scratch()
-    path = work / "sweep.yaml"
-    random = {**raw["sweep"]["random"], "n": 100 * (batches + 1)}
-    path.write_text(yaml.safe_dump({**raw, "sweep": {**raw["sweep"], "random": random}}))
-    base_raw, spec, _ = sweep.load(path)
-    found, hashes = sweep.plan(base_raw, spec)
-    runs = [sweep.Batch(base_raw, found[k : k + 100], hashes[k : k + 100], work / "out", False)
-            for k in range(0, len(found), 100)]  # fmt: skip
+    runs = planned_batches(batches + 1)
     sweep.run_batch(runs[0])  # loaded and warm
     for owner, name, stage in (
         (sweep.Variant, "resolve", "resolve the variant's config"),
@@ -227,14 +201,14 @@ def batch_stages(raw: dict[str, Any], batches: int = 6) -> dict[str, float]:
 
 
 def main() -> None:
-    prepared, raw = variants(600)
+    prepared = prepared_variants(sweep_config(600), 600)
     print(f"nlcx components of benchmark (b), {time.strftime('%Y-%m-%d')}, one process")
     parts = kernel_parts(prepared)
     print("kernel, ns per variant-step (CPU time, batches of 100 of (b)'s variants):")
     for name, ns in parts.items():
         print(f"  {name:40s} {ns:6.1f}")
     print("sweep batch, ms per batch of 100 variants (wall time):")
-    for name, ms in batch_stages(raw).items():
+    for name, ms in batch_stages().items():
         print(f"  {name:40s} {ms:6.1f}")
 
 

@@ -17,8 +17,6 @@ import sys
 import time
 from pathlib import Path
 
-import yaml
-
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -34,19 +32,12 @@ STAGES = {
 
 
 def main() -> None:
-    from run import scratch, sweep_config
+    from run import planned_batches
 
     from nlcx import sweep
 
     batches = int(sys.argv[1]) if len(sys.argv) > 1 else 4
-    raw = sweep_config(100 * (batches + 1))
-    work = scratch()
-    path = work / "sweep.yaml"
-    path.write_text(yaml.safe_dump(raw))
-    base_raw, spec, _ = sweep.load(path)
-    variants, hashes = sweep.plan(base_raw, spec)
-    batch = [sweep.Batch(base_raw, variants[k : k + 100], hashes[k : k + 100], work / "out", False)
-             for k in range(0, len(variants), 100)]  # fmt: skip
+    batch = planned_batches(batches + 1)
     sweep.run_batch(batch[0])  # compiled code loaded, caches warm
     profile = cProfile.Profile()
     start = time.perf_counter()

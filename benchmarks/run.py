@@ -148,6 +148,47 @@ def sweep_config(n: int) -> dict[str, Any]:
     return raw
 
 
+def prepared_variants(raw: dict[str, Any], n: int) -> list[Any]:
+    """The first ``n`` variants of the sweep ``raw``, prepared as a sweep batch prepares them."""
+    from nlcx import config, engine, sweep
+
+    base_raw = {k: v for k, v in raw.items() if k != "sweep"}
+    spec = sweep.SweepSection.model_validate({**raw["sweep"], "random": {**raw["sweep"]["random"], "n": n}})
+    base = config.build(config.interpolate(base_raw))
+    return [engine.prepare(config.build(v.resolve(base_raw), like=base))
+            for v in sweep.expand(spec, config.interpolate(base_raw))]  # fmt: skip
+
+
+def kernel_batches(prepared: list[Any]) -> list[list[Any]]:
+    """The closed loops of ``prepared`` in kernel calls of 100 variants, as a sweep batch makes them."""
+    from nlcx import engine
+
+    return [[item for p in prepared[k : k + 100] for item in engine.items_of(p)] for k in range(0, len(prepared), 100)]
+
+
+def kernel_pass(batches: list[list[Any]], grid: Any, arena: Any) -> None:
+    """Every batch through nlcx's kernel, its records lent by ``arena``, as a sweep batch calls it."""
+    from nlcx import engine
+
+    for items in batches:
+        engine.simulate_items(items, grid, "rk4", record_logs=False, arena=arena)
+        arena.release()
+
+
+def planned_batches(n_batches: int) -> list[Any]:
+    """Benchmark (b)'s sweep of 100 * n_batches variants, written to a scratch directory and
+    planned in batches of 100 (``sweep.run_batch`` runs one; its part files go there too)."""
+    from nlcx import sweep
+
+    work = scratch()
+    path = work / "sweep.yaml"
+    path.write_text(yaml.safe_dump(sweep_config(100 * n_batches)))
+    base_raw, spec, _ = sweep.load(path)
+    variants, hashes = sweep.plan(base_raw, spec)
+    return [sweep.Batch(base_raw, variants[k : k + 100], hashes[k : k + 100], work / "out", False)
+            for k in range(0, len(variants), 100)]  # fmt: skip
+
+
 def _children_cpu_s() -> float:
     """CPU seconds (user + system) of this process's finished children and their descendants."""
     import resource
@@ -254,26 +295,19 @@ def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[s
     processes) is the difference to (b)'s ratio."""
     import reference
 
-    from nlcx import config, engine, sweep
+    from nlcx import engine
 
     base_raw = {k: v for k, v in raw.items() if k != "sweep"}
-    spec = sweep.SweepSection.model_validate({**raw["sweep"], "random": {**raw["sweep"]["random"], "n": n}})
-    variants = sweep.expand(spec, config.interpolate(base_raw))
-    base = config.build(config.interpolate(base_raw))
-    prepared = [engine.prepare(config.build(v.resolve(base_raw), like=base)) for v in variants]
-    grid, dt = prepared[0].grid, base.section.simulation.dt
-    batches = [[item for p in prepared[k : k + 100] for item in engine.items_of(p)] for k in range(0, n, 100)]
+    prepared = prepared_variants(raw, n)
+    grid = prepared[0].grid
+    dt = grid.dt
+    batches = kernel_batches(prepared)
     n_k = grid.t.size
     X, U, n_valid = np.empty((100, n_k, 4)), np.empty((100, n_k)), np.empty(100, dtype=np.int64)
     theta_loop, x_loop = (reference.loop_parameters(base_raw["controllers"]["proposed"]["loops"][s]["schedule"])
                           for s in ("theta", "x"))  # fmt: skip
 
     arena = engine.RecordArena()
-
-    def nlcx_kernel() -> None:
-        for items in batches:
-            engine.simulate_items(items, grid, "rk4", record_logs=False, arena=arena)
-            arena.release()
 
     def register_level(loop: str, keep: bool = False) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """The batches through one of the reference's loops; the trajectories copied out if ``keep``."""
@@ -305,7 +339,7 @@ def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[s
     for _ in range(repeats):
         for name in cpu:
             start = time.process_time()
-            nlcx_kernel() if name == "nlcx" else register_level(name)
+            kernel_pass(batches, grid, arena) if name == "nlcx" else register_level(name)
             cpu[name].append(time.process_time() - start)
     ns = {name: 1e9 * min(times) / steps for name, times in cpu.items()}
     return {"variants": n, "ns": ns, "same": same, "lockstep_same": lockstep_same, "limit_dev": limit_dev}
