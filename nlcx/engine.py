@@ -11,11 +11,13 @@ the tuners (through :class:`LoopSimulator`) all use it.
 from __future__ import annotations
 
 import copy
+import ctypes
 import dataclasses
 import functools
 import hashlib
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -450,6 +452,32 @@ class RecordArena:
         self._free, self._lent = self._lent, []
 
 
+#: glibc's mallopt parameters (malloc.h) and the values :func:`reuse_freed_memory` sets.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_MMAP_THRESHOLD = 32 << 20
+_TRIM_THRESHOLD = 128 << 20
+
+
+@functools.cache
+def reuse_freed_memory() -> bool:
+    """Let this process's C allocator keep freed blocks of up to 32 MB for reuse (glibc only;
+    elsewhere nothing changes). Returns whether it did.
+
+    Measuring a batch forms rows of a few MB (outputs gathered from the records, errors, the
+    terms of the trapezoidal sums). glibc serves a block that large by mapping fresh pages and
+    unmaps it when freed, so every such temporary paid a page fault and the zeroing of each of
+    its pages; a threshold of 32 MB (and a trim threshold of 128 MB, above which the top of the
+    heap is returned to the system) keeps them in the heap. Measuring a sweep batch of 100 runs
+    took 23 ms, 19 ms with this. A sweep worker calls it; the values are memory, not results."""
+    try:
+        if not os.confstr("CS_GNU_LIBC_VERSION"):
+            return False
+    except (ValueError, OSError):
+        return False
+    libc = ctypes.CDLL(None)
+    return bool(libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD) and libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD))
+
+
 def _record_arrays(
     group: list[Item], n_k: int, n_rec: int, empty: Callable[[tuple[int, ...]], np.ndarray]
 ) -> tuple[np.ndarray, ...]:
@@ -624,6 +652,15 @@ def _reference_rows(columns: list[np.ndarray]) -> np.ndarray:
     return np.stack(columns)
 
 
+def _blocks(members: list[int], n_samples: int) -> list[list[int]]:
+    """``members`` in blocks of :func:`nlcx.metrics.rows_per_block` runs: the rows gathered for
+    the metric functions (outputs, errors, inputs) are formed a block at a time, in memory
+    that stays in cache (16 MB at once for 100 runs of 20 001 samples cost ~60 % of measuring
+    them). Each row's metrics are the same whatever the block it is in."""
+    size = m.rows_per_block(n_samples)
+    return [members[k : k + size] for k in range(0, len(members), size)]
+
+
 def _measured_outputs(run: Run, plant: Plant) -> list[str]:
     """Outputs of ``run`` that follow a reference (measured against it)."""
     return [s for s in dict.fromkeys(run.controller.reference_signals) if s in plant.output_names]
@@ -644,12 +681,13 @@ def _tracking_values(
         for s in _measured_outputs(runs[i], plant):
             groups.setdefault((s, plans[i][s], runs[i].t.size), []).append(i)
     values: dict[tuple[int, str], dict[str, float]] = {}
-    for (s, plan, _), members in groups.items():
+    for (s, plan, n_samples), group in groups.items():
         j = plant.output_names.index(s)
-        y = _outputs([runs[i].x for i in members], plant.C[j])
-        r = _reference_rows([runs[i].r[:, runs[i].controller.reference_signals.index(s)] for i in members])
-        batch = _signal_metrics(runs[members[0]].t, y, r, plan, cfg)
-        values.update({(i, s): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)})
+        for members in _blocks(group, n_samples):
+            y = _outputs([runs[i].x for i in members], plant.C[j])
+            r = _reference_rows([runs[i].r[:, runs[i].controller.reference_signals.index(s)] for i in members])
+            batch = _signal_metrics(runs[members[0]].t, y, r, plan, cfg)
+            values.update({(i, s): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)})
     return values
 
 
@@ -668,12 +706,14 @@ def _open_loop_values(
             if s not in followed:
                 groups.setdefault((s, step.t_step, runs[i].t.size), []).append(i)
     values: dict[tuple[int, str], dict[str, float]] = {}
-    for (s, t_step, _), members in groups.items():
-        y = _outputs([runs[i].x for i in members], plant.C[plant.output_names.index(s)])
-        batch = m.step_info(
-            runs[members[0]].t, y, t_step=t_step, settling_band=cfg.settling_band, rise_limits=tuple(cfg.rise_limits)
-        )
-        values.update({(i, s): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)})
+    for (s, t_step, n_samples), group in groups.items():
+        for members in _blocks(group, n_samples):
+            y = _outputs([runs[i].x for i in members], plant.C[plant.output_names.index(s)])
+            batch = m.step_info(
+                runs[members[0]].t, y, t_step=t_step, settling_band=cfg.settling_band,
+                rise_limits=tuple(cfg.rise_limits),
+            )  # fmt: skip
+            values.update({(i, s): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)})
     return values
 
 
@@ -683,13 +723,14 @@ def _input_values(plant: Plant, runs: list[Run], ok: list[int]) -> dict[tuple[in
     for i in ok:
         by_length.setdefault(runs[i].t.size, []).append(i)
     values: dict[tuple[int, str], dict[str, float]] = {}
-    for members in by_length.values():
-        t = runs[members[0]].t
-        for j, name in enumerate(plant.input_names):
-            batch = m.input_metrics(t, np.stack([runs[i].u[:, j] for i in members]))
-            values.update(
-                {(i, name): {metric: float(v[k]) for metric, v in batch.items()} for k, i in enumerate(members)}
-            )
+    for n_samples, group in by_length.items():
+        t = runs[group[0]].t
+        for members in _blocks(group, n_samples):
+            for j, name in enumerate(plant.input_names):
+                batch = m.input_metrics(t, np.stack([runs[i].u[:, j] for i in members]))
+                values.update(
+                    {(i, name): {metric: float(v[k]) for metric, v in batch.items()} for k, i in enumerate(members)}
+                )
     return values
 
 

@@ -148,6 +148,13 @@ def _per_row(value: ArrayLike, n_rows: int, name: str) -> FloatArray:
     raise ValueError(f"{name} must be a scalar or have shape ({n_rows},), got {arr.shape}")
 
 
+def rows_per_block(n_samples: int) -> int:
+    """How many rows of ``n_samples`` samples the functions here process together: a caller
+    that forms the rows it passes (outputs gathered from states, errors) does so block by
+    block, and its temporaries stay as small as these functions' own."""
+    return max(1, _CHUNK_ELEMENTS // max(n_samples, 1))
+
+
 def _run_batched(
     block: Callable[..., Mapping[str, FloatArray]],
     y: FloatArray,
@@ -158,7 +165,7 @@ def _run_batched(
     """Apply ``block(y_rows, **params_rows)`` to blocks of rows and assemble the result."""
     n_rows, n_cols = y.shape
     params = row_params or {}
-    step = max(1, _CHUNK_ELEMENTS // max(n_cols, 1))
+    step = rows_per_block(n_cols)
     parts: dict[str, list[FloatArray]] = {k: [] for k in keys}
     for start in range(0, n_rows, step):
         rows = slice(start, start + step)

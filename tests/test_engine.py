@@ -292,3 +292,40 @@ def test_t_end_must_be_whole_steps(x_time_raw: dict) -> None:
     x_time_raw["simulation"]["dt"] = 0.003
     with pytest.raises(ConfigError, match=r"simulation\.t_end"):
         engine.prepare(config.build(x_time_raw))
+
+
+@pytest.mark.parametrize("rows", [1, 3])
+def test_metrics_measured_in_blocks_of_runs_equal_one_block(x_error_raw: dict, monkeypatch, rows: int) -> None:
+    """The engine gathers the rows it measures (outputs, errors, inputs) a block of runs at a
+    time (:func:`nlcx.metrics.rows_per_block`); every metric of every run is the same to the
+    last bit whatever the block size."""
+    from nlcx import metrics
+
+    prepared = []
+    for k, M in enumerate((0.8, 1.0, 1.2, 1.4, 9.0)):
+        raw = copy.deepcopy(x_error_raw)
+        raw["simulation"]["t_end"] = 3.0
+        raw["plant"]["params"]["M"] = M
+        raw["seed"] = k
+        prepared.append(engine.prepare(config.build(raw)))
+    results = engine.evaluate(prepared)
+    whole = engine.shared_metrics(results)
+    assert len({r.prepared.plant.p.tobytes() for r in results}) == 5 and len(whole) > 100
+    runs = [run for r in results for run in r.runs]
+    monkeypatch.setattr(metrics, "_CHUNK_ELEMENTS", rows * runs[0].t.size)
+    assert metrics.rows_per_block(runs[0].t.size) == rows
+    blocks = engine.shared_metrics(engine.remeasure(results, {}))
+    assert whole.equals(blocks)
+    assert (whole.status == "ok").any() and not whole.value.isna().all()
+
+
+def test_freed_memory_is_kept_for_reuse_on_glibc() -> None:
+    """A sweep worker asks glibc to keep freed blocks of up to 32 MB in its heap (the rows a
+    batch measures); elsewhere nothing is changed and it says so."""
+    import os
+
+    try:
+        glibc = bool(os.confstr("CS_GNU_LIBC_VERSION"))
+    except (ValueError, OSError):
+        glibc = False
+    assert engine.reuse_freed_memory() is glibc
