@@ -468,7 +468,9 @@ def reuse_freed_memory() -> bool:
     unmaps it when freed, so every such temporary paid a page fault and the zeroing of each of
     its pages; a threshold of 32 MB (and a trim threshold of 128 MB, above which the top of the
     heap is returned to the system) keeps them in the heap. Measuring a sweep batch of 100 runs
-    took 23 ms, 19 ms with this. A sweep worker calls it; the values are memory, not results."""
+    took 23 ms, 19 ms with this. :func:`evaluate` calls it, so every process that measures runs
+    (``nlcx run``, sweep workers, the reproduction's workers, tuners) keeps its freed blocks; it
+    changes how much memory the process keeps, never a value."""
     try:
         if not os.confstr("CS_GNU_LIBC_VERSION"):
             return False
@@ -853,6 +855,7 @@ def evaluate(
     (:class:`RecordArena`). Timings are per experiment; a shared kernel call is split evenly
     between its experiments.
     """
+    reuse_freed_memory()
     prepared, timings = [], []
     for exp in experiments:
         start = time.perf_counter()

@@ -248,10 +248,7 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
     travels back pickled; the sweep reads the metrics from the part files). The garbage
     collector waits for the end of the batch (:func:`_settle_heap`): its collections while the
     batch built its configs were ~2 % of a sweep's samples under ``perf``."""
-    from nlcx import engine
-
     _set_threads()
-    engine.reuse_freed_memory()
     collecting = gc.isenabled()
     gc.disable()
     try:
