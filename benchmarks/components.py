@@ -8,7 +8,9 @@ few repeats):
 - the controller step alone: nlcx's PID driven by the outputs the closed loop recorded, called
   through a controller function value as the kernel calls it, at 100, 8, 2 and 1 rows, less
   the same loop with a step that does nothing (the copies of x, y and r and the call); the
-  inputs it computes are checked, bit for bit, against those the closed loop recorded;
+  inputs it computes are checked, bit for bit, against those the closed loop recorded; at 100
+  rows also the general ``pid_step``, which reads the loop structure from each row, where the
+  controller runs the step compiled for its structure (``pid.step_for``);
 - the plant's right-hand side alone (four calls a Runge-Kutta step) and, inside it, the sine
   and cosine of the batch's angles;
 - libm's exp, as often as the PID calls it (the thesis's schedules share k_p's rate with
@@ -32,6 +34,7 @@ import numpy as np
 from numba import njit, types
 
 from nlcx import config, engine, report, sweep
+from nlcx.controllers import pid
 from nlcx.controllers.base import ControllerInstance
 from nlcx.kernel.abi import ARR3, F64, I64, MAT, CallbackTuple, ControllerFn, RhsFn, callback_slots
 from nlcx.kernel.trig import sincos_column
@@ -133,13 +136,18 @@ def kernel_parts(prepared: list[engine.Prepared]) -> dict[str, float]:
         rec = (np.ascontiguousarray(a[:, :rows]) for a in (X, Y, R))  # only the rows driven: no cache misses
         U = np.empty((n_k, rows, n_u))
         args = (np.ascontiguousarray(cp[:rows]), cs0, *rec, dt, n_log, U)
-        pid = cpu_best(functools.partial(drive_controller, controllers[0].step, slots, *args), 3)
+        step = cpu_best(functools.partial(drive_controller, controllers[0].step, slots, *args), 3)
         same = np.array_equal(U.view(np.int64), recorded[:, :rows].view(np.int64))
         idle = cpu_best(functools.partial(drive_controller, idle_step, slots, *args), 3)
-        out[f"controller step, {rows} rows"] = 1e9 * (pid - idle) / (n_k * rows)
+        out[f"controller step, {rows} rows"] = 1e9 * (step - idle) / (n_k * rows)
         out[f"idle step and copies, {rows} rows"] = 1e9 * idle / (n_k * rows)
         if not same:
             raise SystemExit(f"the controller driven alone ({rows} rows) did not reproduce the closed loop's inputs")
+        if rows == 100:  # the general PID step, which reads the loop structure from each row
+            general = cpu_best(functools.partial(drive_controller, pid.pid_step, slots, *args), 3)
+            if not np.array_equal(U.view(np.int64), recorded[:, :rows].view(np.int64)):
+                raise SystemExit("the general PID step did not reproduce the closed loop's inputs")
+            out["general pid_step, 100 rows"] = 1e9 * (general - idle) / (n_k * rows)
     rng = np.random.default_rng(0)
     x = np.ascontiguousarray(X[1000].T)  # (n, 100): the batch's state at t = 1 s, by columns
     u = np.ascontiguousarray(rng.normal(size=(n_u, 100)))

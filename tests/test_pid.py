@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 from nlcx import config, engine, registry
+from nlcx.controllers import pid
 from nlcx.controllers.pid import HEAD, INPUT, LOOP, LOOP_STATE, pid_step
 from nlcx.controllers.schedules import schedule_slots
+from nlcx.kernel.abi import callback_slots
 
 
 def build(raw_ctrl: dict) -> engine.Prepared:
@@ -354,3 +356,73 @@ def test_a_sample_time_below_the_step_is_a_config_error() -> None:
 
     with pytest.raises(ConfigError, match=r"controllers\.c\.sample_time = 0\.001: allowed: .*0\.01"):
         build(copy.deepcopy(CONST) | {"sample_time": 0.001})
+
+
+_LOOP_SCHEDULES = {
+    "constant": {"kind": "constant", "kp": 30, "ki": 2, "kd": 4},
+    "time_ags": {"kind": "time_ags", "kp": {"min": 20, "max": 40}, "ki": {"min": 1, "max": 3},
+                 "kd": {"min": 2, "max": 6}, "rate": {"kp": 1.5, "ki": 1.5, "kd": 0.5}},
+    "error_ags": {"kind": "error_ags", "kp": {"min": 20, "max": 40}, "ki": {"min": 1, "max": 3},
+                  "kd": {"min": 2, "max": 6}, "rate": {"kp": 2.0, "ki": 3.0, "kd": 2.0}, "error": "signed"},
+    "fuzzy": {"kind": "fuzzy", "kp": {"min": 20, "max": 40}, "ki": {"min": 1, "max": 3}, "kd": {"min": 2, "max": 6}},
+}  # fmt: skip
+
+SIGNS = {"theta": -1, "x": 1}
+STRUCTURES = {
+    "constant, defaults": {"theta": "constant", "x": "constant"},
+    "error-AGS, filtered on the measurement, gain inside, ideal form": {
+        "theta": "error_ags", "x": "error_ags",
+        "derivative": {"method": "filtered", "N": 50.0, "on": "measurement"}, "integral": "inside", "form": "ideal",
+    },
+    "time-AGS and constant, series form, set-point weight, clamping": {
+        "theta": "time_ags", "x": "constant", "form": "series", "setpoint_weight": 0.5,
+        "saturation": {"limits": {"F_x": 20.0}, "anti_windup": "clamping"},
+    },
+    "fuzzy through its slot, discrete, back-calculation": {
+        "theta": "fuzzy", "x": "error_ags", "sample_time": 0.03,
+        "saturation": {"limits": {"F_x": 20.0}, "anti_windup": "back_calculation", "kb": 3.0},
+    },
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", list(STRUCTURES))
+def test_the_step_made_for_a_structure_equals_the_general_step_bit_for_bit(name: str) -> None:
+    """A built PID runs the step compiled for its loop structure (``pid.step_for``). On three
+    rows driven by random outputs and references, with schedules called directly and through
+    their slot, every option of the loop and the head, its inputs, logs and state equal
+    :func:`pid_step`'s, which reads the structure from the parameters, to the last bit."""
+    options = dict(STRUCTURES[name])
+    loops = {key: {"sign": sign, "schedule": _LOOP_SCHEDULES[options.pop(key)]} for key, sign in SIGNS.items()}
+    prep = build({"kind": "pid", "loops": loops, **options})
+    c = prep.controllers[0]
+    structure = pid.structure_of(c.cp)
+    assert c.step is not pid_step and c.step is pid.step_for(structure)
+    assert (pid.VIA_SLOT in structure.direct) == ("fuzzy" in name)
+    dt, rows = 0.01, 3
+    states = []
+    for step in (pid_step, c.step):
+        cp, cs = np.tile(c.cp, (rows, 1)), np.tile(c.cs0, (rows, 1))
+        u, log = np.zeros((rows, 1)), np.zeros((rows, len(c.log_names)))
+        trace = []
+        rng = np.random.default_rng(5)
+        for k in range(120):
+            y, r = rng.normal(scale=0.5, size=(rows, 2)), rng.normal(scale=0.5, size=(rows, 2))
+            step(k * dt, dt, np.zeros((rows, 4)), y, r, cp, cs, u, log, callback_slots(c.callbacks))
+            trace.append(np.concatenate([u.ravel(), log.ravel(), cs.ravel()]))
+        states.append(np.array(trace))
+    general, made = states
+    assert np.array_equal(general.view(np.int64), made.view(np.int64))
+    assert np.ptp(general[:, :rows]) > 1.0  # the inputs moved
+
+
+def test_one_compiled_step_per_structure() -> None:
+    """Controllers of the same structure share their step (one kernel group, one compiled
+    function); another schedule, option or loop count gives another one."""
+    first = build(CONST).controllers[0]
+    other_gains = build({**CONST, "loops": {**CONST["loops"], "theta": {"sign": -1, "schedule": {
+        "kind": "constant", "kp": 10, "ki": 0, "kd": 1}}}}).controllers[0]  # fmt: skip
+    filtered = build({**CONST, "derivative": {"method": "filtered"}}).controllers[0]
+    assert first.step is other_gains.step
+    assert first.step is not filtered.step
+    assert first.step.targetoptions.get("_nrt") is False  # the hot-loop rule (tests/test_hot_loop.py)
+    assert pid.structure_of(first.cp).filtered == (0, 0) and pid.structure_of(filtered.cp).filtered == (1, 1)

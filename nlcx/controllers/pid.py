@@ -14,7 +14,9 @@ With a set-point weight b the proportional term acts on b r - y instead of e.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+import functools
+import hashlib
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -197,6 +199,52 @@ def _update_period(t, dt, sample_time, cs, row, c):  # pragma: no cover - compil
     return sample_time
 
 
+@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+def _loop_update(
+    t, period, y_i, r_i, cp, cs, log, row, h, c, g, callbacks, direct, slot, off, filtered, on_measurement, inside, form
+):  # pragma: no cover - compiled
+    """One loop's sample (see :func:`pid_step`): its state updated, its gains logged; returns
+    its signed contribution to its input. The loop's structure (``direct`` .. ``form``) is
+    passed in, read from the parameter row by :func:`pid_step` or a compile-time constant of a
+    step made for one structure (:func:`step_for`), where the compiler drops the branches it
+    does not take."""
+    e = r_i - y_i
+    if cs[row, c + S.started] == 0.0:
+        cs[row, c + S.e_prev] = e
+        cs[row, c + S.y_prev] = y_i
+        cs[row, c + S.started] = 1.0
+    dv = (cs[row, c + S.y_prev] - y_i) if on_measurement else (e - cs[row, c + S.e_prev])
+    if filtered:
+        N = cp[row, h + L.N]
+        d = (cs[row, c + S.d_filtered] + N * dv) / (1.0 + N * period)
+        cs[row, c + S.d_filtered] = d
+    else:
+        d = dv / period
+    if direct == DIRECT_ERROR_AGS:
+        kp, ki, kd = error_ags_gains(t, e, d, cp, row, off)
+    elif direct == DIRECT_TIME_AGS:
+        kp, ki, kd = time_ags_gains(t, e, d, cp, row, off)
+    elif direct == DIRECT_CONSTANT:
+        kp, ki, kd = constant_gains(t, e, d, cp, row, off)
+    else:
+        kp, ki, kd = callbacks[slot](t, e, d, cp, row, off)
+    if form != 0:  # ideal: k_p (1, k_i, k_d); series: k_p (1 + k_i k_d, k_i, k_d)
+        kp, ki, kd = (kp * (1.0 + ki * kd) if form == 2 else kp), kp * ki, kp * kd
+    step = ki * e * period if inside else e * period
+    cs[row, c + S.integral] += step
+    cs[row, c + S.increment] = step
+    integral_term = cs[row, c + S.integral] * (1.0 if inside else ki)
+    out = cp[row, h + L.sign] * (kp * (cp[row, h + L.setpoint_weight] * r_i - y_i) + integral_term + kd * d)
+    log[row, g + G.kp] = kp
+    log[row, g + G.ki] = ki
+    log[row, g + G.kd] = kd
+    log[row, g + G.u] = out
+    cs[row, c + S.held] = out
+    cs[row, c + S.e_prev] = e
+    cs[row, c + S.y_prev] = y_i
+    return out
+
+
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy", _nrt=False)
 def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """Multi-loop PID with pluggable gain schedules, one sample (zero-order hold), every row.
@@ -207,6 +255,10 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
     (k_p, k_i, k_d) turned into parallel gains for the ideal or series form. T = dt, or the
     sampling period T_s of a discrete PID, which holds its output between samples.
     ``callbacks`` holds the registered schedules.
+
+    This step reads each row's loop structure from its parameters, so rows of any structure
+    can share a call; a built controller runs the step made for its structure
+    (:func:`step_for`), the same arithmetic with the structure compiled in.
     """
     for row in range(x.shape[0]):
         n_u = int(cp[row, H.n_inputs])
@@ -223,48 +275,100 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
                 continue
             y_i = y[row, int(cp[row, h + L.y_index])] * cp[row, h + L.scale]
             r_i = r[row, int(cp[row, h + L.r_index])] * cp[row, h + L.scale]
-            e = r_i - y_i
-            if cs[row, c + S.started] == 0.0:
-                cs[row, c + S.e_prev] = e
-                cs[row, c + S.y_prev] = y_i
-                cs[row, c + S.started] = 1.0
-            on_measurement = cp[row, h + L.on_measurement] != 0.0
-            dv = (cs[row, c + S.y_prev] - y_i) if on_measurement else (e - cs[row, c + S.e_prev])
-            if cp[row, h + L.filtered] != 0.0:
-                N = cp[row, h + L.N]
-                d = (cs[row, c + S.d_filtered] + N * dv) / (1.0 + N * period)
-                cs[row, c + S.d_filtered] = d
-            else:
-                d = dv / period
-            off = int(cp[row, h + L.schedule_offset])
-            direct = int(cp[row, h + L.direct_schedule])
-            if direct == DIRECT_ERROR_AGS:
-                kp, ki, kd = error_ags_gains(t, e, d, cp, row, off)
-            elif direct == DIRECT_TIME_AGS:
-                kp, ki, kd = time_ags_gains(t, e, d, cp, row, off)
-            elif direct == DIRECT_CONSTANT:
-                kp, ki, kd = constant_gains(t, e, d, cp, row, off)
-            else:
-                kp, ki, kd = callbacks[int(cp[row, h + L.schedule_slot])](t, e, d, cp, row, off)
-            form = cp[row, h + L.form]
-            if form != 0.0:  # ideal: k_p (1, k_i, k_d); series: k_p (1 + k_i k_d, k_i, k_d)
-                kp, ki, kd = (kp * (1.0 + ki * kd) if form == 2.0 else kp), kp * ki, kp * kd
-            step = ki * e * period if cp[row, h + L.gain_inside] != 0.0 else e * period
-            cs[row, c + S.integral] += step
-            cs[row, c + S.increment] = step
-            integral_term = cs[row, c + S.integral] * (1.0 if cp[row, h + L.gain_inside] != 0.0 else ki)
-            out = cp[row, h + L.sign] * (kp * (cp[row, h + L.setpoint_weight] * r_i - y_i) + integral_term + kd * d)
-            g = len(G) * i
-            log[row, g + G.kp] = kp
-            log[row, g + G.ki] = ki
-            log[row, g + G.kd] = kd
-            log[row, g + G.u] = out
-            cs[row, c + S.held] = out
-            u[row, int(cp[row, h + L.u_index])] += out
-            cs[row, c + S.e_prev] = e
-            cs[row, c + S.y_prev] = y_i
+            u[row, int(cp[row, h + L.u_index])] += _loop_update(
+                t, period, y_i, r_i, cp, cs, log, row, h, c, len(G) * i, callbacks,
+                int(cp[row, h + L.direct_schedule]), int(cp[row, h + L.schedule_slot]),
+                int(cp[row, h + L.schedule_offset]), cp[row, h + L.filtered] != 0.0,
+                cp[row, h + L.on_measurement] != 0.0, cp[row, h + L.gain_inside] != 0.0, int(cp[row, h + L.form]),
+            )  # fmt: skip
         if cp[row, H.anti_windup] >= 0.0:
             _saturate(row, dt, cp, cs, u, log)
+
+
+class Structure(NamedTuple):
+    """What a PID's parameter row fixes beyond its numbers: the head's sizes and modes, and per
+    loop (tuples, one entry a loop) its output, reference and input indices, schedule (built-in
+    called directly, or its slot) and where its parameters start, and its derivative, integral
+    and PID-form options (0/1 flags, :data:`FORMS` code)."""
+
+    n_inputs: int
+    n_loops: int
+    discrete: int
+    saturated: int
+    y_index: tuple[int, ...]
+    r_index: tuple[int, ...]
+    u_index: tuple[int, ...]
+    direct: tuple[int, ...]
+    slot: tuple[int, ...]
+    offset: tuple[int, ...]
+    filtered: tuple[int, ...]
+    on_measurement: tuple[int, ...]
+    inside: tuple[int, ...]
+    form: tuple[int, ...]
+
+
+def structure_of(cp: np.ndarray) -> Structure:
+    """The :class:`Structure` of a PID parameter row, as :func:`pid_step` reads it."""
+    head = HEAD.unpack(cp)
+    n_inputs, n_loops = int(head["n_inputs"]), int(head["n_loops"])
+    base = HEAD.size + INPUT.size * n_inputs
+    loops = [LOOP.unpack(cp, base + LOOP.size * i) for i in range(n_loops)]
+
+    def column(name: str) -> tuple[int, ...]:
+        return tuple(int(loop[name] != 0.0) if name in _FLAGS else int(loop[name]) for loop in loops)
+
+    return Structure(
+        n_inputs=n_inputs, n_loops=n_loops, discrete=int(head["sample_time"] != 0.0),
+        saturated=int(head["anti_windup"] >= 0.0), y_index=column("y_index"), r_index=column("r_index"),
+        u_index=column("u_index"), direct=column("direct_schedule"), slot=column("schedule_slot"),
+        offset=column("schedule_offset"), filtered=column("filtered"), on_measurement=column("on_measurement"),
+        inside=column("gain_inside"), form=column("form"),
+    )  # fmt: skip
+
+
+#: The loop fields :class:`Structure` holds as 0/1 flags (the step tests them against 0).
+_FLAGS = ("filtered", "on_measurement", "gain_inside")
+
+
+@functools.cache
+def step_for(structure: Structure) -> Any:
+    """:func:`pid_step` for rows of one :class:`Structure`, with that structure compiled in as
+    constants: the same operations on the same values, so the same bits, in ~23 instead of
+    ~41 ns a variant-step for benchmark (b)'s two error-AGS loops (``benchmarks/components.py``),
+    the branches and index arithmetic on the structure gone. One compiled step a structure,
+    made when a controller of that structure is first built and compiled when it first reaches
+    the kernel (numba's disk cache keys it by the structure)."""
+    n_inputs, n_loops, discrete, saturated = structure[:4]
+    y_index, r_index, u_index, direct, slot, offset, filtered, on_measurement, inside, form = structure[4:]
+    base = len(H) + len(I) * n_inputs
+
+    def pid_step_for_structure(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
+        for row in range(x.shape[0]):
+            for j in range(n_inputs):
+                u[row, j] = cp[row, len(H) + len(I) * j + I.bias]
+            for i in range(n_loops):
+                h = base + len(L) * i
+                c = len(S) * i
+                period = _update_period(t, dt, cp[row, H.sample_time], cs, row, c) if discrete else dt
+                cs[row, c + S.period] = period
+                if discrete and period == 0.0:
+                    u[row, u_index[i]] += cs[row, c + S.held]
+                    continue
+                y_i = y[row, y_index[i]] * cp[row, h + L.scale]
+                r_i = r[row, r_index[i]] * cp[row, h + L.scale]
+                u[row, u_index[i]] += _loop_update(
+                    t, period, y_i, r_i, cp, cs, log, row, h, c, len(G) * i, callbacks, direct[i], slot[i],
+                    offset[i], filtered[i] != 0, on_measurement[i] != 0, inside[i] != 0, form[i],
+                )  # fmt: skip
+            if saturated:
+                _saturate(row, dt, cp, cs, u, log)
+
+    # numba's disk cache keeps one index file a function name, and processes that compile
+    # different structures of one name at once (a pool's workers) can leave an index entry
+    # pointing at another structure's code: so one name, and one index, a structure
+    digest = hashlib.sha1(repr(tuple(structure)).encode(), usedforsecurity=False).hexdigest()[:12]
+    pid_step_for_structure.__qualname__ = f"pid_step_for_structure_{digest}"
+    return njit(cache=True, error_model="numpy", _nrt=False)(pid_step_for_structure)
 
 
 class MultiLoopPID(ControllerModel):
@@ -313,11 +417,12 @@ class MultiLoopPID(ControllerModel):
             offset += sp.size
             log_names += [f"{key}.{name}" for name in LOOP_LOG.fields]
             log_units += _log_units(plant.unit_of(input_name), plant.unit_of(signal))
+        cp = np.concatenate([head, *blocks, *schedules])
         return ControllerInstance(
             label=label,
             kind="pid",
-            step=self.step,
-            cp=np.concatenate([head, *blocks, *schedules]),
+            step=step_for(structure_of(cp)),
+            cp=cp,
             cs0=np.zeros(LOOP_STATE.size * len(loops)),
             reference_signals=tuple(plant.output_names),
             log_names=tuple(log_names),
