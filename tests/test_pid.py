@@ -6,6 +6,7 @@ import copy
 
 import numpy as np
 import pytest
+from conftest import CONFIGS
 
 from nlcx import config, engine, registry
 from nlcx.controllers import pid
@@ -426,3 +427,28 @@ def test_one_compiled_step_per_structure() -> None:
     assert first.step is not filtered.step
     assert first.step.targetoptions.get("_nrt") is False  # the hot-loop rule (tests/test_hot_loop.py)
     assert pid.structure_of(first.cp).filtered == (0, 0) and pid.structure_of(filtered.cp).filtered == (1, 1)
+
+
+def test_a_controller_is_built_once_for_variants_that_change_only_plant_numbers() -> None:
+    """A sweep's variants share their validated controller section (``config.build(raw,
+    like=base)``); a PID built for it is shared by the variants whose plant signals and
+    equilibrium bias are the same, and equals one built afresh. With the equilibrium
+    feed-forward the bias follows the plant's masses, and so does the controller."""
+    raw = config.read_config(CONFIGS / "xyz_error_ags.yaml")
+    raw["simulation"]["t_end"] = 0.1
+    base = config.build(config.interpolate(raw))
+    assert base.controllers[0].config.feedforward == "equilibrium"
+    variants = []
+    for M in (1.0, 1.0, 1.3):
+        changed = copy.deepcopy(raw)
+        changed["plant"]["params"]["M"] = M
+        variants.append(engine.prepare(config.build(config.interpolate(changed), like=base)))
+    same, again, heavier = (p.controllers[0] for p in variants)
+    assert same is again  # equal plant numbers: one controller
+    assert heavier is not same  # another bias: (M + m) g
+    bias = [pid.input_blocks(c.cp)[-1]["bias"] for c in (same, heavier)]
+    assert bias[1] > bias[0] > 0.0
+    pid._BUILT.clear()
+    fresh = engine.prepare(config.build(config.interpolate(copy.deepcopy(variants[2].experiment.raw)))).controllers[0]
+    assert fresh is not heavier and np.array_equal(fresh.cp, heavier.cp) and fresh.step is heavier.step
+    assert fresh.log_names == heavier.log_names and fresh.config == heavier.config

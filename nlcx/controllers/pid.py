@@ -371,6 +371,11 @@ def step_for(structure: Structure) -> Any:
     return njit(cache=True, error_model="numpy", _nrt=False)(pid_step_for_structure)
 
 
+#: Controllers built so far (:meth:`MultiLoopPID.build`), with the config each was built from.
+_BUILT: dict[tuple[Any, ...], tuple[PIDConfig, ControllerInstance]] = {}
+_BUILT_SIZE = 256
+
+
 class MultiLoopPID(ControllerModel):
     """PID loops summed per input; gains from a schedule (constant, time_ags, error_ags, ...)."""
 
@@ -390,13 +395,32 @@ class MultiLoopPID(ControllerModel):
         return cfg.model_copy(update={"loops": loops})
 
     def build(self, label: str, cfg: PIDConfig, plant: Plant, path: str, dt: float | None = None) -> ControllerInstance:
+        """The controller for ``plant``. A controller is built once for a validated config and
+        the plant's signals and equilibrium bias: the variants of a sweep that change only the
+        plant's numbers (their configs share the validated controller section, see
+        ``config.build(raw, like=base)``) share it, as the arrays it holds are read-only."""
+        bias = self._bias(cfg, plant, path)
+        key = (label, path, dt, id(cfg), plant.name, tuple(plant.output_names), tuple(plant.input_names),
+               bias.tobytes())  # fmt: skip
+        built = _BUILT.get(key)
+        if built is not None and built[0] is cfg:  # the entry holds cfg alive: its id is its own
+            return built[1]
+        controller = self._build(label, cfg, plant, path, dt, bias)
+        if len(_BUILT) >= _BUILT_SIZE:
+            _BUILT.clear()
+        _BUILT[key] = (cfg, controller)
+        return controller
+
+    def _build(
+        self, label: str, cfg: PIDConfig, plant: Plant, path: str, dt: float | None, bias: np.ndarray
+    ) -> ControllerInstance:
         cfg = self.normalize(cfg, path)
         if dt is not None and 0.0 < cfg.sample_time < dt:
             allowed = f"allowed: 0 (updated every step) or a period >= simulation.dt = {dt:g} s"
             raise ConfigError(join(path, "sample_time"), cfg.sample_time, allowed)
         loops = self._resolve_loops(cfg, plant, path)
         sat = cfg.saturation
-        inputs = zip(self._bias(cfg, plant, path), self._limits(cfg, plant, path), strict=True)
+        inputs = zip(bias, self._limits(cfg, plant, path), strict=True)
         head = np.concatenate([
             HEAD.pack(
                 n_loops=len(loops), n_inputs=len(plant.inputs),
