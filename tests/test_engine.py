@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+from typing import Any
 
 import control
 import numpy as np
@@ -329,3 +330,40 @@ def test_freed_memory_is_kept_for_reuse_on_glibc() -> None:
     except (ValueError, OSError):
         glibc = False
     assert engine.reuse_freed_memory() is glibc
+
+
+def test_controllers_of_several_structures_share_a_call_of_few_rows_and_split_when_many(
+    x_error_raw: dict, monkeypatch
+) -> None:
+    """A conventional and an error-AGS PID (two loop structures, two compiled steps) are one
+    kernel call of the general PID step when they are few (a single run); with eight rows or
+    more each, each structure runs its own step in a call of its own. The runs are the same to
+    the bit either way."""
+    from nlcx.controllers import pid
+    from nlcx.kernel import integrator
+
+    steps: list[list[Any]] = []
+    original = integrator.simulate
+
+    def recording(rhs, step, *args):
+        steps[-1].append(step)
+        return original(rhs, step, *args)
+
+    monkeypatch.setattr(integrator, "simulate", recording)
+    runs = {}
+    for n in (1, 8):
+        prepared = []
+        for k in range(n):
+            raw = copy.deepcopy(x_error_raw)
+            raw["simulation"]["t_end"] = 2.0
+            raw["plant"]["params"]["M"] = 1.0 + 0.01 * k
+            prepared.append(engine.prepare(config.build(raw)))
+        steps.append([])
+        runs[n] = engine.evaluate(prepared, measure=False)
+    few, many = steps
+    controllers = runs[8][0].prepared.controllers
+    assert few == [pid.pid_step]
+    assert sorted(map(id, many)) == sorted(id(c.step) for c in controllers) and pid.pid_step not in many
+    for a, b in zip(runs[1][0].runs, runs[8][0].runs, strict=True):
+        assert a.label == b.label and np.array_equal(a.x, b.x) and np.array_equal(a.u, b.u)
+        assert np.array_equal(a.log, b.log)

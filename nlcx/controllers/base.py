@@ -46,6 +46,10 @@ class ControllerInstance:
     #: The controller's own compiled callbacks (:data:`nlcx.kernel.abi.CALLBACK_SIG`), which
     #: the kernel hands its step function untouched: the PID's gain schedules.
     callbacks: tuple[Any, ...] = ()
+    #: Where ``step`` is compiled for this controller's structure (the PID's, ``pid.step_for``):
+    #: the step of the same arithmetic for rows of any structure of its kind, which the engine
+    #: runs when controllers of several structures share a kernel call of few rows.
+    general_step: Any = None
 
 
 class ControllerModel:

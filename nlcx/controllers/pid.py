@@ -446,6 +446,7 @@ class MultiLoopPID(ControllerModel):
             label=label,
             kind="pid",
             step=step_for(structure_of(cp)),
+            general_step=pid_step,
             cp=cp,
             cs0=np.zeros(LOOP_STATE.size * len(loops)),
             reference_signals=tuple(plant.output_names),
