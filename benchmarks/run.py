@@ -167,9 +167,10 @@ def prepared_variants(raw: dict[str, Any], n: int) -> list[Any]:
 
     base_raw = {k: v for k, v in raw.items() if k != "sweep"}
     spec = sweep.SweepSection.model_validate({**raw["sweep"], "random": {**raw["sweep"]["random"], "n": n}})
-    base = config.build(config.interpolate(base_raw))
-    return [engine.prepare(config.build(v.resolve(base_raw), like=base))
-            for v in sweep.expand(spec, config.interpolate(base_raw))]  # fmt: skip
+    interpolated = config.Interpolated.of(base_raw)
+    base = config.build(interpolated.resolved)
+    return [engine.prepare(config.build(v.resolve(interpolated), like=base))
+            for v in sweep.expand(spec, interpolated.resolved)]  # fmt: skip
 
 
 def kernel_batches(prepared: list[Any]) -> list[list[Any]]:
@@ -288,8 +289,8 @@ def limit_reference(raw: dict[str, Any], jobs: int = 2) -> dict[str, Any]:
         start = time.perf_counter()
         done = list(pool.map(_reference_batch, tasks))
         wall = time.perf_counter() - start
-    first = [config.build(sweep.Variant(0, v.values, v.seed).resolve({k: x for k, x in raw.items() if k != "sweep"}))
-             for v in variants[:20]]  # fmt: skip
+    interpolated = config.Interpolated.of({k: x for k, x in raw.items() if k != "sweep"})
+    first = [config.build(sweep.Variant(0, v.values, v.seed).resolve(interpolated)) for v in variants[:20]]
     ours = engine.evaluate(first, record_logs=False)
     X = np.empty((20, n_steps + 1, 4))
     U = np.empty((20, n_steps + 1))

@@ -297,6 +297,60 @@ def interpolate(raw: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _reference_targets(node: Any) -> set[tuple[str, ...]]:
+    """The key paths that the ``"${dotted.key}"`` values anywhere in ``node`` refer to."""
+    if isinstance(node, dict):
+        return set().union(*(_reference_targets(v) for v in node.values()))
+    if isinstance(node, list):
+        return set().union(*(_reference_targets(v) for v in node))
+    if isinstance(node, str) and (match := _REFERENCE.fullmatch(node.strip())):
+        return {tuple(match.group(1).split("."))}
+    return set()
+
+
+@dataclass(frozen=True)
+class Interpolated:
+    """A raw config interpolated once, for the many configs that set a few values on it (a
+    sweep's variants): :meth:`resolve` gives exactly ``interpolate(set_values(raw, values))``,
+    without interpolating the whole config again when no value can change what a reference
+    resolves to."""
+
+    raw: dict[str, Any]
+    resolved: dict[str, Any]
+    targets: frozenset[tuple[str, ...]]
+
+    @classmethod
+    def of(cls, raw: dict[str, Any]) -> Interpolated:
+        return cls(raw, interpolate(raw), frozenset(_reference_targets(raw)))
+
+    def resolve(self, values: list[tuple[list[str], Any]]) -> dict[str, Any]:
+        """``interpolate(set_values(raw, values))``: the values set on the interpolated config
+        when each is independent of interpolation (:meth:`_independent`), else the full path.
+        Both share unchanged parts with ``raw`` or ``resolved`` (treat them as read-only)."""
+        if all(self._independent(parts, value) for parts, value in values):
+            return set_values(self.resolved, values)
+        return interpolate(set_values(self.raw, values))
+
+    def _independent(self, parts: list[str], value: Any) -> bool:
+        """Whether setting ``value`` at ``parts`` commutes with interpolation: the value holds
+        no reference; no reference points at, into or above the key; the key is not in
+        ``vars`` (which interpolation drops); and the raw config holds a mapping (or nothing)
+        at every key above it, as :func:`set_values` requires (else the full path reports it)."""
+        key = tuple(parts)
+        if key[0] == "vars" or _reference_targets(value):
+            return False
+        if any(target[: len(key)] == key or key[: len(target)] == target for target in self.targets):
+            return False
+        node: Any = self.raw
+        for part in key[:-1]:
+            node = node.get(part)
+            if node is None:
+                return True
+            if not isinstance(node, dict):
+                return False
+        return True
+
+
 def load(path: str | Path, overrides: list[str] | None = None) -> Experiment:
     """Read, override, interpolate and validate an experiment config."""
     return build(interpolate(apply_overrides(read_config(path), overrides or [])))

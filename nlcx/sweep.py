@@ -126,9 +126,10 @@ class Variant:
         """The variant as (key path, value) pairs for :func:`nlcx.config.set_values`."""
         return [(key.split("."), value) for key, value in self.values.items()] + [(["seed"], self.seed)]
 
-    def resolve(self, base_raw: dict[str, Any]) -> dict[str, Any]:
-        """The variant's raw config: the base with its values and seed set, interpolated."""
-        return cfg.interpolate(cfg.set_values(base_raw, self.settings()))
+    def resolve(self, base: cfg.Interpolated) -> dict[str, Any]:
+        """The variant's raw config: the base with its values and seed set, interpolated (the
+        base interpolated once, :class:`nlcx.config.Interpolated`)."""
+        return base.resolve(self.settings())
 
 
 def _lookup(raw: dict[str, Any], key: str) -> Any:
@@ -265,13 +266,14 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
 
     rows: list[dict[str, Any]] = []
     prepared_of: dict[int, Any] = {}
-    base = cfg.build(cfg.interpolate(batch.base_raw))  # valid: sweep.load built it
+    interpolated = cfg.Interpolated.of(batch.base_raw)
+    base = cfg.build(interpolated.resolved)  # valid: sweep.load built it
     for pos, (variant, digest) in enumerate(zip(batch.variants, batch.hashes, strict=True)):
         start = time.perf_counter()
         row: dict[str, Any] = {"variant": variant.index, "seed": variant.seed, "config_hash": digest}
         row.update({f"value:{k}": _cell(v) for k, v in variant.values.items()})
         try:
-            prepared_of[pos] = engine.prepare(cfg.build(variant.resolve(batch.base_raw), like=base))
+            prepared_of[pos] = engine.prepare(cfg.build(variant.resolve(interpolated), like=base))
             row.update(status="ok", message="")
         except Exception as exc:  # a bad variant is recorded; the others go on
             row.update(status="failed", message=str(exc).splitlines()[0])

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from nlcx.config import deep_merge, interpolate, read_config
+from nlcx.config import Interpolated, deep_merge, interpolate, read_config, set_values
 from nlcx.errors import ConfigError
 
 
@@ -34,3 +34,57 @@ def test_references_resolve_and_vars_disappear() -> None:
         interpolate({"a": "${vars.missing}"})
     with pytest.raises(ConfigError, match="circular"):
         interpolate({"a": "${b}", "b": "${a}"})
+
+
+def _leaves(node: object, path: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    """Every key path to a leaf of a raw mapping."""
+    if isinstance(node, dict):
+        return [leaf for key, value in node.items() for leaf in _leaves(value, (*path, str(key)))]
+    return [path]
+
+
+def _resolved_or_error(fn: object) -> object:
+    try:
+        return fn()  # type: ignore[operator]
+    except ConfigError as exc:
+        return f"ConfigError: {exc}"
+
+
+@pytest.mark.parametrize(
+    "name", ["thesis/ch2/fig_2_17.yaml", "thesis/ch3/fig_3_06.yaml", "sweeps/robustness.yaml", "xyz_error_ags.yaml"]
+)
+def test_interpolating_once_then_setting_values_equals_setting_then_interpolating(name: str) -> None:
+    """A sweep variant's config (:class:`nlcx.config.Interpolated`): the base interpolated once
+    and the variant's values set on it, when that is the same, else the full path; the result
+    (or error) always equals interpolating the base with the values set. Changes: every leaf
+    of the raw config (numbers, references, the ``vars`` they point at), a value holding a
+    reference, a key below a reference, a new key, a whole section."""
+    raw = read_config(Path(__file__).resolve().parent.parent / "configs" / name)
+    raw.pop("sweep", None)
+    once = Interpolated.of(raw)
+    changes: list[list[tuple[list[str], object]]] = [[(list(path), 1.25)] for path in _leaves(raw)]
+    changes += [
+        [(["seed"], 7), (["plant", "params", "M"], 1.1)],
+        [(["plant", "params", "l"], "${plant.params.M}")],
+        [(["controllers", "conventional", "loops", "x", "schedule", "kp"], 3.0)],
+        [(["controllers", "new_one"], {"kind": "pid"})],
+        [(["simulation"], {"t_end": 2.0, "dt": 0.01})],
+        [(["vars", "conventional", "position", "kp"], 9.0)],
+    ]
+    fast = 0
+    for values in changes:
+        expected = _resolved_or_error(lambda values=values: interpolate(set_values(raw, values)))
+        assert _resolved_or_error(lambda values=values: once.resolve(values)) == expected, values
+        fast += all(once._independent(parts, value) for parts, value in values)
+    assert 0 < fast < len(changes)  # both paths taken
+
+
+def test_setting_a_referenced_key_takes_the_full_path() -> None:
+    raw = {"vars": {"k": 1.0}, "a": {"gain": "${vars.k}", "n": 2}, "b": "${a.n}"}
+    once = Interpolated.of(raw)
+    assert once.resolve([(["vars", "k"], 5.0)]) == {"a": {"gain": 5.0, "n": 2}, "b": 2}
+    assert once.resolve([(["a", "n"], 3)]) == {"a": {"gain": 1.0, "n": 3}, "b": 3}
+    assert once.resolve([(["a", "gain"], 4.0)]) == {"a": {"gain": 4.0, "n": 2}, "b": 2}
+    assert once._independent(["a", "gain"], 4.0) and not once._independent(["a", "n"], 3)
+    with pytest.raises(ConfigError, match="not a mapping"):
+        once.resolve([(["a", "gain", "x"], 1.0)])
