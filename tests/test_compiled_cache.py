@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -95,3 +96,104 @@ def test_prewarm_compiles_what_a_run_needs_except_the_kernel(tmp_path: Path) -> 
     assert "integrator.simulate" in _cache_index(tmp_path / "cache")
     for name in ("metrics.csv", "timeseries.csv"):
         assert (tmp_path / "cold" / name).read_bytes() == (tmp_path / "warm" / name).read_bytes()
+
+
+FUNCTION = """
+from numba import njit
+
+
+@njit(cache=True)
+def f(a):
+    return a * 2 + 1
+"""
+
+
+def _in_child(tmp_path: Path, code: str) -> subprocess.Popen[str]:
+    """A Python process that runs ``code`` beside the module ``cached_f`` (in ``tmp_path``),
+    with nlcx's cache access serialized (as every nlcx process after importing its kernel ABI)."""
+    script = f"import sys; sys.path.insert(0, {str(tmp_path)!r})\nimport nlcx.kernel.abi\nimport cached_f\n{code}"
+    return subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_cache_access_is_serialized_once() -> None:
+    from numba.core.caching import IndexDataCacheFile
+
+    import nlcx.kernel.abi  # noqa: F401  (serializes on import)
+
+    before = {name: getattr(IndexDataCacheFile, name) for name in ("save", "load", "flush")}
+    compiled_cache.serialize_cache_access()
+    assert all(getattr(IndexDataCacheFile, name) is op and op.serialized for name, op in before.items())
+
+
+def _first_line(process: subprocess.Popen[str], timeout: float) -> str:
+    """The first line ``process`` prints, or "" if it prints none within ``timeout`` seconds."""
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.append(process.stdout.readline()), daemon=True)  # type: ignore[union-attr]
+    reader.start()
+    reader.join(timeout)
+    return lines[0].strip() if lines else ""
+
+
+def test_numbas_cache_access_waits_for_the_functions_lock(tmp_path: Path) -> None:
+    """A process that looks a compiled function up in numba's cache (and then compiles and saves
+    it) waits while another holds the lock beside the function's index (here this test), then
+    goes on; a third process loads the saved code."""
+    from filelock import FileLock
+
+    (tmp_path / "cached_f.py").write_text(FUNCTION)
+    sys.path.insert(0, str(tmp_path))
+    try:
+        import cached_f
+    finally:
+        sys.path.remove(str(tmp_path))
+    index = Path(cached_f.f._cache._cache_file._index_path)
+    lock = FileLock(f"{index}.lock")
+    lock.acquire()
+    saver = _in_child(
+        tmp_path,
+        "from numba.core.caching import IndexDataCacheFile\n"
+        "load = IndexDataCacheFile.load\n"
+        "def announced(self, key):\n"
+        "    print('looking up', flush=True)\n"
+        "    return load(self, key)\n"
+        "IndexDataCacheFile.load = announced\n"
+        "print(cached_f.f(20), flush=True)\n",
+    )
+    try:
+        assert _first_line(saver, 60) == "looking up"
+        time.sleep(1.0)
+        assert saver.poll() is None and not index.exists()  # held at the lock
+    finally:
+        lock.release()
+    out, err = saver.communicate(timeout=60)
+    assert saver.returncode == 0, err
+    assert out.strip() == "41" and index.exists()
+    loader = _in_child(tmp_path, "print(cached_f.f(20), cached_f.f.stats.cache_hits)\n")
+    out, err = loader.communicate(timeout=60)
+    assert loader.returncode == 0, err
+    assert out.split()[0] == "41" and ": 1" in out  # loaded, not compiled
+
+
+def test_processes_saving_overloads_of_one_function_at_once_keep_each_its_code(tmp_path: Path) -> None:
+    """Four processes compile a different overload of one function at the same moment into one
+    cache; a fifth loads all four from it, and each computes with its own types."""
+    (tmp_path / "cached_f.py").write_text(FUNCTION)
+    start = time.time() + 3.0
+    arguments = ["7", "2.5", "(1+2j)", "np.float32(1.5)"]
+    savers = [
+        _in_child(tmp_path, f"import time, numpy as np\ntime.sleep(max(0.0, {start} - time.time()))\ncached_f.f({a})\n")
+        for a in arguments
+    ]
+    for saver in savers:
+        _, err = saver.communicate(timeout=120)
+        assert saver.returncode == 0, err
+    loader = _in_child(
+        tmp_path,
+        "import numpy as np\n"
+        f"values = [{', '.join(f'cached_f.f({a})' for a in arguments)}]\n"
+        "print([repr(v) for v in values], dict(cached_f.f.stats.cache_hits))\n",
+    )
+    out, err = loader.communicate(timeout=60)
+    assert loader.returncode == 0, err
+    assert out.startswith("['15', '6.0', '(3+4j)', '4.0']")
+    assert out.count(": 1") == 4  # every overload loaded from the cache, none compiled again

@@ -53,9 +53,13 @@ import warnings
 from numba import njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
+from nlcx.compiled_cache import serialize_cache_access
 from nlcx.layout import Layout
 
 warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
+# every compiled function of nlcx and its plugins is declared against this module, so its
+# processes read and write numba's cache one function's files at a time from here on
+serialize_cache_access()
 
 F64 = types.float64
 VEC = types.float64[::1]
