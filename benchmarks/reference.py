@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from nlcx import compiled_cache
-from nlcx.controllers.pid import G, H, I, L, S, _loop_update, _update_period
+from nlcx.controllers.pid import G, H, I, L, S, _row_loop_update, _update_period
 from nlcx.kernel.trig import _sincos_reduced, sincos
 from nlcx.layout import Layout
 
@@ -228,7 +228,7 @@ def _pid_row(t, dt, y, r, cp, cs, row, log, callbacks):  # pragma: no cover - co
     """nlcx's :func:`~nlcx.controllers.pid.pid_step` for row ``row`` of its parameter and state
     arrays (cp, cs, log, callbacks as nlcx packs them), one input, without saturation; the
     outputs y and references r as tuples. Returns u_0. Each loop is nlcx's own loop body
-    (:func:`~nlcx.controllers.pid._loop_update`); :func:`simulate_nlcx_pid` checks itself
+    (:func:`~nlcx.controllers.pid._row_loop_update`); :func:`simulate_nlcx_pid` checks itself
     against nlcx bit for bit. Compiled, like its caller, without numba's reference counting:
     with it, the inlined body counted its arrays at every call (128 against 85 ns)."""
     u0 = cp[row, len(H) + I.bias]
@@ -243,12 +243,7 @@ def _pid_row(t, dt, y, r, cp, cs, row, log, callbacks):  # pragma: no cover - co
             continue
         y_i = y[int(cp[row, h + L.y_index])] * cp[row, h + L.scale]
         r_i = r[int(cp[row, h + L.r_index])] * cp[row, h + L.scale]
-        u0 += _loop_update(
-            t, period, y_i, r_i, cp, cs, log, row, h, c, len(G) * i, callbacks,
-            int(cp[row, h + L.direct_schedule]), int(cp[row, h + L.schedule_slot]),
-            int(cp[row, h + L.schedule_offset]), cp[row, h + L.filtered] != 0.0,
-            cp[row, h + L.on_measurement] != 0.0, cp[row, h + L.gain_inside] != 0.0, int(cp[row, h + L.form]),
-        )  # fmt: skip
+        u0 += _row_loop_update(t, period, y_i, r_i, cp, cs, log, row, h, c, len(G) * i, callbacks)
     return u0
 
 

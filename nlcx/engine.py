@@ -688,6 +688,14 @@ def _blocks(members: list[int], n_samples: int) -> list[list[int]]:
     return [members[k : k + size] for k in range(0, len(members), size)]
 
 
+def _per_run(
+    batch: Mapping[str, np.ndarray], members: list[int], signal: str
+) -> dict[tuple[int, str], dict[str, float]]:
+    """A metric function's batched result (name -> value per row) split by run: (run, signal)
+    -> {name: value}, row k being run ``members[k]``."""
+    return {(i, signal): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)}
+
+
 def _measured_outputs(run: Run, plant: Plant) -> list[str]:
     """Outputs of ``run`` that follow a reference (measured against it)."""
     return [s for s in dict.fromkeys(run.controller.reference_signals) if s in plant.output_names]
@@ -714,7 +722,7 @@ def _tracking_values(
             y = _outputs([runs[i].x for i in members], plant.C[j])
             r = _reference_rows([runs[i].r[:, runs[i].controller.reference_signals.index(s)] for i in members])
             batch = _signal_metrics(runs[members[0]].t, y, r, plan, cfg)
-            values.update({(i, s): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)})
+            values.update(_per_run(batch, members, s))
     return values
 
 
@@ -740,7 +748,7 @@ def _open_loop_values(
                 runs[members[0]].t, y, t_step=t_step, settling_band=cfg.settling_band,
                 rise_limits=tuple(cfg.rise_limits),
             )  # fmt: skip
-            values.update({(i, s): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)})
+            values.update(_per_run(batch, members, s))
     return values
 
 
@@ -755,9 +763,7 @@ def _input_values(plant: Plant, runs: list[Run], ok: list[int]) -> dict[tuple[in
         for members in _blocks(group, n_samples):
             for j, name in enumerate(plant.input_names):
                 batch = m.input_metrics(t, np.stack([runs[i].u[:, j] for i in members]))
-                values.update(
-                    {(i, name): {metric: float(v[k]) for metric, v in batch.items()} for k, i in enumerate(members)}
-                )
+                values.update(_per_run(batch, members, name))
     return values
 
 

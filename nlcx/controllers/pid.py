@@ -245,6 +245,18 @@ def _loop_update(
     return out
 
 
+@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+def _row_loop_update(t, period, y_i, r_i, cp, cs, log, row, h, c, g, callbacks):  # pragma: no cover - compiled
+    """:func:`_loop_update` with the loop's structure read from its parameter row, as the
+    general :func:`pid_step` does for rows of any structure."""
+    return _loop_update(
+        t, period, y_i, r_i, cp, cs, log, row, h, c, g, callbacks,
+        int(cp[row, h + L.direct_schedule]), int(cp[row, h + L.schedule_slot]),
+        int(cp[row, h + L.schedule_offset]), cp[row, h + L.filtered] != 0.0,
+        cp[row, h + L.on_measurement] != 0.0, cp[row, h + L.gain_inside] != 0.0, int(cp[row, h + L.form]),
+    )  # fmt: skip
+
+
 @njit(CONTROLLER_SIG, cache=True, error_model="numpy", _nrt=False)
 def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """Multi-loop PID with pluggable gain schedules, one sample (zero-order hold), every row.
@@ -275,12 +287,9 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
                 continue
             y_i = y[row, int(cp[row, h + L.y_index])] * cp[row, h + L.scale]
             r_i = r[row, int(cp[row, h + L.r_index])] * cp[row, h + L.scale]
-            u[row, int(cp[row, h + L.u_index])] += _loop_update(
-                t, period, y_i, r_i, cp, cs, log, row, h, c, len(G) * i, callbacks,
-                int(cp[row, h + L.direct_schedule]), int(cp[row, h + L.schedule_slot]),
-                int(cp[row, h + L.schedule_offset]), cp[row, h + L.filtered] != 0.0,
-                cp[row, h + L.on_measurement] != 0.0, cp[row, h + L.gain_inside] != 0.0, int(cp[row, h + L.form]),
-            )  # fmt: skip
+            u[row, int(cp[row, h + L.u_index])] += _row_loop_update(
+                t, period, y_i, r_i, cp, cs, log, row, h, c, len(G) * i, callbacks
+            )
         if cp[row, H.anti_windup] >= 0.0:
             _saturate(row, dt, cp, cs, u, log)
 
