@@ -41,6 +41,10 @@ def write_text(path: Path, text: str) -> None:
     atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
+def write_bytes(path: Path, data: bytes) -> None:
+    atomic_write(path, lambda tmp: tmp.write_bytes(data))
+
+
 def _write_table(path: Path, table: pa.Table) -> None:
     """``table`` as a CSV by Arrow's writer: ten times pandas' speed on long time series, and
     floats in their shortest round-trip form, so the same numbers always give the same bytes.

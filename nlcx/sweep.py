@@ -297,9 +297,19 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
     metrics.insert(0, "variant", index_of[metrics.pop("experiment").to_numpy(dtype=int)])
     digest = hashlib.sha256("".join(batch.hashes).encode()).hexdigest()[:10]
     part = f"{batch.variants[0].index:06d}-{digest}"
-    report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", metrics)
+    report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", _as_assembled(metrics))
     report.write_csv(batch.out_dir / "parts" / f"{part}.index.csv", pd.DataFrame(rows))  # last: marks it complete
     return BatchResult(index=rows, metrics=metrics if return_metrics else None, part=part)
+
+
+def _as_assembled(metrics: pd.DataFrame) -> pd.DataFrame:
+    """A part's metrics as :func:`assemble` writes them: an empty text (a metric's note when it
+    has none) as a missing value, which is how assemble reads it back. So a part file's rows are
+    metrics.csv's rows, byte for byte, and assemble can join the files of a sweep computed in
+    one go without reading them (:func:`_joined_metrics`)."""
+    empty = {c: metrics[c] == "" for c in metrics.columns if pd.api.types.is_string_dtype(metrics[c].dtype)}
+    empty = {c: where for c, where in empty.items() if where.any()}
+    return metrics.assign(**{c: metrics[c].mask(where) for c, where in empty.items()}) if empty else metrics
 
 
 def load(path: str | Path, overrides: list[str] | None = None) -> tuple[dict[str, Any], SweepSection, Any]:
@@ -396,6 +406,7 @@ def run(
         for k in range(0, len(todo), spec.batch_size)
     ]  # fmt: skip
     finished, failures = len(variants) - len(todo), 0
+    written: set[str] = set()  # the part files of this run's batches
     if progress is not None:
         progress(finished, len(variants), failures)
     if batches:
@@ -416,6 +427,7 @@ def run(
             futures: list[Future[BatchResult]] = [pool.submit(run_batch, b, False) for b in batches]
             results = (f.result() for f in as_completed(futures))
         for result in results:
+            written.add(result.part)
             finished += len(result.index)
             failures += sum(r["status"] == "failed" for r in result.index)
             if progress is not None:
@@ -426,7 +438,7 @@ def run(
             gc.unfreeze()
         _records.cache_clear()  # the records of batches run in this process (serial executor)
     simulated = time.perf_counter()
-    index = assemble(out_dir, variants, hashes, base_raw, spec)
+    index = assemble(out_dir, variants, hashes, base_raw, spec, written)
     end = time.perf_counter()
     wall = end - start
     timings = {"plan": planned - start, "batches": simulated - planned, "assemble": end - simulated, "wall": wall}
@@ -478,6 +490,64 @@ def _write_manifest(
     report.write_text(out_dir / "manifest.json", json.dumps(info, indent=2, default=str) + "\n")
 
 
+def _in_plan_order(rows: pd.DataFrame, want: dict[str, int]) -> bool:
+    """Whether the part files' rows (concatenated in file order) are each a variant of the plan
+    once, under its own index, in ascending order: then metrics.csv is the parts' rows as they
+    stand (no retry to supersede, nothing to renumber or reorder)."""
+    plan_index = rows.config_hash.map(want)
+    return bool(
+        plan_index.notna().all()
+        and (plan_index.to_numpy() == rows.variant.to_numpy()).all()
+        and (np.diff(rows.variant.to_numpy()) > 0).all()
+    )
+
+
+def _joined_metrics(parts_dir: Path, parts: list[str]) -> bytes | None:
+    """metrics.csv as the parts' metrics files joined: one header, then each file's rows.
+
+    Only for parts in plan order (:func:`_in_plan_order`) written by this nlcx, whose rows are
+    metrics.csv's rows (:func:`_as_assembled`); None when the files' headers differ or no file
+    has a row (then the merge decides the columns)."""
+    texts = [(parts_dir / f"{part}.metrics.csv").read_bytes() for part in parts]
+    header = texts[0].partition(b"\n")[0] + b"\n"
+    if not all(text.startswith(header) and text.endswith(b"\n") for text in texts):
+        return None
+    body = b"".join(text[len(header) :] for text in texts)
+    return header + body if body else None
+
+
+def _missing_as_null(frame: pd.DataFrame) -> pd.DataFrame:
+    """Part tables concatenated, a missing text as a missing value again: a part whose column
+    is all empty reads it as numbers (NaN), another as text, and their concatenation holds
+    both, which :func:`nlcx.report.write_csv` would write as the text "nan" (a note or
+    message of a variant without one)."""
+    mixed = [c for c in frame.columns if frame[c].dtype == object]
+    return frame.assign(**{c: frame[c].where(frame[c].notna(), None) for c in mixed}) if mixed else frame
+
+
+def _merged_metrics(parts_dir: Path, parts: list[str], chosen: pd.DataFrame) -> pd.DataFrame:
+    """The metrics of the ``chosen`` part rows, read from the part files, renumbered to the
+    plan's variant indices and in variant order (a retried variant's last result)."""
+    metrics = _missing_as_null(
+        pd.concat(
+            [
+                pd.read_csv(parts_dir / f"{part}.metrics.csv", keep_default_na=False, na_values=[""]).assign(
+                    _part=part_no
+                )
+                for part_no, part in enumerate(parts)
+            ],
+            ignore_index=True,
+        )
+    )
+    if metrics.empty:
+        return metrics.drop(columns="_part")
+    link = chosen[["_part", "variant", "new_variant"]]
+    metrics = metrics.merge(link, on=["_part", "variant"], how="inner", sort=False)
+    metrics = metrics.assign(variant=metrics.new_variant).drop(columns=["_part", "new_variant"])
+    metrics = metrics.drop_duplicates(subset=["variant", "controller", "signal", "metric"], keep="last")
+    return metrics.sort_values("variant", kind="stable").reset_index(drop=True)
+
+
 def _member_of(hashes: pd.Series, wanted: Collection[str]) -> np.ndarray:
     """``hashes.isin(wanted)`` by set lookups: pandas' ``isin`` on Arrow-backed strings loops
     in Python and took ~0.1 s of assembling a 10 000-variant sweep."""
@@ -485,42 +555,48 @@ def _member_of(hashes: pd.Series, wanted: Collection[str]) -> np.ndarray:
 
 
 def assemble(
-    out_dir: Path, variants: list[Variant], hashes: list[str], base_raw: dict[str, Any], spec: SweepSection
+    out_dir: Path,
+    variants: list[Variant],
+    hashes: list[str],
+    base_raw: dict[str, Any],
+    spec: SweepSection,
+    written: Collection[str] = (),
 ) -> pd.DataFrame:
-    """sweep.csv and metrics.csv from the part files, in variant order (deterministic)."""
+    """sweep.csv and metrics.csv from the part files, in variant order (deterministic).
+
+    ``written`` names the parts this process's run wrote (:func:`run`): when they are all
+    the parts and hold exactly the plan's variants, in order, metrics.csv is their files
+    joined (:func:`_joined_metrics`), the same bytes as reading, merging and writing them."""
     import yaml
 
     from nlcx import report
 
     want = {h: v.index for v, h in zip(variants, hashes, strict=True)}
-    indexes, metric_parts = [], []
-    for part_no, path in enumerate(sorted((out_dir / "parts").glob("*.index.csv"))):
-        part = path.name.removesuffix(".index.csv")
-        indexes.append(pd.read_csv(path, dtype={"config_hash": str}).assign(_part=part_no))
-        metrics_part = pd.read_csv(out_dir / "parts" / f"{part}.metrics.csv", keep_default_na=False, na_values=[""])
-        metric_parts.append(metrics_part.assign(_part=part_no))
+    parts = [path.name.removesuffix(".index.csv") for path in sorted((out_dir / "parts").glob("*.index.csv"))]
+    indexes = [
+        pd.read_csv(out_dir / "parts" / f"{part}.index.csv", dtype={"config_hash": str}).assign(_part=part_no)
+        for part_no, part in enumerate(parts)
+    ]
     if not indexes:
         report.write_csv(out_dir / "sweep.csv", pd.DataFrame())
         report.write_csv(out_dir / "metrics.csv", pd.DataFrame())
         return pd.DataFrame()
-    rows = pd.concat(indexes, ignore_index=True)
+    rows = _missing_as_null(pd.concat(indexes, ignore_index=True))
+    in_plan_order = set(parts) <= set(written) and _in_plan_order(rows, want)
     rows = rows[_member_of(rows.config_hash, want)]
     # per variant: its first complete result, else its last failure (a retry supersedes a failure)
     complete = rows[rows.status != "failed"].drop_duplicates("config_hash", keep="first")
     failed = rows[(rows.status == "failed") & ~_member_of(rows.config_hash, set(complete.config_hash))]
     chosen = pd.concat([complete, failed.drop_duplicates("config_hash", keep="last")])
     chosen = chosen.assign(new_variant=chosen.config_hash.map(want))
-    metrics = pd.concat(metric_parts, ignore_index=True)
-    if not metrics.empty:
-        link = chosen[["_part", "variant", "new_variant"]]
-        metrics = metrics.merge(link, on=["_part", "variant"], how="inner", sort=False)
-        metrics = metrics.assign(variant=metrics.new_variant).drop(columns=["_part", "new_variant"])
-        metrics = metrics.drop_duplicates(subset=["variant", "controller", "signal", "metric"], keep="last")
-        metrics = metrics.sort_values("variant", kind="stable").reset_index(drop=True)
     index = chosen.assign(variant=chosen.new_variant).drop(columns=["_part", "new_variant"])
     index = index.sort_values("variant", kind="stable").reset_index(drop=True)
     report.write_csv(out_dir / "sweep.csv", index)
-    report.write_csv(out_dir / "metrics.csv", metrics)
+    joined = _joined_metrics(out_dir / "parts", parts) if in_plan_order else None
+    if joined is not None:
+        report.write_bytes(out_dir / "metrics.csv", joined)
+    else:
+        report.write_csv(out_dir / "metrics.csv", _merged_metrics(out_dir / "parts", parts, chosen))
     resolved = {**cfg.interpolate(base_raw), "sweep": spec.model_dump()}
     report.write_text(out_dir / "config.yaml", yaml.safe_dump(resolved, sort_keys=False, allow_unicode=True))
     return index

@@ -135,6 +135,34 @@ def test_failed_variant_is_recorded_the_rest_go_on(tmp_path: Path) -> None:
     assert "variant 1 failed" in result.output
 
 
+def test_metrics_joined_from_the_parts_equal_the_merged_ones(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A sweep computed in one go joins its part files into metrics.csv; reading, merging and
+    writing them gives the same bytes, with failed variants, runs that did not settle (a
+    note) and runs without a note in different parts; a missing note or message is an empty
+    field, never the text "nan"."""
+    grid = {"plant.params.M": [1.0, -1.0, 1.1], "plant.params.l": [0.3, 0.05]}
+    path = write_sweep(tmp_path, {"grid": grid, "batch_size": 2})
+    merged = []
+    monkeypatch.setattr(sweep, "_merged_metrics", lambda *a: merged.append(1) or _merged(*a))
+    out = tmp_path / "out"
+    assert runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)]).exit_code == 1
+    assert merged == [], "a sweep computed in one go joins its parts"
+    joined = {name: (out / name).read_bytes() for name in ("metrics.csv", "sweep.csv")}
+    base_raw, spec, _ = sweep.load(path)
+    variants, hashes = sweep.plan(base_raw, spec)
+    sweep.assemble(out, variants, hashes, base_raw, spec)  # parts not written by this call: merged
+    assert merged == [1]
+    assert {name: (out / name).read_bytes() for name in joined} == joined
+    metrics = pd.read_csv(out / "metrics.csv", keep_default_na=False)
+    index = pd.read_csv(out / "sweep.csv", keep_default_na=False)
+    assert list(index.status) == ["ok", "ok", "failed", "failed", "ok", "ok"]
+    assert set(index.message[index.status == "ok"]) == {""}
+    assert set(metrics.note) == {"", "did not settle within the run"}
+
+
+_merged = sweep._merged_metrics
+
+
 def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) -> None:
     spec = {"random": {"n": 24, "params": {"plant.params.M": {"dist": "uniform", "relative": 0.2}}}, "batch_size": 2}
     path = write_sweep(tmp_path, spec, t_end=8.0)
