@@ -367,3 +367,26 @@ def test_controllers_of_several_structures_share_a_call_of_few_rows_and_split_wh
     for a, b in zip(runs[1][0].runs, runs[8][0].runs, strict=True):
         assert a.label == b.label and np.array_equal(a.x, b.x) and np.array_equal(a.u, b.u)
         assert np.array_equal(a.log, b.log)
+
+
+def test_function_tables_are_typed_as_the_kernels_arguments() -> None:
+    """The kernel's tables of compiled functions are typed by a lookup, as the very types of
+    its signature: numba's own typing of the plain tuples gives those types or, for the
+    friction path's two functions, types that convert to them."""
+    import pickle
+
+    from numba.core.typing.typeof import Purpose, typeof
+
+    from nlcx.kernel import abi
+    from nlcx.kernel.friction import FRICTIONAL, FRICTIONLESS
+    from nlcx.kernel.integrator import SIMULATE_SIG, simulate
+
+    tables = {2: abi.callback_slots(), 3: abi.element_slots(), 12: FRICTIONAL}
+    for position, table in tables.items():
+        declared = SIMULATE_SIG.args[position]
+        assert typeof(table, Purpose.argument) == declared
+        plain = typeof(tuple(table), Purpose.argument)
+        assert plain == declared or simulate.typingctx.can_convert(plain, declared)
+    assert typeof(FRICTIONLESS, Purpose.argument) == SIMULATE_SIG.args[12]
+    again = pickle.loads(pickle.dumps(FRICTIONLESS))
+    assert tuple(again) == tuple(FRICTIONLESS) and again.numba_type == FRICTIONLESS.numba_type

@@ -19,7 +19,7 @@ import math
 
 from numba import njit
 
-from nlcx.kernel.abi import FRICTION_SAMPLE_SIG, FRICTION_STEP_SIG, shared_row
+from nlcx.kernel.abi import FRICTION_SAMPLE_SIG, FRICTION_STEP_SIG, FrictionPath, FunctionTable, shared_row
 from nlcx.layout import Layout
 
 #: Friction parameters of one input's axis: model (FRICTION_NONE, _SIMPLE, _EXPONENTIAL),
@@ -401,5 +401,5 @@ def no_frictional_step(
 
 
 #: The friction path handed to the kernel, with and without friction.
-FRICTIONAL = (frictional_sample, frictional_step)
-FRICTIONLESS = (no_frictional_sample, no_frictional_step)
+FRICTIONAL = FunctionTable((frictional_sample, frictional_step), FrictionPath)
+FRICTIONLESS = FunctionTable((no_frictional_sample, no_frictional_step), FrictionPath)
