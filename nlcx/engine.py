@@ -242,9 +242,10 @@ def prepare(exp: Experiment) -> Prepared:
     _check_memory(exp, plant, [len(c.reference_signals) + len(c.log_names) for c in controllers])
     grid = time_grid(sim.t_end, sim.dt, sim.integrator)
     seed_sequence = np.random.SeedSequence(sec.seed)
-    children = seed_sequence.spawn(max(1, len(exp.uncertainties)))
-    hooks = Hooks(plant=plant, t=grid.t, stage_times=grid.stage_times, rng=np.random.default_rng(0))
-    for child, unc in zip(children, exp.uncertainties, strict=False):
+    # each uncertainty draws from a generator of its own, spawned in config order
+    children = seed_sequence.spawn(len(exp.uncertainties))
+    hooks = Hooks(plant=plant, t=grid.t, stage_times=grid.stage_times)
+    for child, unc in zip(children, exp.uncertainties, strict=True):
         hooks.rng = np.random.default_rng(child)
         unc.model.apply(unc.config, hooks, f"uncertainty.{unc.label}")
     return Prepared(

@@ -55,16 +55,32 @@ def _write_table(path: Path, table: pa.Table) -> None:
     atomic_write(path, lambda tmp: pacsv.write_csv(table, str(tmp), options))
 
 
-def write_csv(path: Path, frame: pd.DataFrame) -> None:
+def write_csv(path: Path, frame: pd.DataFrame, empty_as_missing: bool = False) -> None:
     """``frame`` as a CSV (:func:`_write_table`); a column of mixed values (e.g. tuning.csv's)
-    is written as text."""
+    is written as text. ``empty_as_missing``: an empty text as a missing value (an empty
+    field, not ``""``), as a reader that takes empty fields for missing ones writes it back."""
     import pyarrow as pa
 
     frame = frame.copy()
     for col in frame.columns:
         if frame[col].dtype == object and len({type(v) for v in frame[col] if v is not None}) > 1:
             frame[col] = [v if isinstance(v, str) else repr(v) for v in frame[col]]
-    _write_table(path, pa.Table.from_pandas(frame, preserve_index=False))
+    table = pa.Table.from_pandas(frame, preserve_index=False)
+    _write_table(path, _empty_text_as_null(table) if empty_as_missing else table)
+
+
+def _empty_text_as_null(table: pa.Table) -> pa.Table:
+    """``table`` with every empty string of its text columns a null."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    columns = [
+        pc.if_else(pc.equal(col, ""), pa.scalar(None, col.type), col)
+        if pa.types.is_string(col.type) or pa.types.is_large_string(col.type)
+        else col
+        for col in table.columns
+    ]
+    return pa.table(columns, names=table.column_names)
 
 
 def _arrow_column(values: np.ndarray | Sequence[str]) -> pa.Array:
@@ -317,7 +333,8 @@ def manifest(result: Result, timings: dict[str, float]) -> dict[str, Any]:
         "git": git_state(),
         "seed": {
             "entropy": int(ss.entropy),
-            "uncertainty_spawn_keys": [list(c.spawn_key) for c in ss.spawn(0)],
+            # the children prepare spawned, one an uncertainty in config order (spawn(0) listed none)
+            "uncertainty_spawn_keys": [[*ss.spawn_key, i] for i in range(ss.n_children_spawned)],
         },
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
         "runs": [

@@ -297,19 +297,12 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
     metrics.insert(0, "variant", index_of[metrics.pop("experiment").to_numpy(dtype=int)])
     digest = hashlib.sha256("".join(batch.hashes).encode()).hexdigest()[:10]
     part = f"{batch.variants[0].index:06d}-{digest}"
-    report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", _as_assembled(metrics))
+    # an empty text (a metric's note when it has none) as a missing value, which is how
+    # assemble reads it back: the file's rows are then metrics.csv's rows, byte for byte, and
+    # assemble can join the files of a sweep computed in one go (_joined_metrics)
+    report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", metrics, empty_as_missing=True)
     report.write_csv(batch.out_dir / "parts" / f"{part}.index.csv", pd.DataFrame(rows))  # last: marks it complete
     return BatchResult(index=rows, metrics=metrics if return_metrics else None, part=part)
-
-
-def _as_assembled(metrics: pd.DataFrame) -> pd.DataFrame:
-    """A part's metrics as :func:`assemble` writes them: an empty text (a metric's note when it
-    has none) as a missing value, which is how assemble reads it back. So a part file's rows are
-    metrics.csv's rows, byte for byte, and assemble can join the files of a sweep computed in
-    one go without reading them (:func:`_joined_metrics`)."""
-    empty = {c: metrics[c] == "" for c in metrics.columns if pd.api.types.is_string_dtype(metrics[c].dtype)}
-    empty = {c: where for c, where in empty.items() if where.any()}
-    return metrics.assign(**{c: metrics[c].mask(where) for c, where in empty.items()}) if empty else metrics
 
 
 def load(path: str | Path, overrides: list[str] | None = None) -> tuple[dict[str, Any], SweepSection, Any]:
@@ -505,9 +498,9 @@ def _in_plan_order(rows: pd.DataFrame, want: dict[str, int]) -> bool:
 def _joined_metrics(parts_dir: Path, parts: list[str]) -> bytes | None:
     """metrics.csv as the parts' metrics files joined: one header, then each file's rows.
 
-    Only for parts in plan order (:func:`_in_plan_order`) written by this nlcx, whose rows are
-    metrics.csv's rows (:func:`_as_assembled`); None when the files' headers differ or no file
-    has a row (then the merge decides the columns)."""
+    Only for parts in plan order (:func:`_in_plan_order`) written by this run, whose rows are
+    metrics.csv's rows (:func:`run_batch` writes an empty text as a missing value); None when
+    the files' headers differ or no file has a row (then the merge decides the columns)."""
     texts = [(parts_dir / f"{part}.metrics.csv").read_bytes() for part in parts]
     header = texts[0].partition(b"\n")[0] + b"\n"
     if not all(text.startswith(header) and text.endswith(b"\n") for text in texts):

@@ -63,10 +63,22 @@ def test_run_writes_the_run_directory(name: str, tmp_path: Path) -> None:
     manifest = json.loads((out / "manifest.json").read_text())
     assert {r["status"] for r in manifest["runs"]} == {"ok"}
     assert manifest["seed"]["entropy"] == 0 and "numpy" in manifest["versions"]
+    assert manifest["seed"]["uncertainty_spawn_keys"] == []  # no uncertainty
     assert set(manifest["timings_s"]) >= {"simulate", "write", "wall"}
     assert "commit" in manifest["git"]
     assert (out / "figure.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not list(out.glob(".*.tmp"))
+
+
+def test_manifest_lists_each_uncertaintys_spawned_seed(tmp_path: Path) -> None:
+    """Figure 3.6's run has a disturbance and noise: the manifest lists the seed sequence's
+    two children, in config order, as prepare spawned them (the noise draws from the second)."""
+    out = tmp_path / "f"
+    cfg = ROOT / "configs" / "thesis" / "ch3" / "fig_3_06.yaml"
+    result = runner.invoke(app, ["run", str(cfg), "simulation.t_end=0.5", "--out", str(out), "--no-report"])
+    assert result.exit_code == 0, result.output
+    seed = json.loads((out / "manifest.json").read_text())["seed"]
+    assert seed["uncertainty_spawn_keys"] == [[0], [1]]
 
 
 def test_resolved_config_reproduces_the_run(tmp_path: Path) -> None:

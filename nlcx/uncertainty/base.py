@@ -63,7 +63,8 @@ class Hooks:
     plant: Plant
     t: np.ndarray
     stage_times: np.ndarray
-    rng: np.random.Generator
+    #: The random generator of the uncertainty being applied (set before each one's ``apply``).
+    rng: np.random.Generator | None = None
     elements: list[Element] = field(default_factory=list)
     dist_columns: list[np.ndarray] = field(default_factory=list)
     dist_values: list[np.ndarray] = field(default_factory=list)
