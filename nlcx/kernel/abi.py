@@ -171,15 +171,23 @@ def _typeof_function_table(table: FunctionTable, context: object) -> types.Type:
     return table.numba_type
 
 
+def _padded(
+    functions: tuple[object, ...], slots: int, padding: object, numba_type: types.Type, what: str
+) -> FunctionTable:
+    """``functions`` padded with ``padding`` to ``slots`` entries, as a :class:`FunctionTable`."""
+    if len(functions) > slots:
+        raise ValueError(f"at most {slots} {what}, got {len(functions)}")
+    return FunctionTable(tuple(functions) + (padding,) * (slots - len(functions)), numba_type)
+
+
 def callback_slots(functions: tuple[object, ...] = ()) -> FunctionTable:
-    """A controller's callbacks padded to :data:`CALLBACK_SLOTS`."""
-    if len(functions) > CALLBACK_SLOTS:
-        raise ValueError(f"at most {CALLBACK_SLOTS} controller callbacks, got {len(functions)}")
-    return FunctionTable(tuple(functions) + (no_callback,) * (CALLBACK_SLOTS - len(functions)), CallbackTuple)
+    """A controller's callbacks padded to :data:`CALLBACK_SLOTS` (a table that already is one,
+    as the PID's, unchanged)."""
+    if isinstance(functions, FunctionTable) and functions.numba_type is CallbackTuple:
+        return functions
+    return _padded(functions, CALLBACK_SLOTS, no_callback, CallbackTuple, "controller callbacks")
 
 
 def element_slots(functions: tuple[object, ...] = ()) -> FunctionTable:
     """The element functions of a batch padded to :data:`ELEMENT_SLOTS`."""
-    if len(functions) > ELEMENT_SLOTS:
-        raise ValueError(f"at most {ELEMENT_SLOTS} distinct loop element functions in one run, got {len(functions)}")
-    return FunctionTable(tuple(functions) + (no_element,) * (ELEMENT_SLOTS - len(functions)), ElementTuple)
+    return _padded(functions, ELEMENT_SLOTS, no_element, ElementTuple, "distinct loop element functions in one run")
