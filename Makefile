@@ -10,7 +10,7 @@ JOBS ?= 2
 BASELINE_TABLES := table-2.3,table-2.5,table-3.2,table-3.7,table-4.2,table-4.4,table-5.1,table-5.8
 
 .PHONY: install dev-install run test lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
-	baseline baseline-diff sweep-demo bench clean
+	baseline baseline-diff sweep-demo bench docs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,7 +26,7 @@ $(STAMP): pyproject.toml
 # the test tools (pytest, ruff, sympy, scikit-fuzzy, Playwright) and the dask extra, for
 # make test and the developer targets; make run does not wait for them
 $(DEV_STAMP): $(STAMP)
-	$(BIN)/python -m pip install --quiet -e ".[test,dask]"
+	$(BIN)/python -m pip install --quiet -e ".[test,docs,dask]"
 	touch $(DEV_STAMP)
 
 ## install: create .venv and install nlcx (make dev-install adds the test tools)
@@ -41,6 +41,10 @@ run: install
 ## test: the whole test suite, ruff included (what CI runs)
 test: dev-install
 	$(BIN)/python -m pytest -q
+
+## docs: build the documentation site into site/ (mkdocs, --strict; also a test)
+docs: dev-install
+	$(BIN)/mkdocs build --strict
 
 ## lint: ruff on the package, tests and scripts
 lint: dev-install

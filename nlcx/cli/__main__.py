@@ -1,0 +1,5 @@
+"""``python -m nlcx.cli``."""
+
+from nlcx.cli import main
+
+main()
