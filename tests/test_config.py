@@ -8,6 +8,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
+from nlcx import config as cfg
 from nlcx.cli import app
 from nlcx.config import apply_overrides, load
 
@@ -88,6 +89,22 @@ CASES = [
     ),
     (["seed=-1"], "seed", "-1", "must be greater than or equal to 0"),
     (["simulation.t_end"], "", "'simulation.t_end'", "an override must look like section.key=value"),
+    (["+simulation.dt"], "", "'+simulation.dt'", "an override must look like section.key=value"),
+    (
+        ["+simulation.dt=0.01"],
+        "simulation.dt",
+        "0.001",
+        "already set; +key=value adds a new key only (key=value or ++key=value sets it)",
+    ),
+    (["~uncertainty.wind"], "uncertainty.wind", "(missing)", "not in the config, so ~key cannot delete it"),
+    (["~seed=3"], "seed", "0", "~seed=3 deletes it only where its value is 3"),
+    (["~plant.name"], "plant.name", "(missing)", "required key is missing"),
+    (
+        ["controllers.conventional.loops.x.schedule=${vars.gains}"],
+        "controllers.conventional.loops.x.schedule",
+        "'${vars.gains}'",
+        "refers to vars.gains, a key that does not exist",
+    ),
 ]
 
 
@@ -148,3 +165,20 @@ def test_valid_config_and_defaults_in_one_place() -> None:
     assert resolved["metrics"]["settling_band"] == 0.02
     result = validate([str(CONFIG)])
     assert result.exit_code == 0 and "valid" in result.output
+
+
+SECTIONS = [cfg.PlantSection, cfg.SimulationSection, cfg.MetricsSection, cfg.OutputsSection, cfg.ExperimentSection]
+
+
+@pytest.mark.parametrize("model", SECTIONS, ids=lambda m: m.__name__)
+def test_every_section_field_is_described_in_the_json_schema(model: type[cfg.Section]) -> None:
+    """The configuration reference is generated from the schema: every key has a description,
+    every time a unit, and the section its docstring."""
+    schema = model.model_json_schema()
+    assert model.__doc__ is not None
+    assert schema["description"].startswith(model.__doc__.strip().splitlines()[0])
+    assert set(schema["properties"]) == set(model.model_fields)
+    for key, prop in schema["properties"].items():
+        assert len(prop.get("description", "")) > 10, (model.__name__, key)
+    times = {"t_end", "dt", "ss_window"} & set(schema["properties"])
+    assert all(schema["properties"][key]["unit"] == "s" for key in times)
