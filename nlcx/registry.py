@@ -14,7 +14,11 @@ from __future__ import annotations
 
 import difflib
 import importlib
+import json
+import types
+import typing
 from collections.abc import Iterator
+from dataclasses import dataclass
 from importlib.metadata import entry_points
 from typing import Any, Generic, TypeVar
 
@@ -103,6 +107,162 @@ class Registry(Generic[T]):
             rows.append((name, summary))
         return rows
 
+    def explain(self, name: str) -> PluginDoc:
+        """What ``nlcx list KIND NAME`` shows of the plugin registered as ``name``: its signals
+        (a plant's states, inputs and outputs) and the fields of its parameter model
+        (``Params``, a plant's) or configuration model (``Config``, the other plugins'), with
+        the models nested in them. A ConfigError if nothing is registered under ``name``."""
+        plugin = self.get(name)
+        model = getattr(plugin, "Params", None) or getattr(plugin, "Config", None)
+        models = tuple(model_doc(m) for m in nested_models(model)) if model is not None else ()
+        return PluginDoc(self.kind, name, _first_paragraph(plugin.__doc__), _signals(plugin), models)
+
+
+@dataclass(frozen=True)
+class FieldDoc:
+    """One field of a plugin's model as ``nlcx list`` shows it."""
+
+    name: str
+    #: The annotation in Python's words, with its bounds (e.g. ``float > 0``).
+    type: str
+    #: The default as JSON, or ``required``.
+    default: str
+    #: The field's unit (``json_schema_extra={"unit": ...}``), empty if it has none.
+    unit: str
+    description: str
+
+
+@dataclass(frozen=True)
+class ModelDoc:
+    """A pydantic model: its name, the first line of its docstring and its fields."""
+
+    name: str
+    summary: str
+    fields: tuple[FieldDoc, ...]
+
+
+@dataclass(frozen=True)
+class PluginDoc:
+    """A registered plugin as ``nlcx list KIND NAME`` shows it (see :meth:`Registry.explain`)."""
+
+    kind: str
+    name: str
+    summary: str
+    #: ("states" | "inputs" | "outputs", ((name, unit, label), ...)); empty but for plants.
+    signals: tuple[tuple[str, tuple[tuple[str, str, str], ...]], ...]
+    #: The plugin's parameter or configuration model first, then the models nested in it.
+    models: tuple[ModelDoc, ...]
+
+
+def _first_paragraph(doc: str | None) -> str:
+    """A docstring's first paragraph on one line."""
+    return " ".join((doc or "").strip().split("\n\n")[0].split())
+
+
+def _signals(plugin: Any) -> tuple[tuple[str, tuple[tuple[str, str, str], ...]], ...]:
+    """A plant's states, inputs and outputs as (name, unit, label); its outputs may be given as
+    the names of states."""
+    states = tuple(getattr(plugin, "states", ()) or ())
+    inputs = tuple(getattr(plugin, "inputs", ()) or ())
+    by_name = {s.name: s for s in (*states, *inputs)}
+    outputs = tuple(by_name.get(o, o) if isinstance(o, str) else o for o in getattr(plugin, "outputs", ()) or ())
+    groups = (("states", states), ("inputs", inputs), ("outputs", outputs))
+    return tuple((group, tuple(_signal_row(s) for s in signals)) for group, signals in groups if signals)
+
+
+def _signal_row(signal: Any) -> tuple[str, str, str]:
+    if isinstance(signal, str):
+        return signal, "", ""
+    return str(signal.name), str(getattr(signal, "unit", "")), str(getattr(signal, "label", ""))
+
+
+def nested_models(model: type) -> list[type]:
+    """``model`` and every pydantic model its fields' annotations name, depth first, once each."""
+    from pydantic import BaseModel
+
+    found: list[type] = []
+
+    def visit(annotation: Any) -> None:
+        if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+            if annotation in found:
+                return
+            found.append(annotation)
+            for info in annotation.model_fields.values():
+                visit(info.annotation)
+            return
+        for arg in typing.get_args(annotation):
+            visit(arg)
+
+    visit(model)
+    return found
+
+
+def model_doc(model: type) -> ModelDoc:
+    """The fields of the pydantic ``model`` with their type, default, unit and description."""
+    fields = []
+    for name, info in model.model_fields.items():  # type: ignore[attr-defined]
+        extra = info.json_schema_extra if isinstance(info.json_schema_extra, dict) else {}
+        bounds = " ".join(_bounds(info.metadata))
+        fields.append(
+            FieldDoc(
+                name=name,
+                type=f"{type_text(info.annotation)} {bounds}".strip(),
+                default="required"
+                if info.is_required()
+                else _default_text(info.get_default(call_default_factory=True)),
+                unit=str(extra.get("unit", "")),
+                description=" ".join((info.description or "").split()),
+            )
+        )
+    return ModelDoc(model.__name__, _first_paragraph(model.__doc__), tuple(fields))
+
+
+_BOUNDS = (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="), ("min_length", "min length"),
+           ("max_length", "max length"))  # fmt: skip
+
+
+def _bounds(metadata: list[Any]) -> list[str]:
+    """A field's constraints (pydantic's ``Field(gt=0)`` and the like) as ``> 0``."""
+    words = []
+    for item in metadata:
+        for attribute, word in _BOUNDS:
+            value = getattr(item, attribute, None)
+            if value is not None:
+                words.append(f"{word} {value}")
+    return words
+
+
+def type_text(annotation: Any) -> str:
+    """An annotation as Python spells it, shortened: ``float``, ``'abs' | 'signed'``,
+    ``dict[str, LoopConfig]``, ``float | None`` (pydantic's markers such as SerializeAsAny left out)."""
+    origin = typing.get_origin(annotation)
+    args = typing.get_args(annotation)
+    if annotation is type(None):
+        return "None"
+    if origin is typing.Literal:
+        return " | ".join(repr(a) for a in args)
+    if origin is typing.Annotated:
+        return type_text(args[0])
+    if origin is typing.Union or origin is types.UnionType:
+        return " | ".join(type_text(a) for a in args)
+    if origin is not None:
+        name = getattr(origin, "__name__", str(origin))
+        return f"{name}[{', '.join('...' if a is Ellipsis else type_text(a) for a in args)}]"
+    if annotation is Any:
+        return "Any"
+    if isinstance(annotation, type):
+        return annotation.__name__
+    return str(annotation).replace("typing.", "")
+
+
+def _default_text(value: Any) -> str:
+    """A default as JSON (a model as the mapping of its fields)."""
+    from pydantic import BaseModel
+
+    if isinstance(value, BaseModel):
+        value = value.model_dump(mode="json")
+    return json.dumps(value, default=str, ensure_ascii=False)
+
 
 plants: Registry[Any] = Registry("plant", "nlcx.plants")
 controllers: Registry[Any] = Registry("controller", "nlcx.controllers")
@@ -119,6 +279,23 @@ ALL: dict[str, Registry[Any]] = {
     "references": references,
     "tuners": tuners,
 }
+
+#: Each kind of :data:`ALL` in the singular (``nlcx list plant`` is ``nlcx list plants``).
+SINGULAR: dict[str, str] = {
+    "plants": "plant",
+    "controllers": "controller",
+    "schedules": "schedule",
+    "uncertainties": "uncertainty",
+    "references": "reference",
+    "tuners": "tuner",
+}
+
+
+def kind_named(text: str) -> str | None:
+    """The kind of :data:`ALL` that ``text`` names in the plural or the singular, else None."""
+    if text in ALL:
+        return text
+    return next((kind for kind, singular in SINGULAR.items() if singular == text), None)
 
 
 def register_builtins() -> None:

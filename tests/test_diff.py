@@ -6,6 +6,7 @@ import shutil
 from pathlib import Path
 
 import pandas as pd
+import pytest
 from conftest import reproduce_only
 from typer.testing import CliRunner
 
@@ -57,3 +58,76 @@ def test_committed_baselines_still_reproduce(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     check = runner.invoke(app, ["diff", str(BASELINE), str(out / "tables")])
     assert check.exit_code == 0, check.output
+
+
+@pytest.fixture(scope="module")
+def run_dirs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The x pendulum's two controllers, then the same with |theta| <= 0.2: the proposed
+    controller's angle peaks at 0.23 rad, so that run stops as unstable; the conventional
+    one (0.14 rad) runs as before."""
+    base, new = tmp_path_factory.mktemp("base"), tmp_path_factory.mktemp("new")
+    config = str(ROOT / "configs" / "x_error_ags.yaml")
+    for out, extra in ((base, []), (new, ["simulation.bounds.theta=0.2"])):
+        result = runner.invoke(app, ["run", config, *extra, "outputs.figure=false", "--no-report", "--out", str(out)])
+        assert result.exit_code == 0, result.output
+    return base, new
+
+
+def test_a_changed_status_is_one_line_not_missing_rows(run_dirs: tuple[Path, Path]) -> None:
+    base, new = run_dirs
+    statuses = pd.read_csv(new / "metrics.csv").groupby("controller").status.unique()
+    assert list(statuses["proposed"]) == ["unstable"] and list(statuses["conventional"]) == ["ok"]
+    result = runner.invoke(app, ["diff", str(base), str(new), "--only", "metrics.csv"])
+    assert result.exit_code == 1, result.output
+    assert "metrics.csv  proposed  status: ok -> unstable" in result.output
+    assert "missing" not in result.output and "extra" not in result.output
+    assert "conventional" not in result.output  # its rows are the same
+    assert result.output.splitlines()[-1] == "drift: 1 cell(s) in 1 of 1 file(s): metrics.csv 1 (1 status change(s))"
+
+
+def test_only_and_the_drift_of_each_file(run_dirs: tuple[Path, Path]) -> None:
+    """Every file by default, its drift counted per file; the time series capped in the table."""
+    base, new = run_dirs
+    result = runner.invoke(app, ["diff", str(base), str(new)])
+    assert result.exit_code == 1
+    series = {
+        name: pd.read_csv(d / "timeseries.csv").groupby("controller").size()
+        for name, d in zip(("base", "new"), run_dirs, strict=True)
+    }
+    lost = int(series["base"]["proposed"] - series["new"]["proposed"])  # samples after the run stopped
+    assert lost > 10_000
+    summary = result.output.splitlines()[-1]
+    assert summary == (
+        f"drift: {lost + 1} cell(s) in 2 of 2 file(s): metrics.csv 1 (1 status change(s)), timeseries.csv {lost}"
+    )
+    shown = [line for line in result.output.splitlines() if line.startswith("timeseries.csv  proposed #")]
+    assert len(shown) == 10 and f"... and {lost - 10} more in timeseries.csv" in result.output
+    first = int(series["new"]["proposed"])  # the first sample the new run lacks
+    assert shown[0].split()[:5] == ["timeseries.csv", "proposed", f"#{first}", "(row)", "present"]
+    only = runner.invoke(app, ["diff", str(base), str(new), "--only", "*series.csv", "--only", "nothing*"])
+    assert only.exit_code == 1 and "metrics.csv" not in only.output
+    assert only.output.splitlines()[-1] == f"drift: {lost} cell(s) in 1 of 1 file(s): timeseries.csv {lost}"
+
+
+def test_only_matching_nothing_is_one_line(run_dirs: tuple[Path, Path]) -> None:
+    base, new = run_dirs
+    result = runner.invoke(app, ["diff", str(base), str(new), "--only", "*.json"])
+    assert result.exit_code == 2
+    assert result.stderr.splitlines() == [
+        f"diff error: --only = *.json: matches no file of {base}; allowed: a pattern on the relative paths: "
+        "metrics.csv, timeseries.csv"
+    ]
+
+
+def test_a_changed_note_is_a_changed_cell(tmp_path: Path) -> None:
+    """A settling time that no longer settles: its value and its note changed, the row is there."""
+    rows = {"controller": ["a", "a"], "signal": ["x", "x"], "metric": ["overshoot", "settling_time"], "unit": "s"}
+    base, new = tmp_path / "base.csv", tmp_path / "new.csv"
+    pd.DataFrame(rows | {"value": [5.0, 9.5], "status": "ok", "note": ["", ""]}).to_csv(base, index=False)
+    pd.DataFrame(rows | {"value": [5.0, None], "status": "ok", "note": ["", "did not settle"]}).to_csv(new, index=False)
+    result = runner.invoke(app, ["diff", str(base), str(new)])
+    assert result.exit_code == 1, result.output
+    lines = result.output.splitlines()
+    assert lines[1].split() == ["base.csv", "a", "|", "x", "|", "settling_time", "|", "s", "value", "9.5", "nan", "nan"]
+    assert lines[2].split()[-4:] == ["note", "did", "not", "settle"]
+    assert "missing" not in result.output and lines[-1] == "drift: 2 cell(s) in 1 of 1 file(s): base.csv 2"

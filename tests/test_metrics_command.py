@@ -133,7 +133,7 @@ BAD_CASES = [
     ("missing_file", None, ["--signal", "y"], "FILE", "missing.csv", "no such file"),
     ("missing_column", "t,y,u\n0,0,1\n1,1,1\n2,1,1\n", ["--signal", "yy"], "--signal", "yy", "allowed: y, u"),
     ("missing_time", "time,y\n0,0\n1,1\n2,1\n", ["--signal", "y"], "--time", "t", "allowed: time, y"),
-    ("no_signal", "t,y\n0,0\n1,1\n2,1\n", [], "--signal", "(missing)", "allowed: y"),
+    ("no_signal", "t,note\n0,a\n1,b\n2,c\n", [], "--signal", "(missing)", "no column of numbers besides t"),
     ("non_numeric", "t,y,u\n0,0,a\n1,1,b\n2,1,c\n", ["--signal", "u"], "--signal", "u", "not numeric"),
     ("empty_value", "t,y\n0,0\n1,\n2,1\n", ["--signal", "y"], "--signal", "y", "data row 2"),
     ("time_not_increasing", "t,y\n0,0\n1,1\n1,1\n3,1\n", ["--signal", "y"], "--time", "t", "strictly increasing"),
@@ -143,7 +143,18 @@ BAD_CASES = [
     ("t_step_before", "t,y\n0,0\n1,1\n2,1\n3,1\n", ["--signal", "y", "--t-step", "-1"], "--t-step", "-1", "0 <="),
     ("reference_nan", "t,y\n0,0\n1,1\n2,1\n", ["--signal", "y", "--reference", "nan"], "--reference", "nan", "finite"),
     ("not_csv", "", ["--signal", "y"], "FILE", "bad.csv", "not readable as CSV"),
-]
+    ("reference_column", "t,y,y_rf\n0,0,1\n1,1,1\n2,1,1\n", ["--reference", "y_ref"], "--reference", "y_ref",
+     "did you mean 'y_rf'?"),
+    ("reference_text", "t,y,r\n0,0,1\n1,1,a\n2,1,1\n", ["--reference", "r"], "--reference", "r", "data row 2"),
+    ("band", "t,y\n0,0\n1,1\n2,1\n", ["--settling-band", "1.5"], "--settling-band", "1.5", "0 < band < 1"),
+    ("rise_limits", "t,y\n0,0\n1,1\n2,1\n", ["--rise-limits", "0.9", "0.1"], "--rise-limits", "0.9 0.1",
+     "LOW < HIGH"),
+    ("ss_window", "t,y\n0,0\n1,1\n2,1\n", ["--ss-window", "0"], "--ss-window", "0", "a time > 0 s"),
+    ("controller_short", "t,controller,y\n0,a,0\n1,a,1\n2,a,1\n0,b,0\n1,b,1\n", [], "FILE", "bad.csv",
+     "2 sample(s) of controller b"),
+    ("controller_back", "t,controller,y\n0,a,0\n1,a,1\n2,a,1\n0,b,0\n2,b,1\n1,b,1\n", [], "--time", "t",
+     "controller b, data row 6: 1 after 2"),
+]  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -178,3 +189,144 @@ def test_console_entry_end_to_end(rig_csv: Path, tmp_path: Path) -> None:
     assert bad.stderr.splitlines() == [
         "metrics error: --signal = yy: not a column of data.csv; allowed: y, y_nmp, u, note"
     ]
+
+
+# ----------------------------------------------------------------------------- nlcx's own time series
+
+STEP_KEYS = ("rise_time", "settling_time", "overshoot", "undershoot", "peak", "peak_time")
+REGULATION_KEYS = ("peak_deviation", "peak_time", "settling_time", "steady_state_error")
+
+
+@pytest.fixture(scope="module", params=["csv", "parquet"])
+def own_run(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``nlcx run configs/x_error_ags.yaml``: two controllers stacked in one time series, x
+    stepping to 1 (x_ref), theta regulated to 0 (theta_ref); as CSV and as Parquet."""
+    out = tmp_path_factory.mktemp(f"run_{request.param}")
+    args = ["run", str(ROOT / "configs" / "x_error_ags.yaml"), f"outputs.timeseries_format={request.param}"]
+    result = runner.invoke(app, [*args, "outputs.figure=false", "--no-report", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out / f"timeseries.{request.param}"
+
+
+def _long(path: Path) -> pd.DataFrame:
+    return pd.read_csv(path, keep_default_na=False, na_values=[""])
+
+
+def test_own_time_series_are_measured_per_controller_as_the_run_measured_them(own_run: Path, tmp_path: Path) -> None:
+    """Every controller's x step metrics and theta regulation metrics equal those nlcx run wrote
+    (its defaults are the command's: 2 % band, 10-90 % rise, 1 s window)."""
+    out = tmp_path / "m.csv"
+    result = runner.invoke(app, ["metrics", str(own_run), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    ours = _long(out)
+    assert list(ours.columns) == ["controller", "signal", "metric", "value", "unit", "note"]
+    theirs = _long(own_run.parent / "metrics.csv")
+    assert list(dict.fromkeys(ours.controller)) == ["conventional", "proposed"]
+    assert set(ours.signal) == {"x", "theta"}  # the signals with a reference column, not F_x or the logs
+    for controller in ("conventional", "proposed"):
+        mine = ours[ours.controller == controller].set_index(["signal", "metric"]).value
+        run = theirs[theirs.controller == controller].set_index(["signal", "metric"]).value
+        for key in STEP_KEYS:
+            assert mine["x", key] == pytest.approx(run["x", key], rel=1e-9, abs=0), (controller, key)
+        assert mine["x", "steady_state_value"] == 1.0  # x_ref's final value: the config's step to 1
+        assert sorted(mine["theta"].index) == sorted(REGULATION_KEYS)  # no step metrics for theta
+        for key in REGULATION_KEYS:
+            assert mine["theta", key] == pytest.approx(run["theta", key], rel=1e-9, abs=0), (controller, key)
+    theta = ours[ours.signal == "theta"]
+    assert (theta.note == "regulated: theta_ref is constant 0").all()
+    notes = [line for line in result.stdout.splitlines() if line.startswith("note:")]
+    assert len(notes) == 1 and "regulated" in notes[0] and "theta (theta_ref is constant 0)" in notes[0]
+    assert "x (" not in notes[0]
+
+
+def test_peak_deviation_is_the_largest_angle_of_each_controller(own_run: Path, tmp_path: Path) -> None:
+    """Independently: max |theta| over each controller's rows of the time series."""
+    out = tmp_path / "m.csv"
+    result = runner.invoke(app, ["metrics", str(own_run), "--signal", "theta", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    series = pd.read_parquet(own_run) if own_run.suffix == ".parquet" else pd.read_csv(own_run)
+    ours = _long(out)
+    for controller, rows in series.groupby("controller"):
+        peak = ours[(ours.controller == controller) & (ours.metric == "peak_deviation")].value.item()
+        k = int(np.argmax(np.abs(rows.theta.to_numpy())))
+        assert peak == abs(rows.theta.iloc[k])
+        at = ours[(ours.controller == controller) & (ours.metric == "peak_time")].value.item()
+        assert at == rows.t.iloc[k] - rows.t.iloc[0]
+    # the printed table: one per controller, theta's peak deviation in it
+    assert result.stdout.count("controller conventional:") == 1 and result.stdout.count("controller proposed:") == 1
+    assert "overshoot" not in result.stdout
+
+
+def _first_order(t: np.ndarray, t_step: float, tau: float) -> np.ndarray:
+    return np.where(t >= t_step, -np.expm1(-(t - t_step) / tau), 0.0)
+
+
+def test_a_reference_column_that_steps_gives_the_step_time(tmp_path: Path) -> None:
+    """y = 1 - exp(-(t - 2)/tau) after a step of y_ref at t = 2 s: 10-90 % rise time tau ln 9 and
+    2 % settling time tau ln 50 (analytic), measured from the step the reference column shows."""
+    t = np.round(np.arange(0, 12.0001, 1e-3), 9)
+    tau = 0.5
+    frame = pd.DataFrame({"t": t, "y": _first_order(t, 2.0, tau), "y_ref": np.where(t >= 2.0, 1.0, 0.0)})
+    path = tmp_path / "step.csv"
+    frame.to_csv(path, index=False)
+    out = tmp_path / "m.csv"
+    result = runner.invoke(app, ["metrics", str(path), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "step at 2 s; final value: y_ref = 1" in result.stdout
+    values = _long(out).set_index("metric").value
+    assert values["rise_time"] == pytest.approx(tau * np.log(9), abs=1e-5)
+    assert values["settling_time"] == pytest.approx(tau * np.log(50), abs=1e-5)
+    assert values["overshoot"] == 0.0 and values["steady_state_value"] == 1.0
+    explicit = runner.invoke(app, ["metrics", str(path), "--t-step", "0", "--signal", "y"])
+    assert "step at 0 s" in explicit.stdout  # --t-step overrides what the column shows
+
+
+def test_a_varying_reference_is_tracked(tmp_path: Path) -> None:
+    """A sine reference: error integrals of y_ref - y (trapezoidal, computed here), no step metrics."""
+    t = np.linspace(0.0, 10.0, 2001)
+    ref = 0.3 * np.sin(0.5 * t)
+    y = 0.3 * np.sin(0.5 * t - 0.1)
+    path = tmp_path / "track.csv"
+    pd.DataFrame({"t": t, "y": y, "y_ref": ref}).to_csv(path, index=False)
+    out = tmp_path / "m.csv"
+    result = runner.invoke(app, ["metrics", str(path), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    values = _long(out).set_index("metric").value
+    y_read = pd.read_csv(path)
+    e = (y_read.y_ref - y_read.y).to_numpy()
+    assert values["ise"] == pytest.approx(np.sum(np.diff(t) * (e[1:] ** 2 + e[:-1] ** 2) / 2), rel=1e-12)
+    assert values["max_abs_error"] == np.max(np.abs(e))
+    assert "rise_time" not in values and "note: measured as tracking: y (y_ref varies" in result.stdout
+
+
+def test_plain_csv_measures_every_column_of_numbers(rig_csv: Path, tmp_path: Path) -> None:
+    """No --signal and no reference column: every column of numbers but time, each against its
+    last sample, written as today (signal, metric, value, unit)."""
+    out = tmp_path / "m.csv"
+    result = runner.invoke(app, ["metrics", str(rig_csv), "--time", "time", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(out)
+    assert list(table.columns) == ["signal", "metric", "value", "unit"]
+    assert list(dict.fromkeys(table.signal)) == ["y", "y_nmp", "u"]  # not the text column
+    t, frame = _read(rig_csv)
+    for name in ("y", "y_nmp"):
+        assert _written(out, name) == step_info(t, frame[name].to_numpy())
+    assert "note:" not in result.stdout
+
+
+def test_reference_from_a_column(rig_csv: Path, tmp_path: Path) -> None:
+    """--reference COLUMN: the column's (constant) value as the target, the same numbers as
+    --reference VALUE; a column that is constant 0 measures the signal as regulated."""
+    t, frame = _read(rig_csv)
+    path = tmp_path / "with_target.csv"
+    frame.assign(target=2.5, zero=0.0).to_csv(path, index=False)
+    by_number, by_column = tmp_path / "n.csv", tmp_path / "c.csv"
+    args = ["metrics", str(path), "--time", "time", "--signal", "y"]
+    assert runner.invoke(app, [*args, "--reference", "2.5", "--out", str(by_number)]).exit_code == 0
+    assert runner.invoke(app, [*args, "--reference", "target", "--out", str(by_column)]).exit_code == 0
+    assert _written(by_column, "y") == _written(by_number, "y") == step_info(t, frame.y.to_numpy(), reference=2.5)
+    regulated = runner.invoke(app, [*args, "--reference", "zero", "--out", str(tmp_path / "z.csv")])
+    assert regulated.exit_code == 0, regulated.output
+    values = _long(tmp_path / "z.csv").set_index("metric").value
+    assert values["peak_deviation"] == np.max(np.abs(frame.y.to_numpy()))
+    assert "overshoot" not in values and "y (zero is constant 0)" in regulated.stdout

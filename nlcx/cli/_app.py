@@ -6,16 +6,14 @@ import functools
 import gc
 import math
 import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
 import typer
 
 from nlcx.errors import NlcxError
-
-if TYPE_CHECKING:
-    pass
 
 app = typer.Typer(
     add_completion=False,
@@ -24,12 +22,38 @@ app = typer.Typer(
     help="Reproducible experiments on the control of nonlinear systems.",
 )
 
+
+def _print_version(value: bool) -> None:
+    """``--version``: print ``nlcx <version>`` and exit before any command runs."""
+    if value:
+        from nlcx._version import __version__
+
+        typer.echo(f"nlcx {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", "-V", callback=_print_version, is_eager=True, help="Print the version of nlcx and exit."
+        ),
+    ] = False,
+) -> None:
+    """Reproducible experiments on the control of nonlinear systems."""
+
+
 F = TypeVar("F", bound=Callable[..., Any])
 
 ConfigArg = Annotated[Path, typer.Argument(help="Experiment YAML file.", show_default=False)]
 OverridesArg = Annotated[
     list[str] | None,
-    typer.Argument(help="Overrides key=value with dotted keys, e.g. simulation.t_end=30.", show_default=False),
+    typer.Argument(
+        help="Overrides in Hydra's grammar: key=value (set), +key=value (add), ++key=value (add or set), "
+        "~key or ~key=value (delete); e.g. simulation.t_end=30.",
+        show_default=False,
+    ),
 ]
 NoReport = Annotated[bool, typer.Option("--no-report", help="Do not write report.html / report.md.")]
 
@@ -49,6 +73,9 @@ def one_line_errors(func: F) -> F:
         except KeyboardInterrupt:
             typer.echo("interrupted: files already written are complete", err=True)
             raise typer.Exit(130) from None
+        except BrokenPipeError:  # the reader stopped early (nlcx diff ... | head): nothing more to say
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            raise typer.Exit(1) from None
         except Exception as exc:
             if os.environ.get("NLCX_DEBUG"):
                 raise
