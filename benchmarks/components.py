@@ -33,7 +33,8 @@ from typing import Any
 import numpy as np
 from numba import njit, types
 
-from nlcx import config, engine, report, sweep
+from nlcx import config, engine, report
+from nlcx import sweeps as sweep
 from nlcx.controllers import pid
 from nlcx.controllers.base import ControllerInstance
 from nlcx.kernel.abi import ARR3, F64, I64, MAT, CallbackTuple, ControllerFn, RhsFn, callback_slots

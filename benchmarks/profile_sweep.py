@@ -34,7 +34,7 @@ STAGES = {
 def main() -> None:
     from run import planned_batches
 
-    from nlcx import sweep
+    from nlcx import sweeps as sweep
 
     batches = int(sys.argv[1]) if len(sys.argv) > 1 else 4
     batch = planned_batches(batches + 1)

@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import json
 import platform
+import socket
 import subprocess
+import sys
 import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from datetime import datetime, timezone
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -19,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-import nlcx
+from nlcx._version import __version__
 from nlcx.drawing import FigurePlan, Line, Painter, Panel, atomic_write, draw, draw_all
 from nlcx.engine import METRIC_COLUMNS, Result, Run
 
@@ -291,7 +294,7 @@ def gains_plan(result: Result) -> FigurePlan:
 
 
 def package_versions() -> dict[str, str]:
-    out = {"python": platform.python_version(), "nlcx": nlcx.__version__}
+    out = {"python": platform.python_version(), "nlcx": __version__}
     for name in PACKAGES:
         try:
             out[name] = version(name)
@@ -302,7 +305,7 @@ def package_versions() -> dict[str, str]:
 
 def git_state() -> dict[str, Any]:
     """Commit and dirty flag of the nlcx source tree, when it is a git checkout."""
-    root = Path(nlcx.__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parent.parent
     if not (root / ".git").exists():
         return {"commit": None, "dirty": None}
     try:
@@ -324,13 +327,53 @@ def git_state() -> dict[str, Any]:
     return {"commit": commit or None, "dirty": bool(dirty)}
 
 
-def manifest(result: Result, timings: dict[str, float]) -> dict[str, Any]:
+def utc_iso(timestamp: float) -> str:
+    """A POSIX timestamp as UTC in ISO 8601, to the millisecond (``2024-05-01T12:00:00.000+00:00``)."""
+    return datetime.fromtimestamp(timestamp, tz=timezone.utc).isoformat(timespec="milliseconds")
+
+
+def environment() -> dict[str, Any]:
+    """Where an output was made: ``host`` (:func:`socket.gethostname`), ``platform``
+    (:func:`platform.platform`), the package ``versions`` and the ``git`` state of nlcx."""
+    return {
+        "host": socket.gethostname(),
+        "platform": platform.platform(),
+        "versions": package_versions(),
+        "git": git_state(),
+    }
+
+
+def provenance(overrides: Sequence[str] = (), started: float | None = None) -> dict[str, Any]:
+    """How an output was made: ``argv`` (this process's command line, :data:`sys.argv`), the
+    ``overrides`` as given, ``started`` (UTC, ISO 8601) and ``duration_s``, from the
+    ``time.perf_counter()`` instant ``started`` (default: now) until now."""
+    now = time.perf_counter()
+    begun = now if started is None else started
+    return {
+        "argv": list(sys.argv),
+        "overrides": [str(item) for item in overrides],
+        "started": utc_iso(time.time() - (now - begun)),
+        "duration_s": round(now - begun, 4),
+    }
+
+
+def manifest(
+    result: Result,
+    timings: dict[str, float],
+    overrides: Sequence[str] = (),
+    started: float | None = None,
+    where: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """manifest.json of a run directory: its name and kind (``nlcx_output``: run), how and where
+    it was made (:func:`provenance` from ``started``, :func:`environment` or ``where``), the
+    seeds, the timings, each run's status and (filled in by :func:`write_run`) the files."""
     exp = result.prepared.experiment
     ss = result.prepared.seed_sequence
     return {
         "name": exp.name,
-        "versions": package_versions(),
-        "git": git_state(),
+        "nlcx_output": "run",
+        **provenance(overrides, started),
+        **(environment() if where is None else where),
         "seed": {
             "entropy": int(ss.entropy),
             # the children prepare spawned, one an uncertainty in config order (spawn(0) listed none)
@@ -358,14 +401,18 @@ def write_run(
     timings: dict[str, float],
     started: float | None = None,
     painter: Painter | None = None,
+    overrides: Sequence[str] = (),
 ) -> list[Path]:
-    """Write a run directory; manifest.json last, listing the files and the timings.
+    """Write the files of a run directory into ``out_dir``; manifest.json last, listing the
+    files, the timings and the ``overrides`` the run was built with.
 
     ``started`` (a ``time.perf_counter()`` value) makes the manifest record the wall time
-    from then until the manifest is written. The figures are planned first and drawn by
-    ``painter`` (another process) if given, else here in a thread, while this thread writes
-    config.yaml and the CSV files (from columns, without pandas; tuning.csv, written only when
-    tuners or controllers report values, through a DataFrame).
+    from then until the manifest is written, and the start (default: when writing began).
+    The figures are planned first and drawn by ``painter`` (another process) if given, else
+    here in a thread, while this thread writes config.yaml and the CSV files (from columns,
+    without pandas; tuning.csv, written only when tuners or controllers report values, through
+    a DataFrame) and gathers the manifest's :func:`environment`. This writes into ``out_dir``
+    as it stands: :func:`nlcx.rundir.save_run` stages, locks and renames the whole directory.
     """
     write_start = time.perf_counter()
     exp = result.prepared.experiment
@@ -393,12 +440,13 @@ def write_run(
         if outputs.timeseries:  # pyarrow encodes without holding the GIL
             columns = timeseries_columns(result)
             written.append(write_timeseries(out_dir / "timeseries", columns, outputs.timeseries_format))
+        where = environment()  # while the figures are drawn
         drawn.result()
     written += [path for path, _ in figures]
     timings = {**timings, "write": time.perf_counter() - write_start}
     if started is not None:
         timings["wall"] = time.perf_counter() - started
-    info = manifest(result, timings)
+    info = manifest(result, timings, overrides, write_start if started is None else started, where)
     info["files"] = [p.name for p in written]
     write_text(out_dir / "manifest.json", json.dumps(info, indent=2) + "\n")
     return [*written, out_dir / "manifest.json"]

@@ -1,7 +1,7 @@
 """The JSON Schema of an experiment config (``nlcx schema``), for an editor to complete and check YAML.
 
 The schema is built from the section models of :mod:`nlcx.config` (and the ``sweep`` section
-of :mod:`nlcx.sweep`) and from the model of every registered plugin, so that it knows what
+of :mod:`nlcx.sweeps`) and from the model of every registered plugin, so that it knows what
 :func:`nlcx.config.build` accepts:
 
 - ``plant.name`` is a registered plant; its ``params`` are checked by that plant's parameter
@@ -66,7 +66,7 @@ def _definitions() -> tuple[Schema, dict[type, str]]:
     two models share) and the definition name of each model."""
     from nlcx.config import ExperimentSection, PlantSection
     from nlcx.controllers.schedules import ScheduleConfig
-    from nlcx.sweep import SweepSection
+    from nlcx.sweeps import SweepSection
 
     models: list[type[BaseModel]] = [ExperimentSection, PlantSection, SweepSection, ScheduleConfig]
     for kind, reg in registry.ALL.items():
@@ -225,7 +225,7 @@ def _plugin_sections(root: Schema, defs: Schema, names: dict[type, str]) -> None
 def _file_keys(root: Schema, names: dict[type, str]) -> None:
     """What a config file holds besides the experiment: ``extends``, ``vars``, ``sweep``; and
     ``name``, ``plant`` and ``controllers`` are required unless the file extends another."""
-    from nlcx.sweep import SweepSection
+    from nlcx.sweeps import SweepSection
 
     props = root["properties"]
     props["extends"] = {

@@ -66,6 +66,8 @@ def test_run_writes_the_run_directory(name: str, tmp_path: Path) -> None:
     assert manifest["seed"]["uncertainty_spawn_keys"] == []  # no uncertainty
     assert set(manifest["timings_s"]) >= {"simulate", "write", "wall"}
     assert "commit" in manifest["git"]
+    assert manifest["nlcx_output"] == "run" and manifest["overrides"] == ["outputs.gains_figure=true"]
+    assert manifest["argv"] == sys.argv  # the CLI runner's process
     assert (out / "figure.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not list(out.glob(".*.tmp"))
 
@@ -244,8 +246,14 @@ def test_reproduce_only_some_figures_and_tables(tmp_path: Path) -> None:
     params = pd.read_csv(out / "tables" / "table_2_2.csv")
     printed = params[(params.schedule == "time_ags") & (params.parameter.str.endswith(("min", "max")))]
     assert np.allclose(printed.nlcx, printed.thesis)  # the ranges run are Table 2.2's
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["nlcx_output"] == "reproduction" and manifest["overrides"] == [] and manifest["argv"] == sys.argv
+    assert {"started", "duration_s", "host", "platform", "versions", "git", "profile", "wall_s"} <= set(manifest)
+    written = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     bad = runner.invoke(app, ["reproduce", "--only", "fig-9.9", "--out", str(out)])
     assert bad.exit_code == 2 and "unknown fig-9.9" in bad.stderr
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == written, "a failed rerun changes nothing"
+    assert {p.name for p in tmp_path.iterdir()} == {"thesis", ".thesis.nlcx-lock"}
 
 
 def test_calibration_is_reproducible_serial_or_parallel(tmp_path: Path) -> None:

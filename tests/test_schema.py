@@ -29,8 +29,8 @@ def _resolved(path: Path) -> dict[str, Any]:
 
 
 def _builds(raw: dict[str, Any]) -> bool:
-    """Whether nlcx accepts ``raw`` as an experiment (the sweep section is checked by nlcx.sweep)."""
-    from nlcx.sweep import SweepSection
+    """Whether nlcx accepts ``raw`` as an experiment (the sweep section is checked by nlcx.sweeps)."""
+    from nlcx.sweeps import SweepSection
 
     try:
         config.build({k: v for k, v in raw.items() if k != "sweep"})

@@ -17,7 +17,8 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from nlcx import config, engine, sweep
+from nlcx import config, engine, rundir
+from nlcx import sweeps as sweep
 from nlcx.cli import app
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -167,15 +168,17 @@ def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) 
     spec = {"random": {"n": 24, "params": {"plant.params.M": {"dist": "uniform", "relative": 0.2}}}, "batch_size": 2}
     path = write_sweep(tmp_path, spec, t_end=8.0)
     out = tmp_path / "resumed"
+    staged = rundir.partial_dir(out) / "parts"  # where an unfinished sweep keeps its parts
     cmd = [sys.executable, "-m", "nlcx.cli", "sweep", str(path), "--executor", "serial", "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 60
-    while time.time() < deadline and len(list((out / "parts").glob("*.index.csv"))) < 2:
+    while time.time() < deadline and len(list(staged.glob("*.index.csv"))) < 2:
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
-    parts = len(list((out / "parts").glob("*.index.csv")))
+    parts = len(list(staged.glob("*.index.csv")))
     assert 2 <= parts < 12, "the sweep must have been killed mid-way"
+    assert not out.exists(), "an unfinished sweep is not in its directory"
     result = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert f"({24 - 2 * parts} computed, {2 * parts} already done)" in result.output
@@ -186,6 +189,50 @@ def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) 
     assert (clean / "metrics.csv").read_bytes() == (out / "metrics.csv").read_bytes()
     forced = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out), "--force"])
     assert "(24 computed, 0 already done)" in forced.output
+    assert len(list((out / "parts").glob("*.index.csv"))) == 12 and not rundir.partial_dir(out).exists()
+
+
+def test_a_rerun_into_a_finished_sweep_resumes_from_its_parts_of_the_same_plan(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A finished sweep's parts (and time series) of variants still in the plan are reused, the
+    others are not carried into the new directory; an interrupted rerun leaves the finished
+    sweep as it was; --force recomputes everything."""
+
+    def sweep_of(masses: list[float], folder: str) -> Path:
+        (tmp_path / folder).mkdir()
+        return write_sweep(tmp_path / folder, {"grid": {"plant.params.M": masses}, "timeseries": True})
+
+    def invoke(path: Path, out: Path, *extra: str) -> str:
+        result = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out), *extra])
+        assert result.exit_code == 0, result.output
+        return result.output
+
+    two, three, other = sweep_of([1.0, 1.1], "two"), sweep_of([1.0, 1.1, 1.2], "three"), sweep_of([1.3], "other")
+    out = tmp_path / "out"
+    assert "(2 computed, 0 already done)" in invoke(two, out)
+    assert "(1 computed, 2 already done)" in invoke(three, out)
+    invoke(three, tmp_path / "clean")
+    for name in ("metrics.csv", "timeseries/variant_000000.csv", "timeseries/variant_000002.csv"):
+        assert (out / name).read_bytes() == (tmp_path / "clean" / name).read_bytes()
+    finished = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def interrupt(*args: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep, "assemble", interrupt)
+    interrupted = runner.invoke(app, ["sweep", str(three), "--executor", "serial", "--out", str(out), "--force"])
+    assert interrupted.exit_code == 130
+    assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == finished
+    monkeypatch.undo()
+    assert "(3 computed, 0 already done)" in invoke(three, out, "--force")
+    assert "(1 computed, 0 already done)" in invoke(other, out)
+    assert len(list((out / "parts").glob("*.index.csv"))) == 1, "the parts of another plan are not carried"
+    invoke(other, tmp_path / "alone")
+    assert sorted(p.name for p in (out / "timeseries").iterdir()) == ["variant_000000.csv"]
+    assert (out / "timeseries" / "variant_000000.csv").read_bytes() == (
+        tmp_path / "alone" / "timeseries" / "variant_000000.csv"
+    ).read_bytes(), "variant 0 of the earlier plan (another mass) is not carried"
 
 
 def test_dry_run_and_bad_sweep_specs(tmp_path: Path) -> None:

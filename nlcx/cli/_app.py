@@ -71,7 +71,11 @@ def one_line_errors(func: F) -> F:
             typer.echo(str(exc), err=True)
             raise typer.Exit(2) from None
         except KeyboardInterrupt:
-            typer.echo("interrupted: files already written are complete", err=True)
+            typer.echo(
+                "interrupted: the output directory was left as it was "
+                "(a sweep keeps its finished batches to resume from)",
+                err=True,
+            )
             raise typer.Exit(130) from None
         except BrokenPipeError:  # the reader stopped early (nlcx diff ... | head): nothing more to say
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

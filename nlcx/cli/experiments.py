@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -73,7 +74,7 @@ def run(
     painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
     helper = CompileHelper([sys.executable, "-m", "nlcx.cli", "prewarm", str(config), *(overrides or [])])
     try:
-        from nlcx import engine, report
+        from nlcx import engine, rundir
 
         _imported()
         with helper.watching():  # a slow load means an empty numba cache: `nlcx prewarm` compiles alongside
@@ -81,15 +82,19 @@ def run(
         start = time.perf_counter()
         exp = cfg.build(cfg.interpolate(raw))  # cfg.load's steps on the config already read
         loaded = time.perf_counter()
-        result = engine.run_experiment(exp)
         out_dir = out or Path(exp.section.outputs.dir or Path("results") / exp.name)
-        timings = {"load": loaded - start, **result.timings}
-        report.write_run(result, out_dir, timings, started=start, painter=painter)
+        with rundir.claim(out_dir):  # refused before simulating, not after
+            result = engine.run_experiment(exp)
+            timings = {"load": loaded - start, **result.timings}
+            rundir.save_run(
+                result, out_dir, with_report=not no_report, overrides=overrides or [], timings=timings,
+                painter=painter, started=start,
+            )  # fmt: skip
     finally:
         if painter is not None:
             painter.close()
         helper.close()
-    page = None if no_report else _write_report(out_dir)
+    page = None if no_report else out_dir / "report.html"
     elapsed = time.perf_counter() - start
     if quiet:
         typer.echo(str(out_dir))
@@ -133,7 +138,7 @@ def _sweep(
         TimeRemainingColumn,
     )
 
-    from nlcx import sweep
+    from nlcx import sweeps as sweep
 
     _imported()
 
@@ -157,15 +162,15 @@ def _sweep(
         def progress(done: int, total: int, failed: int) -> None:
             bar.update(task, completed=done, total=total, failed=failed)
 
-        outcome = sweep.run(config, overrides, out, executor, jobs, scheduler, force, progress)
+        outcome = sweep.run(config, overrides, out, executor, jobs, scheduler, force, progress, with_report)
     counts = outcome.index.status.value_counts().to_dict() if not outcome.index.empty else {}
     summary = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
     typer.echo(
         f"{len(outcome.index)} variants ({outcome.computed} computed, {outcome.skipped} already done): {summary}; "
         f"{outcome.wall:.1f} s -> {outcome.out_dir}/"
     )
-    if with_report and not outcome.index.empty:
-        typer.echo(f"report {_write_report(outcome.out_dir)}")
+    if outcome.report is not None:
+        typer.echo(f"report {outcome.report}")
     if counts.get("failed"):
         failed = outcome.index[outcome.index.status == "failed"].head(3)
         for row in failed.itertuples():
@@ -226,6 +231,7 @@ def reproduce(
     no_report: NoReport = False,
 ) -> None:
     """Regenerate the thesis's figures and tables (ours beside theirs) and check its claims."""
+    from nlcx import rundir
     from nlcx.thesis import profiles
     from nlcx.thesis.reproduce import reproduce as run_reproduce
 
@@ -242,32 +248,38 @@ def reproduce(
         note = f" ({', '.join(bad)} unstable)" if bad else ""
         typer.echo(f"  [{done[0]:>3}] {record.name:<12} {record.wall:5.2f} s{note}")
 
-    summary = run_reproduce(
-        configs,
-        out,
-        chapters=chapter,
-        only=keys,
-        jobs=jobs,
-        progress=progress,
-        overrides=tuple(set_ or ()),
-        profile=chosen,
-    )
-    typer.echo(f"profile {chosen.name}: {len(summary['figures'])} figures, {len(summary['tables'])} tables -> {out}/")
-    if "claims" in summary:
-        counts = summary["claims"].reproduced.value_counts().to_dict()
-        typer.echo("claims: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
-    wall = time.perf_counter() - start
-    write_reproduction_manifest(out, chosen, wall, jobs)
-    typer.echo(f"done in {wall:.1f} s")
-    if not no_report:
+    with rundir.staged(out) as stage:  # renamed to OUT when complete, report included
+        summary = run_reproduce(
+            configs, stage, chapters=chapter, only=keys, jobs=jobs, progress=progress,
+            overrides=tuple(set_ or ()), profile=chosen,
+        )  # fmt: skip
+        typer.echo(
+            f"profile {chosen.name}: {len(summary['figures'])} figures, {len(summary['tables'])} tables -> {out}/"
+        )
+        if "claims" in summary:
+            counts = summary["claims"].reproduced.value_counts().to_dict()
+            typer.echo("claims: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+        wall = time.perf_counter() - start
+        write_reproduction_manifest(stage, chosen, wall, jobs, overrides=set_ or (), started=start)
+        typer.echo(f"done in {wall:.1f} s")
         t0 = time.perf_counter()
-        page = _write_report(out, configs)
-        typer.echo(f"report {page} ({time.perf_counter() - t0:.1f} s)")
+        page = None if no_report else _write_report(stage, configs)
+    if page is not None:
+        typer.echo(f"report {out / page.name} ({time.perf_counter() - t0:.1f} s)")
 
 
-def write_reproduction_manifest(out: Path, profile: Any, wall: float, jobs: int | None) -> None:
-    """manifest.json of a reproduction: the command, profile, versions, commit and run time."""
-    import datetime
+def write_reproduction_manifest(
+    out: Path,
+    profile: Any,
+    wall: float,
+    jobs: int | None,
+    overrides: Sequence[str] = (),
+    started: float | None = None,
+) -> None:
+    """manifest.json of a reproduction: its kind (``nlcx_output``: reproduction), the command,
+    its ``overrides`` (``--set``), start and duration from the ``time.perf_counter()`` instant
+    ``started`` (:func:`nlcx.report.provenance`), the profile, where it ran and the versions and
+    commit (:func:`nlcx.report.environment`), the wall time ``wall`` and the workers."""
     import json
     import os
     import sys
@@ -275,14 +287,14 @@ def write_reproduction_manifest(out: Path, profile: Any, wall: float, jobs: int 
     from nlcx import report
 
     record = {
+        "nlcx_output": "reproduction",
         "command": "nlcx " + " ".join(sys.argv[1:]),
+        **report.provenance(overrides, started),
         "profile": profile.name,
         "profile_source": profile.source,
-        "versions": report.package_versions(),
-        "git": report.git_state(),
+        **report.environment(),
         "wall_s": round(wall, 2),
         "jobs": jobs or os.cpu_count(),
-        "started": (datetime.datetime.now() - datetime.timedelta(seconds=wall)).isoformat(timespec="seconds"),
     }
     report.write_text(out / "manifest.json", json.dumps(record, indent=2) + "\n")
 
@@ -304,9 +316,12 @@ def report(
     ),
 ) -> None:
     """Write DIR/report.html and DIR/report.md: one page summarising what DIR holds."""
+    from nlcx import rundir
+
     if not directory.is_dir():
         raise ConfigError("DIR", str(directory), "an existing output directory")
-    typer.echo(str(_write_report(directory, configs)))
+    with rundir.locked(directory, key="DIR"):  # not while another process writes or replaces it
+        typer.echo(str(_write_report(directory, configs)))
 
 
 @app.command()
@@ -321,6 +336,7 @@ def calibrate(
     write: Annotated[bool, typer.Option("--write", help="Write the fitted values into the spec's write.file.")] = False,
 ) -> None:
     """Fit unprinted numbers (e.g. the conventional gains) to a thesis table with the seeded GA."""
+    from nlcx import rundir
     from nlcx.thesis.calibrate import calibrate as run_calibration
     from nlcx.thesis.calibrate import load_spec, write_back
 
@@ -332,7 +348,8 @@ def calibrate(
     def progress(generation: int, best: float) -> None:
         typer.echo(f"  generation {generation:>3}: best loss {best:.5g}")
 
-    outcome = run_calibration(spec, out_dir, jobs=jobs, overrides=overrides or [], progress=progress)
+    with rundir.locked(out_dir):
+        outcome = run_calibration(spec, out_dir, jobs=jobs, overrides=overrides or [], progress=progress)
     typer.echo(outcome["tuning"].to_string(index=False))
     typer.echo(outcome["fit"].to_string(index=False))
     if write:
@@ -354,6 +371,7 @@ def identify(
     ``kind: consistency`` asks of each printed conventional column whether any loop gives it."""
     import yaml
 
+    from nlcx import rundir
     from nlcx.thesis.consistency import consistency
     from nlcx.thesis.identify import identify as run_identify
     from nlcx.thesis.identify_cstr import identify_cstr
@@ -367,19 +385,21 @@ def identify(
     def progress(done: int, total: int, name: str) -> None:
         typer.echo(f"  [{done}/{total}] {name}")
 
+    with rundir.locked(out_dir):  # resumed in place: locked, not staged
+        if raw.get("kind") == "consistency":
+            table = consistency(spec, out_dir, jobs=jobs, progress=progress)
+        elif raw.get("chapter") == 5:
+            table = identify_cstr(spec, out_dir, jobs=jobs, progress=progress)
+        else:
+            table = run_identify(spec, out_dir, jobs=jobs, progress=progress)
     if raw.get("kind") == "consistency":
-        columns_table = consistency(spec, out_dir, jobs=jobs, progress=progress)
-        shown = columns_table[["table", "definition", "loops", "most_cells_hit", "cells", "reproduced"]]
+        shown = table[["table", "definition", "loops", "most_cells_hit", "cells", "reproduced"]]
         typer.echo(shown.to_string(index=False))
         typer.echo(f"results in {out_dir}/")
         return
     if raw.get("chapter") == 5:
-        ranking = identify_cstr(spec, out_dir, jobs=jobs, progress=progress)
         columns = ["rank", "hypothesis", "train_loss", "test_median_rel_error"]
-        typer.echo(ranking[columns].head(10).to_string(index=False))
-        typer.echo(f"{len(ranking)} hypotheses; results in {out_dir}/")
-        return
-    ranking = run_identify(spec, out_dir, jobs=jobs, progress=progress)
-    columns = ["rank", "hypothesis", "train_loss", "validation_median_rel_error", "validation_direction_agreement"]
-    typer.echo(ranking[columns].head(10).to_string(index=False))
-    typer.echo(f"{len(ranking)} hypotheses; results in {out_dir}/")
+    else:
+        columns = ["rank", "hypothesis", "train_loss", "validation_median_rel_error", "validation_direction_agreement"]
+    typer.echo(table[columns].head(10).to_string(index=False))
+    typer.echo(f"{len(table)} hypotheses; results in {out_dir}/")

@@ -185,8 +185,8 @@ def calibrate(
         "evaluations": result.evaluations,
         "optimiser": spec.optimiser.model_dump(),
         "wall_s": round(time.perf_counter() - start, 2),
-        "versions": report.package_versions(),
-        "git": report.git_state(),
+        **report.provenance(overrides or [], start),
+        **report.environment(),
     }
     report.write_text(out_dir / "manifest.json", json.dumps(info, indent=2) + "\n")
     return {

@@ -8,6 +8,9 @@ Writes into the output directory (default ``results/thesis``):
   from the configs actually run, beside the printed values;
 - ``claims.csv``: every qualitative claim with ``reproduced`` yes/no/partly and evidence;
 - ``runs/<name>/``: metrics.csv, config.yaml and manifest.json of every experiment run.
+
+:func:`reproduce` writes into the directory it is given as it stands; ``nlcx reproduce``
+hands it a staged directory that is renamed into place when complete (:func:`nlcx.rundir.staged`).
 """
 
 from __future__ import annotations
@@ -77,9 +80,10 @@ def run_config(
     from nlcx.thesis.lyapunov import lyapunov_rate
 
     start = time.perf_counter()
-    exp = profiles.experiment(config, [*overrides, "outputs.timeseries=false", "outputs.figure=false"], profile)
+    applied = [*overrides, "outputs.timeseries=false", "outputs.figure=false"]
+    exp = profiles.experiment(config, applied, profile)
     result = engine.run_experiment(exp)
-    report.write_run(result, out_dir / "runs" / exp.name, result.timings, started=start)
+    report.write_run(result, out_dir / "runs" / exp.name, result.timings, started=start, overrides=applied)
     if figure is not None:
         filename, title = figure
         drawing.write_figure(out_dir / "figures" / filename, report.output_figure(result, title))

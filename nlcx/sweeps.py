@@ -20,10 +20,18 @@ The variants are the product grid x zip x random. Each variant's ``seed`` is spa
 complete result (``--force`` recomputes), so an interrupted sweep loses nothing finished.
 The run directory gets ``sweep.csv`` (variant, varied values, seed, config hash, status,
 wall time) and one long ``metrics.csv`` for all variants.
+
+The directory is written whole (:mod:`nlcx.rundir`): the parts go into the sweep's staging
+directory beside it, ``.<name>.nlcx-partial`` (:func:`nlcx.rundir.partial_dir`), which is
+kept when the sweep is interrupted and resumed from by a rerun; a rerun into a finished
+sweep resumes from that sweep's parts of the same variants (hard links, not copies). When
+every batch is done, sweep.csv, metrics.csv, config.yaml, manifest.json and the report are
+written beside the parts and the whole staging directory is renamed into place.
 """
 
 from __future__ import annotations
 
+import copy
 import functools
 import gc
 import hashlib
@@ -32,7 +40,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Callable, Collection, Iterable
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -305,9 +313,13 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
     return BatchResult(index=rows, metrics=metrics if return_metrics else None, part=part)
 
 
-def load(path: str | Path, overrides: list[str] | None = None) -> tuple[dict[str, Any], SweepSection, Any]:
-    """(base raw config without ``sweep``, the sweep spec, the validated base experiment)."""
-    raw = cfg.apply_overrides(cfg.read_config(path), overrides or [])
+def load(
+    path: str | Path | Mapping[str, Any], overrides: list[str] | None = None
+) -> tuple[dict[str, Any], SweepSection, Any]:
+    """(base raw config without ``sweep``, the sweep spec, the validated base experiment) of a
+    config file, or of a raw config mapping as a file holds it (:func:`nlcx.sweep`)."""
+    raw_config = copy.deepcopy(dict(path)) if isinstance(path, Mapping) else cfg.read_config(path)
+    raw = cfg.apply_overrides(raw_config, overrides or [])
     sweep_raw = raw.pop("sweep", None)
     if sweep_raw is None:
         raise ConfigError("sweep", None, "this config has no sweep section (use `nlcx run` for a single experiment)")
@@ -367,50 +379,65 @@ class SweepOutcome:
     computed: int
     skipped: int
     wall: float
+    #: The sweep's report.html, when one was written.
+    report: Path | None = None
 
 
-def run(
-    path: str | Path,
-    overrides: list[str] | None = None,
-    out_dir: Path | None = None,
-    executor: str = "process",
-    jobs: int = 2,
-    scheduler: str | None = None,
-    force: bool = False,
-    progress: Callable[[int, int, int], None] | None = None,
-) -> SweepOutcome:
-    """Run (or resume) a sweep; write sweep.csv, metrics.csv, config.yaml and manifest.json."""
-    start = time.perf_counter()
-    base_raw, spec, base = load(path, overrides)
-    out_dir = Path(out_dir or base.section.outputs.dir or Path("results") / base.name)
-    variants, hashes = plan(base_raw, spec)
-    from nlcx import engine
+def _carry_parts(finished: Path, staging: Path, want: Mapping[str, int]) -> None:
+    """Link into ``staging`` the part files of the finished sweep ``finished`` that hold a
+    variant of this plan (``want``: config hash -> variant index) and are not there yet, each
+    part's metrics before its index (which marks it complete); and the time series of those
+    variants whose index in this plan is the one they were written under."""
+    from nlcx import rundir
 
-    workers = 1 if executor == "serial" else jobs
-    engine.check_sweep_memory(base, min(spec.batch_size, len(variants)) * workers)
-    if force and (out_dir / "parts").exists():
-        for part in (out_dir / "parts").iterdir():
-            part.unlink()
-    done = completed(out_dir)
-    todo = [i for i, h in enumerate(hashes) if h not in done]
-    batches = [
-        Batch(base_raw, [variants[i] for i in todo[k : k + spec.batch_size]],
-              [hashes[i] for i in todo[k : k + spec.batch_size]], out_dir, spec.timeseries)
-        for k in range(0, len(todo), spec.batch_size)
-    ]  # fmt: skip
-    finished, failures = len(variants) - len(todo), 0
-    written: set[str] = set()  # the part files of this run's batches
-    if progress is not None:
-        progress(finished, len(variants), failures)
-    if batches:
-        engine.load_kernel()  # here, once: the process pool's workers fork from this process and inherit it
+    series: dict[str, list[Path]] = {}
+    if (finished / "timeseries").is_dir():
+        for path in (finished / "timeseries").iterdir():
+            series.setdefault(path.name.partition(".")[0], []).append(path)
+    for path in sorted((finished / "parts").glob("*.index.csv")):
+        part = path.name.removesuffix(".index.csv")
+        if (staging / "parts" / path.name).exists():
+            continue
+        index = pd.read_csv(path, dtype={"config_hash": str})
+        planned = index.config_hash.map(want)
+        if planned.isna().all():
+            continue
+        rundir.link_or_copy(finished / "parts" / f"{part}.metrics.csv", staging / "parts" / f"{part}.metrics.csv")
+        rundir.link_or_copy(path, staging / "parts" / path.name)
+        for variant in index.variant[planned.to_numpy() == index.variant.to_numpy()]:
+            for source in series.get(f"variant_{int(variant):06d}", []):
+                if not (staging / "timeseries" / source.name).exists():
+                    rundir.link_or_copy(source, staging / "timeseries" / source.name)
+
+
+def _staging(out_dir: Path, variants: list[Variant], hashes: list[str], force: bool) -> Path:
+    """The staging directory of a sweep into ``out_dir`` (:func:`nlcx.rundir.open_partial`) with
+    the finished batches it resumes from: an interrupted run's, already there, and the finished
+    sweep's in ``out_dir`` of this plan's variants (:func:`_carry_parts`); ``force``: none."""
+    from nlcx import rundir
+
+    staging = rundir.open_partial(out_dir, keep=("parts", "timeseries"), fresh=force)
+    if not force and (out_dir / "parts").is_dir():
+        _carry_parts(out_dir, staging, {h: v.index for v, h in zip(variants, hashes, strict=True)})
+    return staging
+
+
+def _run_batches(
+    batches: list[Batch],
+    executor: str,
+    jobs: int,
+    scheduler: str | None,
+    on_batch: Callable[[BatchResult], None],
+) -> None:
+    """Simulate ``batches`` on ``executor`` (:func:`make_executor`), handing each result to
+    ``on_batch`` as it completes. The kernel must be loaded already (:func:`nlcx.engine.load_kernel`):
+    the process pool's workers fork from this process and inherit it."""
     frozen = bool(batches) and executor == "process"
     if frozen:
         # the workers fork with this heap frozen: their first collection (_settle_heap) then
         # skips what they inherit (imports, the kernel), ~465 -> ~330 ms of a worker's first
         # batch (medians of six pairs); a list splice, nothing collected, free here
         gc.freeze()
-    planned = time.perf_counter()
     pool, close = make_executor(executor, jobs, scheduler) if batches else (None, lambda: None)
     try:
         results: Iterable[BatchResult]
@@ -420,33 +447,82 @@ def run(
             futures: list[Future[BatchResult]] = [pool.submit(run_batch, b, False) for b in batches]
             results = (f.result() for f in as_completed(futures))
         for result in results:
-            written.add(result.part)
-            finished += len(result.index)
-            failures += sum(r["status"] == "failed" for r in result.index)
-            if progress is not None:
-                progress(finished, len(variants), failures)
+            on_batch(result)
     finally:
         close()
         if frozen:
             gc.unfreeze()
         _records.cache_clear()  # the records of batches run in this process (serial executor)
-    simulated = time.perf_counter()
-    index = assemble(out_dir, variants, hashes, base_raw, spec, written)
-    end = time.perf_counter()
-    wall = end - start
-    timings = {"plan": planned - start, "batches": simulated - planned, "assemble": end - simulated, "wall": wall}
-    _write_manifest(
-        out_dir,
-        index,
-        spec,
-        timings,
-        name=base.name,
-        variants=len(variants),
-        computed=len(todo),
-        executor=executor,
-        jobs=jobs,
-    )
-    return SweepOutcome(out_dir, index, len(todo), len(variants) - len(todo), wall)
+
+
+def run(
+    path: str | Path | Mapping[str, Any],
+    overrides: list[str] | None = None,
+    out_dir: Path | None = None,
+    executor: str = "process",
+    jobs: int = 2,
+    scheduler: str | None = None,
+    force: bool = False,
+    progress: Callable[[int, int, int], None] | None = None,
+    with_report: bool = True,
+) -> SweepOutcome:
+    """Run (or resume) a sweep; write sweep.csv, metrics.csv, config.yaml, manifest.json and,
+    ``with_report``, the report, and rename the whole directory into place (module docstring).
+    ``out_dir`` is claimed (:func:`nlcx.rundir.claim`) before any variant is computed."""
+    from nlcx import engine, rundir
+
+    start = time.perf_counter()
+    base_raw, spec, base = load(path, overrides)
+    out_dir = Path(out_dir or base.section.outputs.dir or Path("results") / base.name)
+    variants, hashes = plan(base_raw, spec)
+    workers = 1 if executor == "serial" else jobs
+    engine.check_sweep_memory(base, min(spec.batch_size, len(variants)) * workers)
+    with rundir.claim(out_dir):
+        staging = _staging(out_dir, variants, hashes, force)
+        done = completed(staging)
+        todo = [i for i, h in enumerate(hashes) if h not in done]
+        batches = [
+            Batch(base_raw, [variants[i] for i in todo[k : k + spec.batch_size]],
+                  [hashes[i] for i in todo[k : k + spec.batch_size]], staging, spec.timeseries)
+            for k in range(0, len(todo), spec.batch_size)
+        ]  # fmt: skip
+        finished, failures = len(variants) - len(todo), 0
+        written: set[str] = set()  # the part files of this run's batches
+
+        def on_batch(result: BatchResult) -> None:
+            nonlocal finished, failures
+            written.add(result.part)
+            finished += len(result.index)
+            failures += sum(r["status"] == "failed" for r in result.index)
+            if progress is not None:
+                progress(finished, len(variants), failures)
+
+        if progress is not None:
+            progress(finished, len(variants), failures)
+        if batches:
+            engine.load_kernel()  # here, once, before the workers fork (_run_batches)
+        planned = time.perf_counter()
+        _run_batches(batches, executor, jobs, scheduler, on_batch)
+        simulated = time.perf_counter()
+        index = assemble(staging, variants, hashes, base_raw, spec, written)
+        end = time.perf_counter()
+        timings = {"plan": planned - start, "batches": simulated - planned, "assemble": end - simulated}
+        timings["wall"] = end - start
+        _write_manifest(
+            staging, index, spec, timings, name=base.name, variants=len(variants), computed=len(todo),
+            executor=executor, jobs=jobs, overrides=overrides or [], started=start,
+        )  # fmt: skip
+        page = _write_report(staging) if with_report and not index.empty else None
+        rundir.install(staging, out_dir)
+    report = out_dir / page.name if page is not None else None
+    return SweepOutcome(out_dir, index, len(todo), len(variants) - len(todo), end - start, report)
+
+
+def _write_report(directory: Path) -> Path:
+    """``directory``'s report.html and report.md (:func:`nlcx.pages.render.write_report`); the page."""
+    from nlcx.pages.render import write_report
+
+    return write_report(directory)[0]
 
 
 def _write_manifest(
@@ -460,14 +536,20 @@ def _write_manifest(
     computed: int,
     executor: str,
     jobs: int,
+    overrides: Sequence[str] = (),
+    started: float | None = None,
 ) -> None:
-    """manifest.json: the run (name, variants computed and skipped, statuses, seed, executor),
-    the wall time of each phase (reading, planning and loading the kernel; the batches;
-    assembling sweep.csv and metrics.csv), the package versions and the git commit."""
+    """manifest.json: the run (name, kind ``nlcx_output``: sweep, command line, ``overrides``,
+    start and duration from ``started``, variants computed and skipped, statuses, seed,
+    executor), the wall time of each phase (reading, planning and loading the kernel; the
+    batches; assembling sweep.csv and metrics.csv), the host, the platform, the package
+    versions and the git commit (:func:`nlcx.report.provenance`, :func:`nlcx.report.environment`)."""
     from nlcx import report
 
     info = {
         "name": name,
+        "nlcx_output": "sweep",
+        **report.provenance(overrides, started),
         "variants": variants,
         "computed": computed,
         "skipped": variants - computed,
@@ -477,8 +559,7 @@ def _write_manifest(
         "jobs": jobs,
         "wall_s": round(timings["wall"], 3),
         "timings_s": {phase: round(seconds, 3) for phase, seconds in timings.items()},
-        "versions": report.package_versions(),
-        "git": report.git_state(),
+        **report.environment(),
     }
     report.write_text(out_dir / "manifest.json", json.dumps(info, indent=2, default=str) + "\n")
 

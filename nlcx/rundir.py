@@ -1,0 +1,389 @@
+"""Output directories written whole: staged beside their target, locked, renamed into place.
+
+A run, a sweep or a reproduction is written into a directory beside its target (in the same
+parent, so on the same file system): ``.<name>.nlcx-tmp-<random>`` (:func:`staged`). Only when
+every file is there, report included, is it renamed to the target's name. If the target
+already is an nlcx output directory, the new directory replaces it whole: nothing of the old
+one survives beside the new one. An interrupted write (an exception, Ctrl-C) removes its
+temporary directory and leaves the old target as it was. An existing directory that nlcx did
+not write (:func:`written_by_nlcx`) is never replaced: the write is refused.
+
+Replacing (:func:`install`): on Linux the new and the old directory exchange their names in
+one step (``renameat2`` with ``RENAME_EXCHANGE``), so the target's name always holds a
+complete directory. Elsewhere, or where the file system cannot exchange names, the old
+directory is renamed aside and the new one renamed in: between those two consecutive renames
+no directory bears the target's name. Then the old directory is deleted.
+
+Sweeps are the exception to "an interrupted write leaves nothing": their finished batches
+(``parts/``, and the time series of each variant) are kept in a staging directory with a
+stable name, ``.<name>.nlcx-partial`` (:func:`open_partial`), which a rerun finds and resumes
+from; the sweep's own files are written beside them and the whole is renamed into place.
+
+One process at a time writes a target (:func:`locked`): the lock is an advisory file lock
+(:mod:`filelock`) on ``.<name>.nlcx-lock`` beside the target, which the operating system
+releases if the process dies; the file itself stays (removing it would let two processes lock
+two different files of one name). ``.<name>.nlcx-owner`` records the holder's process id and
+start time, for the refusal a second process prints. The leftovers of a killed writer
+(temporary and set-aside directories) are removed by the next writer of the same target,
+which holds the lock and so knows that nobody is writing them.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import errno
+import functools
+import json
+import os
+import secrets
+import shutil
+import socket
+import sys
+import time
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
+from contextlib import contextmanager, suppress
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from nlcx.errors import NlcxError
+
+if TYPE_CHECKING:
+    from nlcx.drawing import Painter
+    from nlcx.engine import Result
+
+#: The kinds of output directory nlcx writes whole, as its manifest names them under :data:`MARKER`.
+KINDS = ("run", "sweep", "reproduction")
+#: The manifest.json key that marks a directory nlcx wrote; its value is one of :data:`KINDS`.
+MARKER = "nlcx_output"
+#: What an output directory may be.
+ALLOWED = "a new or empty directory, or one nlcx wrote"
+_TMP, _OLD, _PARTIAL, _LOCK, _OWNER = ".nlcx-tmp-", ".nlcx-old-", ".nlcx-partial", ".nlcx-lock", ".nlcx-owner"
+#: Hex digits of the random part of a temporary or set-aside directory's name.
+_RANDOM_HEX = 8
+_AT_FDCWD = -100  # <fcntl.h>: a path relative to the working directory
+_RENAME_EXCHANGE = 2  # <linux/fs.h>: renameat2 swaps the two names
+
+#: Lock files this process holds (:func:`locked`), with the process id that took each one: a
+#: forked worker inherits the table but not the right to release.
+_held: dict[Path, int] = {}
+
+
+class OutputError(NlcxError):
+    """An output directory that cannot be written: names the option and the directory, says
+    why, and what is allowed."""
+
+    def __init__(self, target: Path, problem: str, allowed: str, key: str = "--out") -> None:
+        self.target, self.problem, self.allowed, self.key = target, problem, allowed, key
+        super().__init__(f"output error: {key} = '{target}': {problem}; allowed: {allowed}")
+
+    def __reduce__(self) -> tuple[type, tuple[Path, str, str, str]]:
+        return (type(self), (self.target, self.problem, self.allowed, self.key))
+
+
+def _real(target: Path) -> Path:
+    """``target`` absolute, symbolic links resolved: the directory that is renamed and replaced."""
+    return Path(os.path.realpath(target))
+
+
+def _beside(target: Path, suffix: str) -> Path:
+    real = _real(target)
+    return real.parent / f".{real.name}{suffix}"
+
+
+def lock_path(target: Path) -> Path:
+    """The lock file of ``target``: ``.<name>.nlcx-lock`` beside it."""
+    return _beside(target, _LOCK)
+
+
+def owner_path(target: Path) -> Path:
+    """Who holds ``target``'s lock: ``.<name>.nlcx-owner`` beside it (JSON: pid, since, host)."""
+    return _beside(target, _OWNER)
+
+
+def partial_dir(target: Path) -> Path:
+    """The staging directory of a sweep into ``target``: ``.<name>.nlcx-partial`` beside it."""
+    return _beside(target, _PARTIAL)
+
+
+def _read_manifest(directory: Path) -> dict[str, Any]:
+    """``directory``'s manifest.json as a mapping; empty when it is missing or not a JSON object."""
+    try:
+        manifest = json.loads((directory / "manifest.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return manifest if isinstance(manifest, dict) else {}
+
+
+def _written_before_the_marker(directory: Path, manifest: Mapping[str, Any]) -> bool:
+    """An output of an nlcx that wrote no :data:`MARKER`: a manifest recording nlcx's version,
+    a sweep's sweep.csv or part files (an interrupted sweep has only these), or a
+    reproduction's tables/ beside its claims.csv."""
+    versions = manifest.get("versions")
+    return (
+        (isinstance(versions, dict) and "nlcx" in versions)
+        or (directory / "sweep.csv").is_file()
+        or any((directory / "parts").glob("*.index.csv"))
+        or ((directory / "tables").is_dir() and (directory / "claims.csv").is_file())
+    )
+
+
+def written_by_nlcx(directory: Path) -> bool:
+    """Whether ``directory`` is an nlcx output directory: its manifest.json names one of
+    :data:`KINDS` under :data:`MARKER`, or it was written before the marker existed."""
+    manifest = _read_manifest(directory)
+    return manifest.get(MARKER) in KINDS or _written_before_the_marker(directory, manifest)
+
+
+def check_target(target: Path) -> None:
+    """Refuse (:class:`OutputError`) a ``target`` that exists and is neither an empty directory
+    nor an nlcx output directory (:func:`written_by_nlcx`)."""
+    if not os.path.lexists(target):
+        return
+    if target.is_dir() and (not any(target.iterdir()) or written_by_nlcx(target)):
+        return
+    raise OutputError(target, "exists and is not an nlcx output directory", ALLOWED)
+
+
+def lock_owner(target: Path) -> dict[str, Any] | None:
+    """The record of the process holding ``target``'s lock (pid, since, host), if readable."""
+    try:
+        record = json.loads(owner_path(target).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return record if isinstance(record, dict) else None
+
+
+def _write_owner(target: Path) -> None:
+    """Record this process as the holder of ``target``'s lock (written whole, then renamed)."""
+    from nlcx.drawing import atomic_write
+    from nlcx.report import utc_iso
+
+    record = {"pid": os.getpid(), "since": utc_iso(time.time()), "host": socket.gethostname()}
+    text = json.dumps(record) + "\n"
+    atomic_write(owner_path(target), lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+def _busy(target: Path, key: str) -> OutputError:
+    """The refusal of a target whose lock another process holds."""
+    owner = lock_owner(target) or {}
+    holder = f"pid {owner.get('pid', 'unknown')}, since {owner.get('since', 'unknown')}"
+    allowed = "wait for it to finish" + (", or choose another --out" if key == "--out" else "")
+    return OutputError(target, f"being written by another nlcx process ({holder})", allowed, key)
+
+
+@contextmanager
+def locked(target: Path, key: str = "--out") -> Iterator[None]:
+    """Hold the lock of ``target`` for the block; refuse at once (:class:`OutputError`, naming
+    ``key``) while another process holds it. Within a process the lock nests: a block inside
+    another one's lock of the same target goes on under it."""
+    from filelock import FileLock, Timeout
+
+    path = lock_path(target)
+    if _held.get(path) == os.getpid():
+        yield
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lock = FileLock(path)
+    try:
+        lock.acquire(timeout=0)
+    except Timeout:
+        raise _busy(target, key) from None
+    _held[path] = os.getpid()
+    try:
+        _write_owner(target)
+        yield
+    finally:
+        del _held[path]
+        with suppress(FileNotFoundError):
+            owner_path(target).unlink()
+        lock.release()
+
+
+def _ours(name: str, target: Path) -> bool:
+    """Whether ``name`` is a temporary or set-aside directory of ``target`` (random part included,
+    so ``.a.nlcx-tmp-b.nlcx-tmp-<random>``, target ``a.nlcx-tmp-b``'s, is not target ``a``'s)."""
+    real = _real(target)
+    for suffix in (_TMP, _OLD):
+        prefix = f".{real.name}{suffix}"
+        rest = name[len(prefix) :]
+        if name.startswith(prefix) and len(rest) == _RANDOM_HEX and all(c in "0123456789abcdef" for c in rest):
+            return True
+    return False
+
+
+def remove_leftovers(target: Path) -> None:
+    """Delete the temporary and set-aside directories a killed writer of ``target`` left beside
+    it. Only under ``target``'s lock (:func:`claim`): then none of them is being written."""
+    parent = _real(target).parent
+    if not parent.is_dir():
+        return
+    for entry in parent.iterdir():
+        if _ours(entry.name, target) and entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+@contextmanager
+def claim(target: Path) -> Iterator[None]:
+    """Make ``target`` this process's to write: hold its lock (:func:`locked`), check that it
+    may be replaced (:func:`check_target`) and clear a killed writer's leftovers. Take it before
+    the work that fills it, so a refusal comes before that work, not after."""
+    with locked(target):
+        check_target(target)
+        remove_leftovers(target)
+        yield
+
+
+def _new_sibling(target: Path, suffix: str) -> Path:
+    """A name beside ``target`` that no entry has: ``.<name><suffix><8 random hex digits>``."""
+    real = _real(target)
+    while True:
+        candidate = real.parent / f".{real.name}{suffix}{secrets.token_hex(_RANDOM_HEX // 2)}"
+        if not os.path.lexists(candidate):
+            return candidate
+
+
+@functools.cache
+def _renameat2() -> Callable[..., int] | None:
+    """The C library's ``renameat2``, where there is one (Linux, glibc 2.28 and later)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        function = ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError):
+        return None
+    function.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    function.restype = ctypes.c_int
+    return function
+
+
+def _exchange(first: Path, second: Path) -> bool:
+    """Swap the names of two existing directories in one step; False where the system or the
+    file system cannot (then nothing was renamed)."""
+    renameat2 = _renameat2()
+    if renameat2 is None:
+        return False
+    if renameat2(_AT_FDCWD, os.fsencode(first), _AT_FDCWD, os.fsencode(second), _RENAME_EXCHANGE) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP):
+        return False
+    raise OSError(code, os.strerror(code), str(first), None, str(second))
+
+
+def install(complete: Path, target: Path) -> None:
+    """Rename the directory ``complete`` to ``target``, replacing the directory ``target`` holds
+    (whose replacement :func:`claim` allowed), then delete the old one. ``complete`` must be
+    beside ``target``."""
+    real = _real(target)
+    if not os.path.lexists(real):
+        os.rename(complete, real)
+        return
+    if _exchange(complete, real):
+        shutil.rmtree(complete, ignore_errors=True)  # it names the old directory now
+        return
+    aside = _new_sibling(target, _OLD)
+    os.rename(real, aside)
+    try:
+        os.rename(complete, real)
+    except BaseException:
+        os.rename(aside, real)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
+
+
+@contextmanager
+def staged(target: Path) -> Iterator[Path]:
+    """A new, empty directory beside ``target`` to write its output into, renamed into place
+    (:func:`install`) when the block completes; removed, ``target`` untouched, when the block
+    raises or is interrupted. ``target`` is claimed (:func:`claim`) for the block."""
+    with claim(target):
+        real = _real(target)
+        real.parent.mkdir(parents=True, exist_ok=True)
+        stage = _new_sibling(target, _TMP)
+        stage.mkdir()
+        try:
+            yield stage
+            install(stage, target)
+        except BaseException:
+            shutil.rmtree(stage, ignore_errors=True)
+            raise
+
+
+def open_partial(target: Path, keep: Collection[str], fresh: bool = False) -> Path:
+    """The staging directory of a sweep into ``target`` (:func:`partial_dir`), created if missing,
+    holding only its entries named in ``keep`` (the resumable results; the files an
+    interrupted write of the rest left are removed), or, ``fresh``, nothing. Only under
+    ``target``'s claim (:func:`claim`)."""
+    partial = partial_dir(target)
+    if fresh:
+        shutil.rmtree(partial, ignore_errors=True)
+    partial.mkdir(parents=True, exist_ok=True)
+    for entry in partial.iterdir():
+        if entry.name in keep:
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry)
+        else:
+            entry.unlink()
+    return partial
+
+
+def link_or_copy(source: Path, destination: Path) -> None:
+    """``source`` at ``destination`` too: a hard link (the files of a finished sweep are never
+    rewritten in place: :func:`nlcx.drawing.atomic_write` replaces a file by renaming), or a
+    copy where the file system has no hard links."""
+    destination.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        os.link(source, destination)
+    except OSError:
+        shutil.copy2(source, destination)
+
+
+def save_run(
+    result: Result,
+    out_dir: Path,
+    *,
+    with_report: bool = True,
+    overrides: Sequence[str] = (),
+    timings: Mapping[str, float] | None = None,
+    painter: Painter | None = None,
+    started: float | None = None,
+) -> Path:
+    """Write the run directory of ``result`` as ``nlcx run`` does (it calls this): staged, under
+    the lock of ``out_dir``, the files of :func:`nlcx.report.write_run` and, ``with_report``,
+    report.html and report.md, then renamed into place (:func:`staged`).
+
+    Parameters
+    ----------
+    result
+        The experiment's result (:func:`nlcx.engine.run_experiment`).
+    out_dir
+        The run directory: new, empty, or one nlcx wrote (replaced whole).
+    with_report
+        Write report.html and report.md (:func:`nlcx.pages.render.write_report`).
+    overrides
+        The overrides the experiment was built with, as given; recorded in the manifest.
+    timings
+        Seconds of each phase for the manifest; default ``result.timings``.
+    painter
+        A figure painter process (:class:`nlcx.drawing.Painter`); default: draw in a thread.
+    started
+        The ``time.perf_counter()`` instant the run began; default: now less the seconds of
+        ``timings``.
+
+    Returns
+    -------
+    Path
+        ``out_dir``.
+    """
+    from nlcx import report
+
+    phases = dict(result.timings if timings is None else timings)
+    begun = time.perf_counter() - sum(phases.values()) if started is None else started
+    with staged(out_dir) as stage:
+        report.write_run(result, stage, phases, started=begun, painter=painter, overrides=overrides)
+        if with_report:
+            from nlcx.pages.render import write_report
+
+            write_report(stage)
+    return out_dir
