@@ -14,6 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from nlcx.cli import app
+from nlcx.comparison import THESIS_METRICS
 from nlcx.pages.tables import cells_of
 from nlcx.pages.tolerances import load as load_tolerances
 
@@ -32,11 +33,67 @@ def test_a_run_writes_a_page_whose_metrics_are_metrics_csv(tmp_path: Path) -> No
     metrics = pd.read_csv(out / "metrics.csv")
     shown = [float(v) if v else math.nan for v in re.findall(r'data-value="([^"]*)"', html)]
     np.testing.assert_array_equal(np.array(shown), metrics.value.to_numpy())
-    assert '<img class="figure" src="figure.png"' in html and "Resolved config" in html
+    assert '<img class="figure" src="./figure.png"' in html and "Resolved config" in html
     assert (out / "report.md").read_text().count("\n| conventional |") == (metrics.controller == "conventional").sum()
     skipped = tmp_path / "quiet"
     result = runner.invoke(app, [*args[:-1], str(skipped), "--no-report"])
     assert result.exit_code == 0 and not (skipped / "report.html").exists()
+
+
+def _thesis_rows(metrics: pd.DataFrame) -> list[tuple[str, str, float, float]]:
+    """(signal, metric, conventional, proposed) of the thesis's metrics, in metrics.csv's order."""
+    values = metrics.set_index(["controller", "signal", "metric"]).value
+    keys = metrics[metrics.metric.isin(THESIS_METRICS)][["signal", "metric"]].drop_duplicates()
+    return [(s, m, values[("conventional", s, m)], values[("proposed", s, m)]) for s, m in keys.itertuples(index=False)]
+
+
+def test_a_runs_page_leads_with_the_comparison_then_the_figure_then_the_long_table(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    result = runner.invoke(app, ["run", str(CONFIGS / "x_error_ags.yaml"), "simulation.t_end=8", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    html = (out / "report.html").read_text()
+    md = (out / "report.md").read_text()
+    marks = ['<section id="comparison">', '<section id="figures">', '<details id="metrics-details">',
+             'id="metrics-table"', '<section id="config">', '<section id="manifest">']  # fmt: skip
+    assert [html.index(m) for m in marks] == sorted(html.index(m) for m in marks)
+    marks = ["## Comparison", "![figure.png](./figure.png)", "## Metrics", "## Resolved config"]
+    assert [md.index(m) for m in marks] == sorted(md.index(m) for m in marks)
+    rows = _thesis_rows(pd.read_csv(out / "metrics.csv"))
+    assert {(s, m) for s, m, _, _ in rows} >= {("x", "overshoot"), ("x", "peak"), ("theta", "peak_deviation")}
+    shown = [float(v) for v in re.findall(r'data-compare="([^"]*)"', html)]
+    np.testing.assert_array_equal(shown, [v for _, _, c, p in rows for v in (c, p)])
+    improvements = [float(v) for v in re.findall(r'data-improvement="([^"]*)"', html)]
+    by_hand = [(c - p) / p * 100 for _, _, c, p in rows]  # the thesis's (conventional - proposed) / proposed
+    np.testing.assert_allclose(improvements, by_hand, rtol=1e-12)
+    for text in (unescape(re.sub(r"<[^>]+>", "", html)), md):
+        assert "(first − other) / other × 100" in text and "positive where the other controller" in text
+    _, _, c, p = rows[0]
+    assert f"| rise_time | s | {c:.4g} | {p:.4g} | {(c - p) / p * 100:.3g} |" in md
+
+
+def test_a_controller_whose_run_stopped_shows_its_status_in_the_comparison(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    result = runner.invoke(app, ["run", str(CONFIGS / "x_error_ags.yaml"), "simulation.t_end=2", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    metrics = pd.read_csv(out / "metrics.csv")
+    reason = "diverged at t = 1.5 s: |theta| > 1.5708 (simulation.bounds)"
+    stopped = pd.DataFrame(  # the rows `nlcx run` writes for a run that stopped
+        [["conventional", "all", "t_fail", 1.5, "s", "unstable", reason]]
+        + [["conventional", s, "settling_time", math.nan, "s", "unstable", reason] for s in ("x", "theta")],
+        columns=metrics.columns,
+    )
+    pd.concat([stopped, metrics[metrics.controller == "proposed"]]).to_csv(out / "metrics.csv", index=False)
+    assert runner.invoke(app, ["report", str(out)]).exit_code == 0
+    html = (out / "report.html").read_text()
+    proposed = metrics[(metrics.controller == "proposed") & metrics.metric.isin(THESIS_METRICS)]
+    assert html.count('<td class="status">unstable</td>') == len(proposed)
+    assert re.findall(r'data-improvement="([^"]*)"', html) == ["nan"] * len(proposed)
+    assert "conventional</b>: diverged at t = 1.5 s: |theta| &gt; 1.5708" in html
+    shown = [float(v) for v in re.findall(r'data-compare="([^"]*)"', html)]
+    np.testing.assert_array_equal(np.sort(shown), np.sort(proposed.value.to_numpy()))  # only the proposed's
+    md = (out / "report.md").read_text()
+    assert "- conventional: unstable (diverged at t = 1.5 s: \\|theta\\| &gt; 1.5708 (simulation.bounds))" in md
+    assert md.split("## Metrics")[0].count("| unstable |") == len(proposed)  # the comparison's cells
 
 
 def test_the_robustness_sweeps_page_is_its_metrics_aggregated(tmp_path: Path) -> None:
@@ -59,7 +116,8 @@ def test_the_robustness_sweeps_page_is_its_metrics_aggregated(tmp_path: Path) ->
     html = (out / "report.html").read_text()
     medians = [float(v) for v in re.findall(r'data-median="([^"]*)"', html)]
     np.testing.assert_array_equal(np.array(medians), summary["median"].to_numpy())
-    assert html.count('src="report_files/parameter_') == 4  # friction model, M, m, l
+    assert html.count('src="./report_files/parameter_') == 4  # friction model, M, m, l
+    assert "3 distinct values: none, simple, exponential" in html  # the grid of robustness.yaml
     assert "| conventional | x | rise_time |" in (out / "report.md").read_text()
 
 

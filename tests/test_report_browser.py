@@ -9,12 +9,14 @@ from urllib.parse import unquote, urlparse
 
 import numpy as np
 import pandas as pd
+import pytest
 from matplotlib.image import imread
 from playwright.sync_api import sync_playwright
 
 #: Chromium as root needs --no-sandbox; the others keep it off this machine's closed network.
 ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
         "--disable-sync", "--no-first-run"]  # fmt: skip
+pytestmark = pytest.mark.browser
 
 
 def chromium() -> str:

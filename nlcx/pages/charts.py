@@ -3,14 +3,16 @@
 :func:`grouped_bars` draws, per (signal, metric) of a thesis table, four bars: thesis
 conventional, thesis proposed, nlcx conventional, nlcx proposed, each group scaled to its
 own largest value (metrics of different units side by side); the exact values are in each
-bar's tooltip.
+bar's tooltip. The charts are :class:`markupsafe.Markup` (a page prints them as they are), so
+every text inside them (labels, tooltips) is escaped here.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from html import escape
+
+from markupsafe import Markup, escape
 
 from nlcx.pages.tables import Cell
 
@@ -25,6 +27,8 @@ BAR, GAP, HEIGHT, TOP, BOTTOM = 9, 14, 90, 8, 34
 
 @dataclass
 class Group:
+    """One (signal, metric) of a table: its four values, by (source, controller)."""
+
     label: str
     values: dict[tuple[str, str], float]
 
@@ -42,11 +46,11 @@ def groups_of(cells: list[Cell]) -> list[Group]:
     return [g for g in groups.values() if len(g.values) == 4]
 
 
-def grouped_bars(cells: list[Cell]) -> str:
-    """The SVG of a table's grouped bars ('' when it has no conventional/proposed pairs)."""
+def grouped_bars(cells: list[Cell]) -> Markup:
+    """The SVG of a table's grouped bars (empty when it has no conventional/proposed pairs)."""
     groups = groups_of(cells)
     if not groups:
-        return ""
+        return Markup("")
     width = len(groups) * (4 * BAR + GAP) + GAP
     parts = [
         f'<svg class="bars" role="img" width="{width}" height="{TOP + HEIGHT + BOTTOM}" '
@@ -69,14 +73,14 @@ def grouped_bars(cells: list[Cell]) -> str:
             f"{escape(group.label)}</text>"
         )
     parts.append("</svg>")
-    return "".join(parts)
+    return Markup("".join(parts))
 
 
-def legend() -> str:
+def legend() -> Markup:
     """The four series' colours, once per page."""
     items = "".join(
-        f'<span class="key"><svg width="10" height="10"><rect width="10" height="10" fill="{c}"/></svg> '
-        f"{s} {ctrl}</span>"
-        for s, ctrl, c in SERIES
+        f'<span class="key"><svg width="10" height="10"><rect width="10" height="10" fill="{escape(colour)}"/></svg> '
+        f"{escape(source)} {escape(controller)}</span>"
+        for source, controller, colour in SERIES
     )
-    return f'<p class="legend">{items}</p>'
+    return Markup(f'<p class="legend">{items}</p>')

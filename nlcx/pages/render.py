@@ -1,8 +1,17 @@
-"""Render a directory's report: detect its kind, gather its numbers, fill the templates."""
+"""Render a directory's report: detect its kind, gather its numbers, fill the templates.
+
+Every value a template prints is escaped, so a page shows what a config, a CSV or a file name
+holds as text and never runs it: the HTML templates (``*.html.j2``, and templates without a
+name) by Jinja2's HTML autoescaping, the Markdown templates (``*.md.j2``) by
+:func:`nlcx.pages.markup.markdown_text`, applied to every printed value. Only
+:class:`markupsafe.Markup` passes unescaped: the charts and code blocks nlcx builds, which
+escape the values inside them.
+"""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -10,6 +19,7 @@ import jinja2
 
 from nlcx import report
 from nlcx.errors import ConfigError
+from nlcx.pages import markup
 
 TEMPLATES = Path(__file__).parent / "templates"
 
@@ -40,16 +50,45 @@ def number(value: Any, digits: int = 4) -> str:
     return str(value)
 
 
+def is_html(name: str | None) -> bool:
+    """Whether a template is HTML (escaped as HTML): all but the Markdown ones (``*.md.j2``)."""
+    return name is None or not name.endswith(".md.j2")
+
+
+@jinja2.pass_eval_context
+def _finalize(eval_ctx: jinja2.nodes.EvalContext, value: Any) -> Any:
+    """Every printed value: left to autoescaping on an HTML page, escaped as Markdown text on
+    a Markdown page."""
+    return value if eval_ctx.autoescape else markup.markdown_text(value)
+
+
+def _markdown_only(build: Callable[..., Any]) -> Callable[..., Any]:
+    """A filter that builds Markdown (:func:`~nlcx.pages.markup.fenced`, :func:`~nlcx.pages.markup.code`):
+    on an HTML page its result is plain text, escaped like any other value."""
+
+    @jinja2.pass_eval_context
+    def apply(eval_ctx: jinja2.nodes.EvalContext, value: Any, *args: Any) -> Any:
+        built = build(value, *args)
+        return str(built) if eval_ctx.autoescape else built
+
+    return apply
+
+
 def environment() -> jinja2.Environment:
+    """The templates' environment: every printed value escaped (HTML or Markdown, by the
+    template's name), the filters ``num``, ``href``, ``fenced`` and ``code``."""
     env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(TEMPLATES),
-        autoescape=jinja2.select_autoescape(["html"]),
+        autoescape=is_html,
+        finalize=_finalize,
         undefined=jinja2.StrictUndefined,
         trim_blocks=True,
         lstrip_blocks=True,
         keep_trailing_newline=True,
     )
-    env.filters["num"] = number
+    env.filters.update(
+        num=number, href=markup.href, fenced=_markdown_only(markup.fenced), code=_markdown_only(markup.code)
+    )
     return env
 
 

@@ -16,6 +16,7 @@ from typing import Any
 
 import pandas as pd
 from markdown_it import MarkdownIt
+from markupsafe import Markup
 
 from nlcx.pages import charts
 from nlcx.pages.tables import TableComparison, compare
@@ -93,24 +94,26 @@ def _relative_links(tokens: list[Any], document: Path, directory: Path) -> None:
             token.attrSet("href", relative + (f"#{fragment}" if fragment else ""))
 
 
-def sections(path: Path, directory: Path) -> list[dict[str, str]]:
+def sections(path: Path, directory: Path) -> list[dict[str, Any]]:
     """The ``## `` sections of a Markdown document: heading, a link to the document and the
-    body as HTML (markdown-it-py, CommonMark with tables, raw HTML escaped), its relative links
-    pointing from the page in ``directory`` to the document's neighbours."""
+    body as HTML (markdown-it-py, CommonMark with tables; raw HTML escaped and javascript:,
+    vbscript:, file: and data: links left as text, so the page prints it as it is), its
+    relative links pointing from the page in ``directory`` to the document's neighbours."""
     if not path.is_file():
         return []
     md = MarkdownIt("commonmark", {"html": False}).enable("table")
     href = Path(os.path.relpath(path, directory)).as_posix()
-    out: list[dict[str, str]] = []
+    out: list[dict[str, Any]] = []
     for block in path.read_text(encoding="utf-8").split("\n## ")[1:]:
         heading, _, body = block.partition("\n")
         tokens = md.parse(body)
         _relative_links(tokens, path, directory)
-        out.append({"heading": heading.strip(), "href": href, "html": md.renderer.render(tokens, md.options, {})})
+        html = Markup(md.renderer.render(tokens, md.options, {}))
+        out.append({"heading": heading.strip(), "href": href, "html": html})
     return out
 
 
-def deviations(directory: Path, repo: Path | None) -> dict[str, list[dict[str, str]]]:
+def deviations(directory: Path, repo: Path | None) -> dict[str, list[dict[str, Any]]]:
     """What the deviations section shows: every documented assumption (unprinted parameters
     and choices), the errata of the printed equations, the calibration's findings, and what
     was difficult (the identification study's findings and conclusion)."""

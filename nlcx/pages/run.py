@@ -1,5 +1,8 @@
-"""What the report of a run directory (``nlcx run``) shows: its metrics table, its figures,
-the resolved config and the manifest (versions, commit, seed, timings) in readable form."""
+"""What the report of a run directory (``nlcx run``) shows, in this order: the comparison of its
+controllers (each one's thesis metrics per signal and the improvement % of each later one over
+the first, :mod:`nlcx.comparison`), its figures, the long metrics table, the resolved config and
+the manifest (versions, commit, seed, timings) in readable form. Reads the files with the
+standard library only: ``nlcx run`` writes its page without importing pandas."""
 
 from __future__ import annotations
 
@@ -11,6 +14,8 @@ from typing import Any
 
 import yaml
 
+from nlcx.comparison import Comparison, Row, comparison
+
 
 def metric_records(path: Path) -> list[dict[str, Any]]:
     """metrics.csv's rows: every field as written, ``value`` as a float (NaN where empty)."""
@@ -18,14 +23,35 @@ def metric_records(path: Path) -> list[dict[str, Any]]:
         return [{**row, "value": float(row["value"]) if row["value"] else math.nan} for row in csv.DictReader(file)]
 
 
+def by_signal(table: Comparison) -> list[dict[str, Any]]:
+    """The comparison's rows grouped by signal: ``{"signal": s, "rows": [Row, ...]}`` in order."""
+    groups: dict[str, list[Row]] = {}
+    for row in table.rows:
+        groups.setdefault(row.signal, []).append(row)
+    return [{"signal": signal, "rows": rows} for signal, rows in groups.items()]
+
+
+def _config(directory: Path) -> tuple[str, dict[str, Any]]:
+    """config.yaml's text and its mapping (both empty when the directory has none)."""
+    path = directory / "config.yaml"
+    text = path.read_text(encoding="utf-8") if path.is_file() else ""
+    loaded = yaml.load(text, Loader=yaml.CSafeLoader) if text else None
+    return text, loaded if isinstance(loaded, dict) else {}
+
+
 def context(directory: Path) -> dict[str, Any]:
-    config = (directory / "config.yaml").read_text(encoding="utf-8") if (directory / "config.yaml").is_file() else ""
+    """Everything the run page shows."""
+    config, raw = _config(directory)
     manifest = json.loads((directory / "manifest.json").read_text()) if (directory / "manifest.json").is_file() else {}
-    name = (yaml.load(config, Loader=yaml.CSafeLoader) or {}).get("name", directory.name) if config else directory.name
+    metrics = metric_records(directory / "metrics.csv")
+    table = comparison(metrics)
     return {
         "kind": "run",
-        "title": f"nlcx run: {name}",
-        "metrics": metric_records(directory / "metrics.csv"),
+        "title": f"nlcx run: {raw.get('name', directory.name)}",
+        "caption": str(raw.get("title") or ""),
+        "comparison": table,
+        "signals": by_signal(table),
+        "metrics": metrics,
         "figures": sorted(p.name for p in directory.glob("*.png")),
         "config": config,
         "manifest": manifest,

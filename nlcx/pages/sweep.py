@@ -3,7 +3,7 @@
 Per controller, signal and metric over the variants: median, interquartile range, min, max,
 and how many variants measured it, were unstable (the run stopped) or failed (the variant
 did not run); ``summary.csv`` holds the same table. Plots: each metric's distribution per
-controller, and each metric against each varied parameter.
+controller, and each metric against each varied parameter (with the values it took).
 """
 
 from __future__ import annotations
@@ -43,6 +43,18 @@ def summary(metrics: pd.DataFrame, index: pd.DataFrame) -> pd.DataFrame:
 def varied(index: pd.DataFrame) -> list[str]:
     """The varied parameters: the sweep index's ``value:`` columns."""
     return [c for c in index.columns if c.startswith("value:")]
+
+
+def described(values: pd.Series, shown: int = 12) -> str:
+    """A varied parameter's values in words: their range (numbers) or the distinct values
+    (text: the first ``shown`` of them, in order of appearance)."""
+    present = values.dropna()
+    if pd.api.types.is_numeric_dtype(values) and not pd.api.types.is_bool_dtype(values):
+        distinct = present.nunique()
+        return f"{distinct} distinct values from {present.min():.4g} to {present.max():.4g}" if distinct else "no value"
+    levels = list(dict.fromkeys(present.astype(str)))
+    more = f", and {len(levels) - shown} more" if len(levels) > shown else ""
+    return f"{len(levels)} distinct values: " + ", ".join(levels[:shown]) + more
 
 
 def _pyplot() -> Any:
@@ -122,12 +134,18 @@ def context(directory: Path) -> dict[str, Any]:
     plots = []
     for i, column in enumerate(params):
         parameter_figure(metrics, index, column, files / f"parameter_{i}.png")
-        plots.append({"parameter": column.removeprefix("value:"), "file": f"{FILES}/parameter_{i}.png"})
+        plots.append({
+            "parameter": column.removeprefix("value:"),
+            "described": described(index[column]),
+            "file": f"{FILES}/parameter_{i}.png",
+        })  # fmt: skip
     config = (directory / "config.yaml").read_text(encoding="utf-8") if (directory / "config.yaml").is_file() else ""
-    name = (yaml.safe_load(config) or {}).get("name", directory.name) if config else directory.name
+    loaded = yaml.safe_load(config) if config else None
+    raw = loaded if isinstance(loaded, dict) else {}
     return {
         "kind": "sweep",
-        "title": f"nlcx sweep: {name}",
+        "title": f"nlcx sweep: {raw.get('name', directory.name)}",
+        "caption": str(raw.get("title") or ""),
         "summary": table.to_dict("records"),
         "variants": len(index),
         "status": index.status.value_counts().to_dict() if "status" in index else {},

@@ -14,6 +14,7 @@ from typing import Any
 
 import pandas as pd
 
+from nlcx.comparison import improvement  # the thesis's formula, importable from here too
 from nlcx.thesis import ags, catalog
 
 ANGLES = ("theta", "phi")
@@ -45,13 +46,6 @@ def lookup_value(values: dict[tuple[str, str, str], float], controller: str, sig
 def thesis_value(metrics: pd.DataFrame, controller: str, signal: str, metric: str) -> float:
     """Our number for a thesis (signal, metric) of one run's metrics (:func:`lookup_value`)."""
     return lookup_value(metric_lookup(metrics), controller, signal, metric)
-
-
-def improvement(conventional: float, proposed: float) -> float:
-    """The thesis's % improvement: (conventional - proposed) / proposed x 100."""
-    if proposed == 0 or math.isnan(proposed) or math.isnan(conventional):
-        return math.nan
-    return (conventional - proposed) / proposed * 100.0
 
 
 def _metric_row(printed: Any, metrics: pd.DataFrame, status: dict[str, str]) -> dict[str, Any]:

@@ -1,0 +1,99 @@
+"""nlcx.comparison: the thesis's improvement % and the controllers-side-by-side table, checked
+against numbers worked out by hand."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from nlcx import comparison
+from nlcx.comparison import THESIS_METRICS, compare, improvement
+from nlcx.errors import NlcxError
+from nlcx.thesis import tables
+
+
+def test_improvement_is_the_thesis_formula_and_nan_where_undefined() -> None:
+    assert improvement(2.0, 1.6) == pytest.approx(25.0)  # (2 - 1.6) / 1.6 = 0.25
+    assert improvement(1.0, 2.0) == pytest.approx(-50.0)  # the later controller is worse
+    assert improvement(3.0, 3.0) == 0.0
+    assert math.isnan(improvement(1.0, 0.0)) and math.isnan(improvement(1.0, math.nan))
+    assert math.isnan(improvement(math.nan, 2.0))
+    assert tables.improvement is improvement  # one home for the formula
+
+
+def frame(rows: list[tuple[str, str, str, float, str, str]]) -> pd.DataFrame:
+    """A metrics.csv frame from (controller, signal, metric, value, unit, status) rows."""
+    out = pd.DataFrame(rows, columns=["controller", "signal", "metric", "value", "unit", "status"])
+    return out.assign(note="")
+
+
+#: Three controllers on a step in x and theta regulated to 0; c stopped (its rows as nlcx writes them).
+METRICS = frame(
+    [("a", "x", "rise_time", 2.0, "s", "ok"), ("a", "x", "overshoot", 30.0, "%", "ok"),
+     ("a", "x", "undershoot", 1.0, "%", "ok"), ("a", "x", "ise", 0.6, "m^2*s", "ok"),
+     ("a", "theta", "peak_deviation", 0.1, "rad", "ok"), ("a", "theta", "settling_time", math.nan, "s", "ok"),
+     ("b", "x", "rise_time", 2.5, "s", "ok"), ("b", "x", "overshoot", 20.0, "%", "ok"),
+     ("b", "x", "undershoot", 2.0, "%", "ok"), ("b", "x", "ise", 0.0, "m^2*s", "ok"),
+     ("b", "theta", "peak_deviation", 0.05, "rad", "ok"), ("b", "theta", "settling_time", 4.0, "s", "ok"),
+     ("c", "all", "t_fail", 1.2, "s", "unstable"), ("c", "x", "settling_time", math.nan, "s", "unstable"),
+     ("c", "theta", "settling_time", math.nan, "s", "unstable")]
+)  # fmt: skip
+
+
+def test_compare_sets_the_controllers_side_by_side_with_the_improvement_of_each_later_one() -> None:
+    table = compare(METRICS)
+    assert table.index.names == ["signal", "metric"]
+    assert list(table.index) == [("x", "rise_time"), ("x", "overshoot"), ("x", "ise"), ("x", "settling_time"),
+                                 ("theta", "peak_deviation"), ("theta", "settling_time")]  # fmt: skip
+    assert list(table.columns) == ["unit", "a", "b", "c", "improvement_b_pct", "improvement_c_pct"]
+    assert table.unit.tolist() == ["s", "%", "m^2*s", "s", "rad", "s"]
+    np.testing.assert_array_equal(table.a, [2.0, 30.0, 0.6, np.nan, 0.1, np.nan])
+    np.testing.assert_array_equal(table.b, [2.5, 20.0, 0.0, np.nan, 0.05, 4.0])
+    np.testing.assert_array_equal(table.c, [np.nan] * 6)  # stopped: nothing to compare
+    # (a - b) / b x 100 by hand: (2 - 2.5) / 2.5 = -20 %, (30 - 20) / 20 = 50 %, b's ISE 0: undefined,
+    # x's settling time only c (stopped) has, (0.1 - 0.05) / 0.05 = 100 %, a never settled: undefined.
+    np.testing.assert_allclose(table.improvement_b_pct, [-20.0, 50.0, np.nan, np.nan, 100.0, np.nan], rtol=1e-12)
+    assert table.improvement_c_pct.isna().all()
+    assert all(table[c].dtype == float for c in table.columns if c != "unit")
+
+
+def test_compare_takes_exactly_the_metrics_named_and_says_which_names_are_unknown() -> None:
+    table = compare(METRICS, ["undershoot", "t_fail"])
+    assert list(table.index) == [("x", "undershoot"), ("all", "t_fail")]
+    np.testing.assert_array_equal(table.a, [1.0, np.nan])
+    assert table.improvement_b_pct.iloc[0] == pytest.approx(-50.0)  # (1 - 2) / 2
+    with pytest.raises(NlcxError) as error:
+        compare(METRICS, ["ise", "overshot", "itae"])
+    message = str(error.value)
+    assert "\n" not in message and "'overshot'" in message and "'itae'" in message
+    assert "allowed: rise_time, overshoot, undershoot, ise, peak_deviation, settling_time, t_fail" in message
+
+
+def test_compare_defaults_to_the_thesis_metrics_present() -> None:
+    assert THESIS_METRICS == ("rise_time", "settling_time", "overshoot", "peak", "peak_deviation", "ise", "iae", "itae")
+    assert set(compare(METRICS).index.get_level_values("metric")) == {
+        "rise_time", "overshoot", "ise", "peak_deviation", "settling_time"
+    }  # fmt: skip
+
+
+def test_compare_refuses_the_rows_of_several_runs_and_frames_without_metric_columns() -> None:
+    with pytest.raises(NlcxError, match=r"\('a', 'x', 'ise'\) appears twice"):
+        compare(pd.concat([METRICS, METRICS.iloc[[3]]]))
+    with pytest.raises(NlcxError, match=r"lacks the columns \['metric'\]"):
+        compare(METRICS.drop(columns="metric"))
+
+
+def test_the_pages_comparison_is_compares_table() -> None:
+    records = [{**r, "value": float(r["value"])} for r in METRICS.to_dict("records")]
+    side_by_side = comparison.comparison(records)
+    table = compare(METRICS)
+    assert side_by_side.controllers == ("a", "b", "c")
+    assert side_by_side.status == {"a": "ok", "b": "ok", "c": "unstable"}
+    assert [(r.signal, r.metric) for r in side_by_side.rows] == list(table.index)
+    np.testing.assert_array_equal([r.values for r in side_by_side.rows], table[["a", "b", "c"]].to_numpy())
+    np.testing.assert_array_equal(
+        [r.improvements for r in side_by_side.rows], table[["improvement_b_pct", "improvement_c_pct"]].to_numpy()
+    )
