@@ -1,8 +1,74 @@
-"""nlcx: reproducible experiments on the control of nonlinear systems."""
+"""nlcx: reproducible experiments on the control of nonlinear systems.
 
+The Python API in one namespace. Importing ``nlcx`` is light: each name loads its module (and
+numpy, pandas, numba) on first use.
+
+>>> import nlcx
+>>> result = nlcx.run("configs/x_error_ags.yaml", ["simulation.t_end=10"])
+>>> result.compare(["overshoot"]).columns.tolist()
+['unit', 'conventional', 'proposed', 'improvement_proposed_pct']
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from nlcx._version import __version__
 from nlcx.compiled_cache import ensure_consistent
 
-__version__ = "0.1.0"
+if TYPE_CHECKING:
+    from nlcx.api import Result, SweepResult, experiment, load_run, run, sweep
+    from nlcx.comparison import compare, improvement
+    from nlcx.errors import ConfigError, NlcxError
+    from nlcx.metrics import step_info
+    from nlcx.plants.scalar import plant
+
+__all__ = [
+    "ConfigError",
+    "NlcxError",
+    "Result",
+    "SweepResult",
+    "__version__",
+    "compare",
+    "experiment",
+    "improvement",
+    "load_run",
+    "plant",
+    "run",
+    "step_info",
+    "sweep",
+]
+
+#: Where each public name lives (imported on first access, PEP 562).
+_HOMES = {
+    "Result": "nlcx.api",
+    "SweepResult": "nlcx.api",
+    "experiment": "nlcx.api",
+    "load_run": "nlcx.api",
+    "run": "nlcx.api",
+    "sweep": "nlcx.api",
+    "compare": "nlcx.comparison",
+    "improvement": "nlcx.comparison",
+    "ConfigError": "nlcx.errors",
+    "NlcxError": "nlcx.errors",
+    "step_info": "nlcx.metrics",
+    "plant": "nlcx.plants.scalar",
+}
+
+
+def __getattr__(name: str) -> Any:
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module 'nlcx' has no attribute {name!r}")
+    value = getattr(importlib.import_module(home), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
+
 
 # before any compiled function is loaded from numba's disk cache (see nlcx.compiled_cache)
 ensure_consistent()

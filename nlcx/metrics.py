@@ -620,6 +620,22 @@ def step_info(
     python-control reports the sample at or after each crossing, so its rise and settling
     times are within one sample interval of these; the other values are the same samples.
     See ``docs/metrics.md``.
+
+    Examples
+    --------
+    A first-order lag y = 1 - exp(-t) rises from 10 % to 90 % in ln 9 and enters the 2 % band
+    at -ln 0.02, without overshoot:
+
+    >>> import numpy as np
+    >>> from nlcx import step_info
+    >>> t = np.linspace(0.0, 10.0, 10001)
+    >>> info = step_info(t, 1.0 - np.exp(-t), reference=1.0)
+    >>> round(float(info["rise_time"]), 6), round(float(np.log(9.0)), 6)
+    (2.197225, 2.197225)
+    >>> round(float(info["settling_time"]), 6), round(float(-np.log(0.02)), 6)
+    (3.912023, 3.912023)
+    >>> float(info["overshoot"])
+    0.0
     """
     t_arr, y2, squeeze = _prepare(t, y, "y")
     n_rows = y2.shape[0]

@@ -128,6 +128,26 @@ class PlantModel:
     input_axes: ClassVar[Mapping[str, str]] = {}
     rhs: ClassVar[Any] = None
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Keep a right-hand side given as ``rhs = my_rhs`` a plain function of the class.
+
+        A numba dispatcher (or a Python function) assigned as a class attribute would bind to
+        the instance like a method, and the kernel would call it with ``self`` as a seventh
+        argument; it is stored as a ``staticmethod`` instead, as if written so. A Python
+        function that numba has not compiled is refused in one line that names the fix."""
+        super().__init_subclass__(**kwargs)
+        rhs = cls.__dict__.get("rhs")
+        if rhs is None or isinstance(rhs, staticmethod):
+            return
+        if not hasattr(rhs, "py_func"):
+            raise ConfigError(
+                f"{cls.__name__}.rhs",
+                getattr(rhs, "__name__", rhs),
+                "a numba-compiled function: decorate it with @numba.njit(nlcx.kernel.abi.RHS_SIG), "
+                "or write f(t, x, u, p) for one state and register it with @nlcx.plant",
+            )
+        cls.rhs = staticmethod(rhs)
+
     def parameter_vector(self, params: PlantParams) -> np.ndarray:
         """The parameter vector p the right-hand side reads."""
         raise NotImplementedError
