@@ -44,7 +44,7 @@ test: dev-install
 
 ## docs: build the documentation site into site/ (mkdocs, --strict; also a test)
 docs: dev-install
-	$(BIN)/mkdocs build --strict
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 ## lint: ruff on the package, tests and scripts
 lint: dev-install

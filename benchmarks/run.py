@@ -1,6 +1,10 @@
-"""nlcx speed benchmarks (issue targets a-d). Run from the repository root:
+"""nlcx speed benchmarks (targets a-e). Run from the repository root:
 
     python benchmarks/run.py | tee benchmarks/latest.txt      (or: make bench)
+
+It also rewrites the speed table of README.md (between the ``speed-table`` markers) from the
+figures it measured; ``python benchmarks/run.py --table-from benchmarks/latest.txt`` rewrites
+the table from a saved output without running anything.
 
 (a) configs/xyz_error_ags.yaml: simulation of both controllers after warm-up (target <= 0.2 s),
     `nlcx run` end to end with a warm numba cache (target <= 1.5 s), and the first run with an
@@ -31,11 +35,13 @@ import functools
 import json
 import os
 import platform
+import re
 import subprocess
 import sys
 import tempfile
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -110,8 +116,8 @@ def run_measured(cmd: list[str], cwd: Path, env: dict[str, str] | None = None) -
     """(wall s, (peak tree Rss kB, peak tree Pss kB), stdout) of a command, sampling memory every
     50 ms. The Rss sum counts a page shared by forked workers once per worker, so it overstates;
     the Pss sum is the memory the tree occupies. A sample reads every process's smaps_rollup,
-    which walks its page tables: ~12 ms of CPU a sample for (b)'s three processes, ~20 % of a
-    core, which a 2-core machine takes from the command. So the speed targets are timed by
+    which walks its page tables: a sizeable share of a core, which a 2-core machine takes from
+    the command. So the speed targets are timed by
     :func:`run_timed`, and memory is measured in a run of its own."""
     start = time.perf_counter()
     proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -163,7 +169,8 @@ def sweep_config(n: int) -> dict[str, Any]:
 
 def prepared_variants(raw: dict[str, Any], n: int) -> list[Any]:
     """The first ``n`` variants of the sweep ``raw``, prepared as a sweep batch prepares them."""
-    from nlcx import config, engine, sweep
+    from nlcx import config, engine
+    from nlcx import sweeps as sweep
 
     base_raw = {k: v for k, v in raw.items() if k != "sweep"}
     spec = sweep.SweepSection.model_validate({**raw["sweep"], "random": {**raw["sweep"]["random"], "n": n}})
@@ -192,7 +199,7 @@ def kernel_pass(batches: list[list[Any]], grid: Any, arena: Any) -> None:
 def planned_batches(n_batches: int) -> list[Any]:
     """Benchmark (b)'s sweep of 100 * n_batches variants, written to a scratch directory and
     planned in batches of 100 (``sweep.run_batch`` runs one; its part files go there too)."""
-    from nlcx import sweep
+    from nlcx import sweeps as sweep
 
     work = scratch()
     path = work / "sweep.yaml"
@@ -270,7 +277,8 @@ def limit_reference(raw: dict[str, Any], jobs: int = 2) -> dict[str, Any]:
 
     import reference
 
-    from nlcx import config, engine, sweep
+    from nlcx import config, engine
+    from nlcx import sweeps as sweep
 
     base = config.interpolate({k: v for k, v in raw.items() if k != "sweep"})
     spec = sweep.SweepSection.model_validate(raw["sweep"])
@@ -546,21 +554,146 @@ def print_b(b: dict[str, Any]) -> None:
     )
 
 
+#: Where the speed table sits in README.md.
+README = ROOT / "README.md"
+TABLE_START, TABLE_END = "<!-- speed-table:start -->", "<!-- speed-table:end -->"
+#: How latest.txt prints each figure of the table: key -> the pattern of its value.
+FIGURE_PATTERNS = {
+    "machine": r"^nlcx benchmarks, [^,]*, (.+)$",
+    "a_simulate_s": r"^\(a\) .*?: simulate \(.*?\) ([\d.]+) s",
+    "a_end_to_end_s": r"end to end \(warm cache\) ([\d.]+) s",
+    "a_cold_run_s": r"first run with an empty numba cache \(compiles\) ([\d.]+) s",
+    "b_variants": r"^\(b\) (\d+) x-pendulum variants",
+    "b_wall_s": r"^\(b\) .*?--jobs 2: ([\d.]+) s wall",
+    "b_peak_mb": r"^\(b\) .*? peak (\d+) MB",
+    "b_ratio": r"ratio nlcx / limit ([\d.]+)",
+    "c_wall_s": r"^\(c\) .*?: ([\d.]+) s \[target",
+    "c_peak_mb": r"^\(c\) .*? peak (\d+) MB",
+    "d_nlcx_ms": r"^\(d\) .*?: nlcx ([\d.]+) ms",
+    "d_ratio": r"input_output_response [\d.]+ s \(x(\d+)\)",
+    "e_make_run_s": r"^\(e\) .*?: (\d+) s \[target",
+}
+
+
+def figures_from_text(text: str) -> dict[str, Any]:
+    """The speed table's figures from a saved output of this script (benchmarks/latest.txt);
+    a benchmark the output lacks has none of its figures."""
+    figures: dict[str, Any] = {}
+    for key, pattern in FIGURE_PATTERNS.items():
+        match = re.search(pattern, text, flags=re.MULTILINE)
+        if match:
+            figures[key] = match.group(1) if key == "machine" else float(match.group(1))
+    return figures
+
+
+def figures_measured(
+    a: dict[str, float] | None, b: dict[str, Any] | None, c: dict[str, float] | None,
+    d: dict[str, float] | None, e: dict[str, Any] | None,
+) -> dict[str, Any]:  # fmt: skip
+    """The speed table's figures from the benchmarks' results, rounded as the output prints them."""
+    figures: dict[str, Any] = {"machine": machine()}
+    if a:
+        figures |= {"a_simulate_s": round(a["simulate_s"], 3), "a_end_to_end_s": round(a["end_to_end_s"], 2),
+                    "a_cold_run_s": round(a["cold_compile_run_s"], 1)}  # fmt: skip
+    if b:
+        figures |= {"b_variants": float(b["variants"]), "b_wall_s": round(b["wall_s"], 1),
+                    "b_peak_mb": round(b["peak_memory_mb"]), "b_ratio": round(b["ratio"], 2)}  # fmt: skip
+    if c:
+        figures |= {"c_wall_s": round(c["wall_s"], 1), "c_peak_mb": round(c["peak_memory_mb"])}
+    if d:
+        figures |= {"d_nlcx_ms": round(d["nlcx_s"] * 1e3, 1), "d_ratio": round(d["ratio_python_control"])}
+    if e:
+        figures |= {"e_make_run_s": round(e["make_run_s"])}
+    return figures
+
+
+def table_rows(f: dict[str, Any]) -> list[tuple[str, str, str, str]]:
+    """(benchmark, what is measured, the figure, the target) for each benchmark in ``f``."""
+    rows = []
+    if "a_simulate_s" in f:
+        rows += [
+            ("a", "simulating `configs/xyz_error_ags.yaml` (both controllers, 20 s at dt = 1 ms)",
+             f"{f['a_simulate_s']:.3f} s", "≤ 0.2 s"),
+            ("a", "`nlcx run configs/xyz_error_ags.yaml` end to end, warm cache", f"{f['a_end_to_end_s']:.2f} s",
+             "≤ 1.5 s"),
+            ("a", "the first `nlcx run` with an empty numba cache", f"{f['a_cold_run_s']:.1f} s", "≤ 15 s"),
+        ]  # fmt: skip
+    if "b_wall_s" in f:
+        variants = f"{f['b_variants']:,.0f}".replace(",", " ")
+        rows += [
+            ("b", f"a sweep of {variants} x-pendulum variants (error-AGS PID), `--jobs 2`: wall time, peak memory",
+             f"{f['b_wall_s']:.1f} s, {f['b_peak_mb']:.0f} MB", "≤ 30 s, ≤ 2 GB"),
+            ("b", "that sweep's time over its limit reference's (`benchmarks/reference.py`)",
+             f"{f['b_ratio']:.2f}×", "≤ 1.3×"),
+        ]  # fmt: skip
+    if "c_wall_s" in f:
+        rows.append(("c", "`nlcx reproduce` (every figure and table of chapters 2–5): wall time, peak memory",
+                     f"{f['c_wall_s']:.1f} s, {f['c_peak_mb']:.0f} MB", "≤ 120 s, ≤ 2 GB"))  # fmt: skip
+    if "d_ratio" in f:
+        rows.append(("d", "one trajectory of (a)'s proposed controller against python-control's "
+                     "`input_output_response`", f"{f['d_ratio']:.0f}× as fast ({f['d_nlcx_ms']:.1f} ms)",
+                     "≥ 100×"))  # fmt: skip
+    if "e_make_run_s" in f:
+        rows.append(("e", "`make run` in a fresh clone, pip's cache off", f"{f['e_make_run_s']:.0f} s", "≤ 90 s"))
+    return rows
+
+
+def speed_table(figures: dict[str, Any], kept: Sequence[str] = ()) -> str:
+    """The README's speed table: a row per figure of ``figures``, then the ``kept`` rows (lines
+    of the table before, for benchmarks this run did not measure), in the benchmarks' order."""
+    lines = [f"| ({bench}) | {what} | {value} | {target} |" for bench, what, value, target in table_rows(figures)]
+    lines = sorted([*lines, *kept], key=lambda line: line[:5])
+    machine_text = f" on {figures['machine']}" if figures.get("machine") else ""
+    return (
+        f"Measured by `make bench`{machine_text} (`benchmarks/latest.txt` holds the whole output; "
+        "docs/performance.md describes each benchmark).\n\n"
+        "| | benchmark | measured | target |\n|---|---|---|---|\n" + "\n".join(lines) + "\n"
+    )
+
+
+def write_speed_table(figures: dict[str, Any], readme: Path = README) -> bool:
+    """Rewrite the table between the markers of ``readme``, keeping the rows of benchmarks that
+    ``figures`` lacks. False (and nothing written) when the file has no markers."""
+    text = readme.read_text(encoding="utf-8")
+    start, end = text.find(TABLE_START), text.find(TABLE_END)
+    if start < 0 or end < start:
+        return False
+    measured = {bench for bench, *_ in table_rows(figures)}
+    rows = (re.match(r"^\| \(([a-e])\) \|", line) for line in text[start + len(TABLE_START) : end].splitlines())
+    kept = [row.string for row in rows if row and row.group(1) not in measured]
+    table = speed_table(figures, kept)
+    new = f"{text[: start + len(TABLE_START)]}\n{table}{text[end:]}"
+    if new != text:
+        readme.write_text(new, encoding="utf-8")
+    return True
+
+
+def machine() -> str:
+    """The machine line of the output: processor, cores, Python."""
+    return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description="nlcx speed benchmarks (latest output: benchmarks/latest.txt)")
     parser.add_argument("--only", default="a,d,c,b", help="benchmarks to run, comma-separated (default a,d,c,b)")
     parser.add_argument("--fresh-clone", action="store_true", help="also time make run in a fresh clone (downloads)")
+    parser.add_argument(
+        "--table-from", type=Path, help="only rewrite README.md's speed table from this saved output (latest.txt)"
+    )
     args = parser.parse_args()
+    if args.table_from is not None:
+        if not write_speed_table(figures_from_text(args.table_from.read_text(encoding="utf-8"))):
+            sys.exit(f"README.md has no {TABLE_START} ... {TABLE_END} markers")
+        return
     chosen = set(args.only.split(","))
     sys.path.insert(0, str(ROOT))
     sys.path.insert(0, str(ROOT / "benchmarks"))
     os.chdir(ROOT)
-    print(
-        f"nlcx benchmarks, {time.strftime('%Y-%m-%d')}, {platform.processor() or platform.machine()}, "
-        f"{os.cpu_count()} cores, Python {platform.python_version()}"
-    )
+    print(f"nlcx benchmarks, {time.strftime('%Y-%m-%d')}, {machine()}")
+    a = b = c = d = e = None
     if "a" in chosen:
-        print_a(bench_a())
+        a = bench_a()
+        print_a(a)
     if "d" in chosen:
         d = bench_d()
         print(
@@ -583,13 +716,16 @@ def main() -> None:
             f"{c['summary']}"
         )
     if "b" in chosen:
-        print_b(bench_b(repeats=3))
+        b = bench_b(repeats=3)
+        print_b(b)
     if args.fresh_clone:
         e = bench_fresh_clone()
         print(
             f"(e) make run in a fresh clone, pip's cache off (install, warm-up compile, main job): "
             f"{e['make_run_s']:.0f} s [target <= 90]; the next nlcx run {e['next_run_s']:.1f} s"
         )
+    if write_speed_table(figures_measured(a, b, c, d, e)):
+        print("README.md speed table rewritten", file=sys.stderr)
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ stamps the cache with a hash of every source file of the package; when the stamp
 the package's cache files (``*.nbi``, ``*.nbc`` in its ``__pycache__`` folders) are removed
 before anything is compiled or loaded, and numba rebuilds them.
 
-Rebuilding takes a while: the kernel alone compiles for ~13 s, in the process that needs it.
+Rebuilding takes a while: the kernel alone compiles for seconds, in the process that needs it.
 :class:`CompileHelper` lets ``nlcx run`` compile the rest of what the run needs (its plugins'
 functions, the metric functions) in a second process meanwhile. Processes that share the
 cache (that helper, a sweep's or a reproduction's workers) read and write a function's cache
@@ -114,8 +114,8 @@ def _locked(operation: Callable[..., Any]) -> Callable[..., Any]:
 
 class CompileHelper:
     """A command run in a second process, started only if a step of this one takes longer than
-    ``after`` seconds: ``nlcx run`` watches loading the kernel, which takes ~0.1 s from numba's
-    cache and ~13 s when it compiles, and then starts ``nlcx prewarm`` with the run's config
+    ``after`` seconds: ``nlcx run`` watches loading the kernel, which is quick from numba's
+    cache and takes seconds when it compiles, and then starts ``nlcx prewarm`` with the run's config
     (:func:`nlcx.engine.prewarm`). Both processes write numba's cache, one function's files at a
     time (:func:`serialize_cache_access`), so either may finish first."""
 

@@ -204,7 +204,7 @@ def _warm_up() -> None:
 def _serve() -> None:
     """The painter process: import matplotlib, then draw the jobs read from stdin; reply "ok"
     and leave at once. Every file is written and closed by then; the interpreter's teardown of
-    matplotlib's modules (~0.2 s) would only keep the run waiting."""
+    matplotlib's modules would only keep the run waiting."""
     gc.disable()  # the imports build large object graphs; collecting them midway only costs
     import matplotlib.figure  # noqa: F401
 

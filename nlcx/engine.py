@@ -428,8 +428,7 @@ class RecordArena:
 
     A sweep batch's records are tens of MB. Fresh from ``np.empty`` for every batch, each of
     their pages costs the kernel a page fault and the operating system's zeroing when first
-    written (in a profile of benchmark (b), 6 % of all samples were the kernel clearing pages;
-    1.7 % with the arena). A sweep worker lends a batch's records from its arena and, once the
+    written. A sweep worker lends a batch's records from its arena and, once the
     batch's metrics are written, :meth:`release` returns them: the next batch writes into the
     same memory. Only what the last batch used is kept."""
 
@@ -469,10 +468,9 @@ def reuse_freed_memory() -> bool:
     terms of the trapezoidal sums). glibc serves a block that large by mapping fresh pages and
     unmaps it when freed, so every such temporary paid a page fault and the zeroing of each of
     its pages; a threshold of 32 MB (and a trim threshold of 128 MB, above which the top of the
-    heap is returned to the system) keeps them in the heap. Measuring a sweep batch of 100 runs
-    took 23 ms, 19 ms with this. :func:`evaluate` calls it, so every process that measures runs
-    (``nlcx run``, sweep workers, the reproduction's workers, tuners) keeps its freed blocks; it
-    changes how much memory the process keeps, never a value."""
+    heap is returned to the system) keeps them in the heap. :func:`evaluate` calls it, so every
+    process that measures runs (``nlcx run``, sweep workers, the reproduction's workers, tuners)
+    keeps its freed blocks; it changes how much memory the process keeps, never a value."""
     try:
         if not os.confstr("CS_GNU_LIBC_VERSION"):
             return False
@@ -589,7 +587,7 @@ def _kernel_calls(groups: list[list[int]], items: list[Item]) -> list[tuple[list
     at least :data:`_MIN_ROWS_PER_STEP` rows, and is otherwise one call of the kind's general
     step (the same arithmetic, so the same bits): a call's cost per time step, shared by its
     rows, outweighs the faster step for one or two rows (``nlcx run`` of a conventional PID
-    against an AGS PID: 6.3 against 9.5 ms split)."""
+    against an AGS PID is faster as one call)."""
     calls: list[tuple[list[int], Any]] = []
     for indices in groups:
         by_step: dict[int, list[int]] = {}
@@ -683,8 +681,8 @@ def _reference_rows(columns: list[np.ndarray]) -> np.ndarray:
 def _blocks(members: list[int], n_samples: int) -> list[list[int]]:
     """``members`` in blocks of :func:`nlcx.metrics.rows_per_block` runs: the rows gathered for
     the metric functions (outputs, errors, inputs) are formed a block at a time, in memory
-    that stays in cache (16 MB at once for 100 runs of 20 001 samples cost ~60 % of measuring
-    them). Each row's metrics are the same whatever the block it is in."""
+    that stays in cache (forming them for a whole batch at once costs more than the metrics
+    themselves). Each row's metrics are the same whatever the block it is in."""
     size = m.rows_per_block(n_samples)
     return [members[k : k + size] for k in range(0, len(members), size)]
 
@@ -932,7 +930,7 @@ def remeasure(results: Sequence[Result], metrics: Mapping[str, Any]) -> list[Res
 
 def load_kernel() -> None:
     """Load the kernel (:func:`nlcx.kernel.integrator.simulate`) from numba's disk cache, or
-    compile it (~13 s; with a warm cache ~0.1 s). Importing this module does not: a process
+    compile it (seconds; loading from a warm cache is quick). Importing this module does not: a process
     that only prepares and measures (:func:`prewarm`) never needs it."""
     import nlcx.kernel.integrator  # noqa: F401
 

@@ -54,15 +54,19 @@ class AnfisModelConfig(BaseModel):
     """One trained ANFIS model (:meth:`nlcx.tuning.anfis.AnfisModel.to_config`)."""
 
     model_config = ConfigDict(extra="forbid")
-    mf: Literal["gbell", "gauss"] = "gbell"
-    n_mfs: int = Field(ge=1, le=50)
-    #: [[x1 min, x1 max], [x2 min, x2 max]]: the inputs' training ranges.
-    ranges: tuple[tuple[float, float], tuple[float, float]]
-    centres: list[float]
-    widths: list[float]
-    #: Bell slopes b (ignored by Gaussians; default 2).
-    slopes: list[float] | None = None
-    consequents: list[float]
+    mf: Literal["gbell", "gauss"] = Field("gbell", description="membership functions: generalised bell or Gaussian")
+    n_mfs: int = Field(ge=1, le=50, description="membership functions per input")
+    ranges: tuple[tuple[float, float], tuple[float, float]] = Field(
+        description="[[x1 min, x1 max], [x2 min, x2 max]]: the inputs' (e, de/dt) training ranges"
+    )
+    centres: list[float] = Field(description="centres of the membership functions, those of x1 then of x2")
+    widths: list[float] = Field(description="widths of the membership functions, in the order of centres")
+    slopes: list[float] | None = Field(
+        None, description="bell slopes b, in the order of centres (ignored by Gaussians; default 2)"
+    )
+    consequents: list[float] = Field(
+        description="first-order Takagi-Sugeno consequents (p, q, r) of every rule, rule by rule"
+    )
 
     @field_validator("ranges")
     @classmethod
@@ -90,14 +94,16 @@ class AnfisModelConfig(BaseModel):
 
 
 class ANFISConfig(ScheduleConfig):
-    kind: Literal["anfis"] = "anfis"
-    kp: AnfisModelConfig
-    ki: AnfisModelConfig
-    kd: AnfisModelConfig
-    #: Clip (e, de/dt) to each model's training ranges before evaluating it.
-    clip_inputs: bool = True
-    #: Optional clipping of gains to [min, max], by gain name.
-    clip: dict[Literal["kp", "ki", "kd"], GainRange] = Field(default_factory=dict)
+    kind: Literal["anfis"] = Field(
+        "anfis", description="registered name of this gain schedule; selects the model that validates this section"
+    )
+    kp: AnfisModelConfig = Field(description="the trained model of k_p (written by the anfis tuner)")
+    ki: AnfisModelConfig = Field(description="the trained model of k_i")
+    kd: AnfisModelConfig = Field(description="the trained model of k_d")
+    clip_inputs: bool = Field(True, description="clip (e, de/dt) to each model's training ranges before evaluating it")
+    clip: dict[Literal["kp", "ki", "kd"], GainRange] = Field(
+        default_factory=dict, description="optional clipping of gains to [min, max], by gain name"
+    )
 
     @field_validator("clip")
     @classmethod

@@ -47,6 +47,7 @@ from nlcx.layout import Layout
 
 #: Linguistic values, in order: negative big, negative small, zero, positive small, positive big.
 SET_NAMES: tuple[str, ...] = ("NB", "NS", "ZE", "PS", "PB")
+SET_MEANINGS: tuple[str, ...] = ("negative big", "negative small", "zero", "positive small", "positive big")
 #: Input variables (rows and columns of the rule grid) and output variables (eqs. 5.12-5.14).
 INPUTS: tuple[str, ...] = ("e", "de_dt")
 OUTPUTS: tuple[str, ...] = ("kp1", "ki1", "kd1")
@@ -147,7 +148,13 @@ class _VariableSets(BaseModel):
 
 
 def _sets_model(variable: str, table: dict[str, tuple[float, float]]) -> type[_VariableSets]:
-    fields: dict[str, Any] = {name: (tuple[float, float], table[name]) for name in SET_NAMES}
+    fields: dict[str, Any] = {
+        name: (
+            tuple[float, float],
+            Field(table[name], description=f"crisp range (lower, upper) of {variable}'s set {name} ({meaning})"),
+        )
+        for name, meaning in zip(SET_NAMES, SET_MEANINGS, strict=True)
+    }
     return create_model(f"FuzzySets_{variable}", __base__=_VariableSets, **fields)
 
 
@@ -162,11 +169,11 @@ class FuzzySets(BaseModel):
     """Fuzzy sets of every variable (defaults: Tables 5.3-5.7); a partial mapping overrides sets."""
 
     model_config = ConfigDict(extra="forbid")
-    e: ESets = ESets()
-    de_dt: DeDtSets = DeDtSets()
-    kp1: Kp1Sets = Kp1Sets()
-    ki1: Ki1Sets = Ki1Sets()
-    kd1: Kd1Sets = Kd1Sets()
+    e: ESets = Field(ESets(), description="fuzzy sets of the error e (Table 5.3)")
+    de_dt: DeDtSets = Field(DeDtSets(), description="fuzzy sets of de/dt (Table 5.4)")
+    kp1: Kp1Sets = Field(Kp1Sets(), description="fuzzy sets of the scaled gain k_p1 (Table 5.5)")
+    ki1: Ki1Sets = Field(Ki1Sets(), description="fuzzy sets of the scaled gain k_i1 (Table 5.6)")
+    kd1: Kd1Sets = Field(Kd1Sets(), description="fuzzy sets of the scaled gain k_d1 (Table 5.7)")
 
     def ranges(self, variable: str) -> list[tuple[float, float]]:
         """The (lower, upper) ranges of ``variable`` in the order NB, NS, ZE, PS, PB."""
@@ -178,8 +185,10 @@ class FuzzyUniverses(BaseModel):
     """Universes of discourse of the inputs (Table 5.2); the outputs' universe is [0, 1]."""
 
     model_config = ConfigDict(extra="forbid")
-    e: tuple[float, float] = E_UNIVERSE
-    de_dt: tuple[float, float] = DE_DT_UNIVERSE
+    e: tuple[float, float] = Field(E_UNIVERSE, description="universe of discourse of e, (min, max) (Table 5.2)")
+    de_dt: tuple[float, float] = Field(
+        DE_DT_UNIVERSE, description="universe of discourse of de/dt, (min, max) (Table 5.2)"
+    )
 
     @field_validator("e", "de_dt")
     @classmethod
@@ -188,22 +197,46 @@ class FuzzyUniverses(BaseModel):
 
 
 class FuzzyConfig(ScheduleConfig):
-    kind: Literal["fuzzy"] = "fuzzy"
-    #: Ranges of the gains, eqs. 5.12-5.14 (from the Ziegler-Nichols tuning).
-    kp: GainRange
-    ki: GainRange
-    kd: GainRange
-    universes: FuzzyUniverses = FuzzyUniverses()
-    #: Samples of the output universe [0, 1] for the centroid (MATLAB's default 101).
-    resolution: int = Field(101, ge=3, le=100_001)
-    #: "discrete": sum(z mu) / sum(mu) over the samples (MATLAB); "piecewise_linear": centroid
-    #: of the linear interpolant through the samples (scikit-fuzzy).
-    centroid: Literal["discrete", "piecewise_linear"] = "discrete"
-    #: Checked against the universes even when left at the default (Tables 5.3-5.7).
-    sets: FuzzySets = Field(default_factory=FuzzySets, validate_default=True)
-    #: Output set of k_p1, k_i1, k_d1 by e (row NB..PB) and de/dt (column NB..PB).
+    kind: Literal["fuzzy"] = Field(
+        "fuzzy", description="registered name of this gain schedule; selects the model that validates this section"
+    )
+    kp: GainRange = Field(
+        description=(
+            "range of k_p that the scaled output k_p1 in [0, 1] spans (eq. 5.12; from the Ziegler-Nichols tuning)"
+        )
+    )
+    ki: GainRange = Field(description="range of k_i spanned by k_i1 (eq. 5.13)")
+    kd: GainRange = Field(description="range of k_d spanned by k_d1 (eq. 5.14)")
+    universes: FuzzyUniverses = Field(
+        FuzzyUniverses(),
+        description="universes of discourse of the inputs (Table 5.2); the outputs' universe is [0, 1]",
+    )
+    resolution: int = Field(
+        101,
+        ge=3,
+        le=100_001,
+        description="samples of the output universe [0, 1] for the centroid (MATLAB's default 101)",
+    )
+    centroid: Literal["discrete", "piecewise_linear"] = Field(
+        "discrete",
+        description=(
+            "discrete: sum(z mu) / sum(mu) over the samples (MATLAB); piecewise_linear: centroid of the linear "
+            "interpolant through the samples (scikit-fuzzy)"
+        ),
+    )
+    sets: FuzzySets = Field(
+        default_factory=FuzzySets,
+        validate_default=True,
+        description=(
+            "the fuzzy sets of every variable (defaults: Tables 5.3-5.7), checked against the universes; a partial "
+            "mapping overrides single sets"
+        ),
+    )
     rules: Annotated[list[RuleRow], Field(min_length=5, max_length=5)] = Field(
-        default_factory=lambda: [list(row) for row in RULES]
+        default_factory=lambda: [list(row) for row in RULES],
+        description=(
+            "output set of k_p1, k_i1, k_d1 by e (row NB..PB) and de/dt (column NB..PB): the 25 rules of section 5.4.1"
+        ),
     )
 
     @field_validator("sets")

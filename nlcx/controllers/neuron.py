@@ -28,29 +28,37 @@ from nlcx.validation import join
 
 class LearningRates(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    p: float = Field(0.4, ge=0)
-    i: float = Field(0.35, ge=0)
-    d: float = Field(0.4, ge=0)
+    p: float = Field(0.4, ge=0, description="learning rate eta_P of the proportional weight w1")
+    i: float = Field(0.35, ge=0, description="learning rate eta_I of the integral weight w2")
+    d: float = Field(0.4, ge=0, description="learning rate eta_D of the derivative weight w3")
 
 
 class NeuronConfig(ControllerConfig):
-    kind: Literal["single_neuron"] = "single_neuron"
-    #: Plant output the neuron regulates (default: the plant's only output).
-    signal: str | None = None
-    #: Neuron gain K (the eta of eq. 5.18).
-    gain: float = Field(0.12, gt=0)
-    learning: LearningRates = LearningRates()
-    #: Initial weights (w1, w2, w3).
-    weights: tuple[float, float, float] = (0.1, 0.1, 0.1)
-    #: Eq. 5.17: "standard" e(k) - 2e(k-1) + e(k-2), or "printed" e(k) - 2e(k-1) - e(k-2).
-    second_difference: Literal["standard", "printed"] = "standard"
-    #: "hebbian": Liu's supervised Hebbian rule with x_i(k); "printed": eq. 5.19 as printed.
-    rule: Literal["hebbian", "printed"] = "hebbian"
-    normalize: bool = True
-    #: Controller sample period, s (a whole number of simulation steps).
-    sample_time: float = Field(0.1, gt=0)
-    #: "equilibrium": add the input that holds the plant's operating point.
-    feedforward: Literal["none", "equilibrium"] = "none"
+    kind: Literal["single_neuron"] = Field(
+        "single_neuron", description="registered name of this controller; selects the model that validates this section"
+    )
+    signal: str | None = Field(None, description="plant output the neuron regulates (default: the plant's only output)")
+    gain: float = Field(0.12, gt=0, description="neuron gain K (the eta of eq. 5.18)")
+    learning: LearningRates = Field(LearningRates(), description="learning rates of the three weights")
+    weights: tuple[float, float, float] = Field((0.1, 0.1, 0.1), description="initial weights (w1, w2, w3)")
+    second_difference: Literal["standard", "printed"] = Field(
+        "standard", description="eq. 5.17: standard e(k) - 2e(k-1) + e(k-2), or printed e(k) - 2e(k-1) - e(k-2)"
+    )
+    rule: Literal["hebbian", "printed"] = Field(
+        "hebbian", description="hebbian: Liu's supervised Hebbian rule with x_i(k); printed: eq. 5.19 as printed"
+    )
+    normalize: bool = Field(
+        True, description="use w_i / sum_j |w_j| in place of each weight w_i (Liu's normalised neuron PID)"
+    )
+    sample_time: float = Field(
+        0.1,
+        gt=0,
+        description="controller sample period, a whole number of simulation steps",
+        json_schema_extra={"unit": "s"},
+    )
+    feedforward: Literal["none", "equilibrium"] = Field(
+        "none", description="equilibrium: add the input that holds the plant at its operating point"
+    )
 
 
 #: The parameter row cp (sample time rounded to whole simulation steps; bias the feed-forward).

@@ -6,13 +6,16 @@ from typing import Literal
 
 import numpy as np
 from numba import njit
+from pydantic import Field
 
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
 from nlcx.plants.base import Plant
 
 
 class OpenLoopConfig(ControllerConfig):
-    kind: Literal["open_loop"] = "open_loop"
+    kind: Literal["open_loop"] = Field(
+        "open_loop", description="registered name of this controller; selects the model that validates this section"
+    )
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)

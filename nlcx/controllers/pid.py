@@ -62,7 +62,7 @@ LOOP = Layout(
 )  # fmt: skip
 L = LOOP.at
 #: The built-in schedules are called directly (the compiler inlines them; a call through the
-#: slot table cannot be inlined and cost ~15 % of a sweep's time); any other schedule,
+#: slot table cannot be inlined, a sizeable share of a sweep's time); any other schedule,
 #: including a third party's or a replaced built-in, goes through its slot.
 VIA_SLOT, DIRECT_CONSTANT, DIRECT_TIME_AGS, DIRECT_ERROR_AGS = 0, 1, 2, 3
 _DIRECT = {constant_gains: DIRECT_CONSTANT, time_ags_gains: DIRECT_TIME_AGS, error_ags_gains: DIRECT_ERROR_AGS}
@@ -89,31 +89,53 @@ class DerivativeConfig(BaseModel):
     """How the derivative term is formed."""
 
     model_config = ConfigDict(extra="forbid")
-    method: Literal["backward", "filtered"] = "backward"
-    #: Filter coefficient of N s / (s + N), used when method is "filtered".
-    N: float = Field(100.0, gt=0)
-    #: Differentiate the error (textbook PID, eq. 5.11) or the negated measurement.
-    on: Literal["error", "measurement"] = "error"
+    method: Literal["backward", "filtered"] = Field(
+        "backward",
+        description=(
+            "backward: backward difference of the sampled error; filtered: N s / (s + N), discretised by backward Euler"
+        ),
+    )
+    N: float = Field(
+        100.0,
+        gt=0,
+        description="filter coefficient N of N s / (s + N), used when method is filtered",
+        json_schema_extra={"unit": "1/s"},
+    )
+    on: Literal["error", "measurement"] = Field(
+        "error",
+        description="differentiate the error (textbook PID, eq. 5.11) or the negated measurement (no derivative kick)",
+    )
 
 
 class LoopConfig(BaseModel):
     """One loop: which output it regulates, which input it drives, with which schedule."""
 
     model_config = ConfigDict(extra="forbid")
-    #: Plant output regulated by this loop (default: the loop's key).
-    signal: str | None = None
-    #: Plant input the loop drives (default: the plant's default for this output).
-    input: str | None = None
-    #: Sign of the loop's contribution to the summed input (the sum block of Fig. 2.2).
-    sign: Literal[-1, 1] = 1
-    #: The gain schedule: a mapping in the YAML, its registered model's validated config
-    #: after :meth:`MultiLoopPID.normalize`.
-    schedule: dict[str, Any] | SerializeAsAny[ScheduleConfig]
-    derivative: DerivativeConfig | None = None
-    #: The units the loop sees its output and reference in, as a factor on y and r (the
-    #: error, the schedule's argument and the gains' units follow): 1 as the plant gives
-    #: them, 57.29577951308232 (180/pi) for an angle in degrees.
-    scale: float = Field(1.0, gt=0)
+    signal: str | None = Field(None, description="plant output regulated by this loop (default: the loop's key)")
+    input: str | None = Field(
+        None, description="plant input the loop drives (default: the plant's default input for this output)"
+    )
+    sign: Literal[-1, 1] = Field(
+        1, description="sign of the loop's contribution to the summed input (the sum block of Fig. 2.2)"
+    )
+    schedule: dict[str, Any] | SerializeAsAny[ScheduleConfig] = Field(
+        description=(
+            "the gain schedule: a mapping whose kind names a registered schedule (constant, time_ags, error_ags, "
+            "fuzzy, anfis), validated by that schedule's model"
+        )
+    )
+    derivative: DerivativeConfig | None = Field(
+        None, description="this loop's derivative term (default: the controller's derivative)"
+    )
+    scale: float = Field(
+        1.0,
+        gt=0,
+        description=(
+            "factor on y and r: the units the loop sees its output and reference in (the error, the schedule's "
+            "argument and the gains' units follow); 1 as the plant gives them, 57.29577951308232 (180/pi) for an angle"
+            " in degrees"
+        ),
+    )
 
 
 class SaturationConfig(BaseModel):
@@ -124,35 +146,76 @@ class SaturationConfig(BaseModel):
     every loop on that input (Astrom & Hagglund's tracking anti-windup, K_b = 1 / T_t)."""
 
     model_config = ConfigDict(extra="forbid")
-    #: Limit of each saturated input, by input name (> 0; inputs not named are unlimited).
-    limits: dict[str, float] = Field(min_length=1)
-    anti_windup: Literal["none", "clamping", "back_calculation"] = "none"
-    #: Back-calculation gain K_b, 1/s.
-    kb: float = Field(1.0, gt=0)
+    limits: dict[str, float] = Field(
+        min_length=1,
+        description=(
+            "limit of each saturated input, |u| <= limit, by input name (> 0; inputs not named are unlimited), in the "
+            "input's unit"
+        ),
+    )
+    anti_windup: Literal["none", "clamping", "back_calculation"] = Field(
+        "none",
+        description=(
+            "none; clamping: a loop's integral holds while its input is saturated and the error would drive it "
+            "further; back_calculation: K_b (u_sat - u) is added to the integrator input"
+        ),
+    )
+    kb: float = Field(1.0, gt=0, description="back-calculation gain K_b = 1 / T_t", json_schema_extra={"unit": "1/s"})
 
 
 class PIDConfig(ControllerConfig):
-    kind: Literal["pid"] = "pid"
-    loops: dict[str, LoopConfig] = Field(min_length=1)
-    derivative: DerivativeConfig = Field(default_factory=DerivativeConfig)
-    #: "outside": u = k_i(t) * integral(e) as eqs. 2.17-2.22 write it;
-    #: "inside": u = integral(k_i(t) e), bumpless when k_i varies.
-    integral: Literal["outside", "inside"] = "outside"
-    #: Constant feed-forward added to an input, by input name.
-    bias: dict[str, float] = Field(default_factory=dict)
-    #: "equilibrium" adds the input that holds the plant at its operating point, computed
-    #: from the model (for the x-z and x-y-z pendulums: gravity compensation F_z = (M + m) g).
-    feedforward: Literal["none", "equilibrium"] = "none"
-    #: Set-point weight b: the proportional term acts on b r - y (b = 1: on the error).
-    setpoint_weight: float = 1.0
-    #: PID form of every loop (:data:`FORMS`): the schedule's gains are the form's parameters.
-    form: Literal["parallel", "ideal", "series"] = "parallel"
-    #: Actuator saturation with anti-windup (none: unlimited inputs).
-    saturation: SaturationConfig | None = None
-    #: Sampling period T_s of a discrete PID, s: the loops update every T_s (integral e T_s,
-    #: derivative over T_s) and hold their output in between (zero-order hold). 0: updated at
-    #: every integration step dt (a continuous PID to within dt).
-    sample_time: float = Field(0.0, ge=0)
+    kind: Literal["pid"] = Field(
+        "pid", description="registered name of this controller; selects the model that validates this section"
+    )
+    loops: dict[str, LoopConfig] = Field(
+        min_length=1,
+        description=(
+            "the loops by name (by default the name is the regulated output); the loops' outputs are summed per input"
+        ),
+    )
+    derivative: DerivativeConfig = Field(
+        default_factory=DerivativeConfig,
+        description="how every loop forms its derivative term, unless a loop sets its own",
+    )
+    integral: Literal["outside", "inside"] = Field(
+        "outside",
+        description=(
+            "outside: u = k_i(t) * integral(e), as eqs. 2.17-2.22 write it; inside: u = integral(k_i(t) e), bumpless "
+            "when k_i varies"
+        ),
+    )
+    bias: dict[str, float] = Field(
+        default_factory=dict, description="constant feed-forward added to an input, by input name, in the input's unit"
+    )
+    feedforward: Literal["none", "equilibrium"] = Field(
+        "none",
+        description=(
+            "equilibrium: add the input that holds the plant at its operating point, computed from the model (for the "
+            "x-z and x-y-z pendulums the gravity compensation F_z = (M + m) g)"
+        ),
+    )
+    setpoint_weight: float = Field(
+        1.0, description="set-point weight b: the proportional term acts on b r - y (1: on the error)"
+    )
+    form: Literal["parallel", "ideal", "series"] = Field(
+        "parallel",
+        description=(
+            "PID form of every loop, as Simulink's PID block names them: parallel k_p + k_i/s + k_d s; ideal k_p (1 + "
+            "k_i/s + k_d s); series k_p (1 + k_i/s)(1 + k_d s); the schedule's gains are the form's parameters"
+        ),
+    )
+    saturation: SaturationConfig | None = Field(
+        None, description="actuator saturation with anti-windup (null: unlimited inputs)"
+    )
+    sample_time: float = Field(
+        0.0,
+        ge=0,
+        description=(
+            "sampling period T_s of a discrete PID: the loops update every T_s and hold their output in between (zero-"
+            "order hold); 0: updated at every integration step dt"
+        ),
+        json_schema_extra={"unit": "s"},
+    )
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -342,11 +405,10 @@ _FLAGS = ("filtered", "on_measurement", "gain_inside")
 @functools.cache
 def step_for(structure: Structure) -> Any:
     """:func:`pid_step` for rows of one :class:`Structure`, with that structure compiled in as
-    constants: the same operations on the same values, so the same bits, in ~23 instead of
-    ~41 ns a variant-step for benchmark (b)'s two error-AGS loops (``benchmarks/components.py``),
-    the branches and index arithmetic on the structure gone. One compiled step a structure,
-    made when a controller of that structure is first built and compiled when it first reaches
-    the kernel (numba's disk cache keys it by the structure)."""
+    constants: the same operations on the same values, so the same bits, with the branches and
+    index arithmetic on the structure gone (``benchmarks/components.py`` times both steps). One
+    compiled step a structure, made when a controller of that structure is first built and
+    compiled when it first reaches the kernel (numba's disk cache keys it by the structure)."""
     n_inputs, n_loops, discrete, saturated = structure[:4]
     y_index, r_index, u_index, direct, slot, offset, filtered, on_measurement, inside, form = structure[4:]
     base = len(H) + len(I) * n_inputs

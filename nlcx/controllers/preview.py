@@ -455,27 +455,51 @@ def preview_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover
 
 
 class PreviewConfig(ControllerConfig):
-    kind: Literal["preview"] = "preview"
-    #: H2 (LQ) or H-infinity (game Riccati equation, bisection on gamma) design.
-    design: Literal["h2", "hinf"] = "hinf"
-    #: Preview length h: the controller reads r(t), r(t + Ts), ..., r(t + h Ts).
-    preview: int = Field(10, ge=0, le=1000)
-    #: Controller sample time Ts, s; a whole number of simulation steps dt.
-    sample_time: float = Field(0.1, gt=0)
-    #: Weight of the squared tracking error (c x - d)^2.
-    q: float = Field(1.0, gt=0)
-    #: Weight of the squared control effort u^2 (deviation from the equilibrium input).
-    r: float = Field(0.1, gt=0)
-    #: Weight of the squared error integral v^2; 0 or null: no integrator (no zero-offset guarantee).
-    integral: float | None = Field(1.0, ge=0)
-    #: Add an input-disturbance channel (entering like u) to w in the H-infinity design.
-    disturbance: bool = False
-    #: Relative tolerance of the bisection on gamma.
-    gamma_tolerance: float = Field(1e-4, gt=0, lt=1)
-    #: The H-infinity design is made at gamma_factor * gamma_min (numerical margin).
-    gamma_factor: float = Field(1.05, ge=1)
-    #: Plant output tracked (default: the plant's single output); its reference is previewed.
-    signal: str | None = None
+    kind: Literal["preview"] = Field(
+        "preview", description="registered name of this controller; selects the model that validates this section"
+    )
+    design: Literal["h2", "hinf"] = Field(
+        "hinf", description="h2: LQ design; hinf: H-infinity design (game Riccati equation, bisection on gamma)"
+    )
+    preview: int = Field(
+        10,
+        ge=0,
+        le=1000,
+        description="preview length h: the controller reads r(t), r(t + T_s), ..., r(t + h T_s)",
+        json_schema_extra={"unit": "samples"},
+    )
+    sample_time: float = Field(
+        0.1,
+        gt=0,
+        description="controller sample time T_s, a whole number of simulation steps dt",
+        json_schema_extra={"unit": "s"},
+    )
+    q: float = Field(
+        1.0,
+        gt=0,
+        description=(
+            "weight of the squared tracking error (c x - d)^2, d the reference's deviation from the operating point"
+        ),
+    )
+    r: float = Field(
+        0.1, gt=0, description="weight of the squared control effort u^2 (deviation from the equilibrium input)"
+    )
+    integral: float | None = Field(
+        1.0,
+        ge=0,
+        description="weight of the squared error integral v^2; 0 or null: no integrator (no zero-offset guarantee)",
+    )
+    disturbance: bool = Field(
+        False,
+        description="add an input-disturbance channel (entering like u) to the H-infinity design's exogenous input",
+    )
+    gamma_tolerance: float = Field(1e-4, gt=0, lt=1, description="relative tolerance of the bisection on gamma")
+    gamma_factor: float = Field(
+        1.05, ge=1, description="the H-infinity design is made at gamma_factor * gamma_min (a numerical margin)"
+    )
+    signal: str | None = Field(
+        None, description="plant output tracked (default: the plant's single output); its reference is previewed"
+    )
 
 
 class Preview(ControllerModel):

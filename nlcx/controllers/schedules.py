@@ -49,44 +49,75 @@ class GainRange(BaseModel):
     """The two end points of a scheduled gain, as the thesis's tables print them."""
 
     model_config = ConfigDict(extra="forbid")
-    min: float
-    max: float
+    min: float = Field(
+        description="the range's printed min end point (a min above max reverses the direction of travel)"
+    )
+    max: float = Field(description="the range's printed max end point")
 
 
 class Rates(BaseModel):
     """The rate constants k of the exponentials, one per gain (section 2.3)."""
 
     model_config = ConfigDict(extra="forbid")
-    kp: float = Field(ge=0)
-    ki: float = Field(ge=0)
-    kd: float = Field(ge=0)
+    kp: float = Field(
+        ge=0, description="rate constant k of k_p's exponential: 1/s for time_ags, 1/(unit of e) for error_ags"
+    )
+    ki: float = Field(ge=0, description="rate constant k of k_i's exponential (units as kp)")
+    kd: float = Field(ge=0, description="rate constant k of k_d's exponential (units as kp)")
 
 
 class ConstantConfig(ScheduleConfig):
-    kind: Literal["constant"] = "constant"
-    kp: float = 0.0
-    ki: float = 0.0
-    kd: float = 0.0
+    kind: Literal["constant"] = Field(
+        "constant", description="registered name of this gain schedule; selects the model that validates this section"
+    )
+    kp: float = Field(0.0, description="proportional gain k_p (units: the loop's input per unit of its error)")
+    ki: float = Field(0.0, description="integral gain k_i (per second of k_p's units)")
+    kd: float = Field(0.0, description="derivative gain k_d (k_p's units times s)")
 
 
 class AGSConfig(ScheduleConfig):
-    kp: GainRange
-    ki: GainRange
-    kd: GainRange
-    rate: Rates
+    kp: GainRange = Field(
+        description=(
+            "end points of k_p: time_ags moves it from max at t = 0 towards min (eq. 2.17); error_ags from min at "
+            "e = 0 towards max as |e| grows (eq. 2.20)"
+        )
+    )
+    ki: GainRange = Field(
+        description=(
+            "end points of k_i: time_ags moves it from min at t = 0 towards max (eq. 2.18); error_ags from max at "
+            "e = 0 towards min as |e| grows (eq. 2.21)"
+        )
+    )
+    kd: GainRange = Field(
+        description=(
+            "end points of k_d: time_ags moves it from max at t = 0 towards min (eq. 2.19); error_ags from min at "
+            "e = 0 towards max as |e| grows (eq. 2.22)"
+        )
+    )
+    rate: Rates = Field(description="rate constants k of the three exponentials (section 2.3)")
 
 
 class TimeAGSConfig(AGSConfig):
-    kind: Literal["time_ags"] = "time_ags"
+    kind: Literal["time_ags"] = Field(
+        "time_ags", description="registered name of this gain schedule; selects the model that validates this section"
+    )
 
 
 class ErrorAGSConfig(AGSConfig):
-    kind: Literal["error_ags"] = "error_ags"
-    #: Schedule on |e(t)| (default) or on the signed e(t) as eqs. 2.20-2.22 literally print.
-    error: Literal["abs", "signed"] = "abs"
-    #: Factor c on the schedule's argument: s = |c e| (1: e as the loop sees it; e.g. 1/step
-    #: size to normalise it, or 180/pi for an angle in degrees). Only the schedule sees it.
-    error_scale: float = Field(1.0, gt=0)
+    kind: Literal["error_ags"] = Field(
+        "error_ags", description="registered name of this gain schedule; selects the model that validates this section"
+    )
+    error: Literal["abs", "signed"] = Field(
+        "abs", description="abs: schedule on |e(t)| (default); signed: on e(t) as eqs. 2.20-2.22 literally print it"
+    )
+    error_scale: float = Field(
+        1.0,
+        gt=0,
+        description=(
+            "factor c on the schedule's argument, s = |c e| (1: e as the loop sees it; 1/step size normalises it, "
+            "180/pi takes an angle in degrees); only the schedule sees it"
+        ),
+    )
 
 
 @njit(cache=True, error_model="numpy")

@@ -36,14 +36,13 @@ per variant (a view handed to a compiled-function value costs a reference-count 
 trip); a function that calls a compiled-function value does so inside its loop over the
 rows, so its own reference counting is paid once per call, not once per variant; a plant's
 loop over its columns reads and writes unit-stride memory only (a strided read, a branch or
-numba's integer power ``x**2`` in it keeps the loop scalar: 7 against 4 ns a variant for the
-x pendulum); and a function called every step that allocates nothing is compiled with
-``_nrt=False``, numba's switch for its reference counting. A function counts every array it
-receives on entry and on exit, and an inlined helper at each of its call sites: that was
-~50 ns a call of the PID step, more than its arithmetic for one or two variants
-(``benchmarks/components.py``). Such a function may slice and pass views on, but must not
-allocate, nor keep an array it did not get (nothing frees it); ``tests/test_hot_loop.py``
-holds the built-in plugins to this rule.
+numba's integer power ``x**2`` in it keeps the loop scalar; write ``x * x``); and a function
+called every step that allocates nothing is compiled with ``_nrt=False``, numba's switch for
+its reference counting. A function counts every array it receives on entry and on exit, and
+an inlined helper at each of its call sites, which for one or two variants costs more than
+the PID step's arithmetic (``benchmarks/components.py`` times it). Such a function may slice
+and pass views on, but must not allocate, nor keep an array it did not get (nothing frees it);
+``tests/test_hot_loop.py`` holds the built-in plugins to this rule.
 """
 
 from __future__ import annotations
@@ -151,9 +150,9 @@ class FunctionTable(tuple):
     """Compiled functions handed to the kernel as one argument, with the argument's numba type.
 
     numba types a plain tuple of function values element by element at every call of the
-    kernel (~0.3 ms for 16 callback slots, ~0.9 ms a sweep batch for its three tables); a
-    table is typed by a lookup (the ``typeof`` registered below). The type is the one of the
-    kernel's signature, which the functions are unboxed as in either case."""
+    kernel, a cost paid by every sweep batch and single run; a table is typed by a lookup (the
+    ``typeof`` registered below). The type is the one of the kernel's signature, which the
+    functions are unboxed as in either case."""
 
     numba_type: types.Type
 

@@ -534,7 +534,7 @@ def simulate(
             _no_friction_recorded(k, nb, vid, stopped, FRICTION)
         if k < n_steps and nb > n_stop:
             kd = shared_row(dist.shape[1], k)
-            if n_free > 0 and classic:  # written out here: as a helper it cost 60 % of a step
+            if n_free > 0 and classic:  # written out here: as a helper it cost a large share of a step
                 rhs(t, x, uc, pw, k1, n_free)
                 _add_disturbances(k1, n_free, dist, vid, kd, 0, dist_map)
                 for q in range(m):

@@ -26,10 +26,8 @@ import math
 from numba import njit
 
 #: Batches of at least this many variants take :func:`sincos_column`; smaller ones call
-#: :func:`sincos` per variant. Measured on the x pendulum's equations (AVX-512, pendulum
-#: angles, when the column still allocated its result): one variant at a time 17 ns a variant
-#: at 4 variants, 13 at 7; the column 27 ns a variant at 4 (its work array, and no full vector
-#: of 8 angles), 12 at 8, 5-6 at 100.
+#: :func:`sincos` per variant. Below it the column's fixed costs (its work array, and no full
+#: AVX-512 vector of 8 angles) outweigh what vector code saves; both paths give the same bits.
 COLUMN_ROWS = 8
 #: Beyond this |x| (rad) the two-part reduction is not trusted; libm takes over.
 REDUCTION_LIMIT = 1.0e5
@@ -117,7 +115,7 @@ def sincos_column(angles, nb, sines, cosines):  # pragma: no cover - compiled
     (n, B) derivative that it writes later, one entry a variant), so the loop over them reads
     and writes contiguous memory and vectorises; angles outside the reduction's range then
     get libm's values. Nothing is allocated, and the function is compiled without numba's
-    reference counting (which cost a plant's right-hand side ~20 % of its time)."""
+    reference counting (a noticeable share of a plant's right-hand side otherwise)."""
     for b in range(nb):
         sines[b], cosines[b] = _sincos_reduced(angles[b])
     for b in range(nb):

@@ -23,10 +23,10 @@ class TransferFunctionParams(PlantParams):
 
     num: list[float] = Field(min_length=1, description="numerator coefficients, highest power first")
     den: list[float] = Field(min_length=2, description="denominator coefficients, highest power first")
-    input_name: str = "u"
-    input_unit: str = ""
-    output_name: str = "y"
-    output_unit: str = ""
+    input_name: str = Field("u", description="name of the plant's input")
+    input_unit: str = Field("", description="unit of the input")
+    output_name: str = Field("y", description="name of the plant's output")
+    output_unit: str = Field("", description="unit of the output")
 
     @field_validator("den")
     @classmethod

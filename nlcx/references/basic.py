@@ -11,31 +11,49 @@ from nlcx.references.base import MetricPlan, ReferenceConfig, ReferenceModel
 
 
 class ConstantConfig(ReferenceConfig):
-    kind: Literal["constant"] = "constant"
-    value: float = 0.0
+    kind: Literal["constant"] = Field(
+        "constant", description="registered name of this reference; selects the model that validates this section"
+    )
+    value: float = Field(0.0, description="the constant reference, in the signal's unit")
 
 
 class StepConfig(ReferenceConfig):
-    kind: Literal["step"] = "step"
-    initial: float = 0.0
-    final: float = 1.0
-    #: Time of the step, s; r = final for t >= time.
-    time: float = Field(0.0, ge=0)
+    kind: Literal["step"] = Field(
+        "step", description="registered name of this reference; selects the model that validates this section"
+    )
+    initial: float = Field(0.0, description="reference before the step, in the signal's unit")
+    final: float = Field(1.0, description="reference from the step on, in the signal's unit")
+    time: float = Field(
+        0.0, ge=0, description="time of the step; r = final for t >= time", json_schema_extra={"unit": "s"}
+    )
 
 
 class FilteredStepConfig(StepConfig):
-    kind: Literal["filtered_step"] = "filtered_step"  # type: ignore[assignment]
-    #: Time constant T_f of the first-order prefilter 1 / (T_f s + 1) on the step, s.
-    time_constant: float = Field(gt=0)
+    kind: Literal["filtered_step"] = Field(
+        "filtered_step", description="registered name of this reference; selects the model that validates this section"
+    )  # type: ignore[assignment]
+    time_constant: float = Field(
+        gt=0,
+        description="time constant T_f of the first-order prefilter 1 / (T_f s + 1) on the step",
+        json_schema_extra={"unit": "s"},
+    )
 
 
 class SineConfig(ReferenceConfig):
-    kind: Literal["sine"] = "sine"
-    amplitude: float
-    #: Frequency in Hz: the thesis's x_r = 0.3 sin(0.05 pi t) has frequency 0.025 Hz.
-    frequency: float = Field(gt=0)
-    phase: float = 0.0
-    offset: float = 0.0
+    kind: Literal["sine"] = Field(
+        "sine", description="registered name of this reference; selects the model that validates this section"
+    )
+    amplitude: float = Field(description="amplitude, in the signal's unit")
+    frequency: float = Field(
+        gt=0,
+        description=(
+            "frequency f of offset + amplitude sin(2 pi f t + phase): the thesis's x_r = 0.3 sin(0.05 pi t) has f = "
+            "0.025 Hz"
+        ),
+        json_schema_extra={"unit": "Hz"},
+    )
+    phase: float = Field(0.0, description="phase", json_schema_extra={"unit": "rad"})
+    offset: float = Field(0.0, description="constant added to the sine, in the signal's unit")
 
 
 class Constant(ReferenceModel):

@@ -7,7 +7,7 @@ ranges, an actuator lag and a reference prefilter. A hypothesis picks at
 most one non-default value per family; :func:`apply` writes it into an experiment's
 (interpolated) raw config, with the continuous parameters it frees (e.g. F_max).
 
-The literal hypothesis (no option) is today's behaviour.
+The literal hypothesis (no option) is the default loop, every experiment as its config has it.
 """
 
 from __future__ import annotations
@@ -116,56 +116,56 @@ def _sampled(pid: Raw, params: Mapping[str, float], _: list[str]) -> None:
 
 ANGLES = ("theta", "phi")
 F_MAX = {"F_max": (2.0, 100.0)}
-#: The free parameters' values nearest today's loop: the widest limit, the shortest lag,
+#: The free parameters' values nearest the default loop: the widest limit, the shortest lag,
 #: prefilter and sampling period.
 NEUTRAL = {"F_max": 100.0, "tau": 0.001, "T_f": 0.01, "T_s": 0.001, "u_max": 20.0}
 
-#: family -> value -> option; the first value of each family is the default (today's).
+#: family -> value -> option; the first value of each family is the default.
 FAMILIES: dict[str, dict[str, OptionValue]] = {
     "ordering": {
-        "value": OptionValue("AGS ranges min/max by value, as printed (today)", _unchanged),
+        "value": OptionValue("AGS ranges min/max by value, as printed (default)", _unchanged),
         "magnitude": OptionValue("negative-gain AGS ranges min/max by magnitude", _by_magnitude),
     },
     "derivative": {
-        "backward": OptionValue("backward difference of e (today)", _unchanged),
+        "backward": OptionValue("backward difference of e (default)", _unchanged),
         "filtered": OptionValue("filtered N s/(s + N), N = 100 (Simulink's default)", _derivative("filtered", "error")),
         "measurement": OptionValue("filtered, N = 100, on the measurement", _derivative("filtered", "measurement")),
     },
     "integral": {
-        "outside": OptionValue("u = k_i(t) integral(e), eqs. 2.17-2.22 as printed (today)", _unchanged),
+        "outside": OptionValue("u = k_i(t) integral(e), eqs. 2.17-2.22 as printed (default)", _unchanged),
         "inside": OptionValue("u = integral(k_i(t) e) (Simulink's AGS by a gain block)", _integral_inside),
     },
     "ags_error": {
-        "abs": OptionValue("error AGS on |e| (today)", _unchanged),
+        "abs": OptionValue("error AGS on |e| (default)", _unchanged),
         "signed": OptionValue("error AGS on e as eqs. 2.20-2.22 print it", _signed_error),
     },
     "ags_argument": {
-        "as_seen": OptionValue("the error schedule's argument is e as the loop sees it (today)", _unchanged),
+        "as_seen": OptionValue("the error schedule's argument is e as the loop sees it (default)", _unchanged),
         "angle_degrees": OptionValue("the angle loops' error schedules take e in degrees", _ags_angle_degrees),
     },
     "form": {
-        "parallel": OptionValue("k_p + k_i/s + k_d s (today)", _unchanged),
+        "parallel": OptionValue("k_p + k_i/s + k_d s (default)", _unchanged),
         "ideal": OptionValue("k_p (1 + k_i/s + k_d s), Simulink's ideal form", _form("ideal")),
         "series": OptionValue("k_p (1 + k_i/s)(1 + k_d s)", _form("series")),
     },
     "units": {
-        "radians": OptionValue("angle loops see radians (today)", _unchanged),
+        "radians": OptionValue("angle loops see radians (default)", _unchanged),
         "degrees": OptionValue("angle loops see degrees (y, r, e and the schedule's argument)", _angles_in_degrees),
     },
     "lag": {
-        "none": OptionValue("forces applied as commanded (today)", _unchanged),
+        "none": OptionValue("forces applied as commanded (default)", _unchanged),
         "first_order": OptionValue(
             "first-order actuator lag tau on every force", _actuator_lag, {"tau": (0.001, 0.3)}, "experiment"
         ),
     },
     "prefilter": {
-        "none": OptionValue("raw step references (today)", _unchanged),
+        "none": OptionValue("raw step references (default)", _unchanged),
         "first_order": OptionValue(
             "first-order prefiltered steps, time constant T_f", _prefilter, {"T_f": (0.01, 3.0)}, "experiment"
         ),
     },
     "sampling": {
-        "continuous": OptionValue("PID updated at every integration step, dt = 1 ms (today)", _unchanged),
+        "continuous": OptionValue("PID updated at every integration step, dt = 1 ms (default)", _unchanged),
         "discrete": OptionValue(
             "discrete PID at T_s (free in [1, 50] ms; 10 and 20 ms inside), output held between samples",
             _sampled,
@@ -173,7 +173,7 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
         ),
     },
     "saturation": {
-        "none": OptionValue("unlimited forces (today)", _unchanged),
+        "none": OptionValue("unlimited forces (default)", _unchanged),
         "plain": OptionValue("|F| <= F_max, no anti-windup", _saturation("none"), F_MAX),
         "clamping": OptionValue("|F| <= F_max, clamping anti-windup", _saturation("clamping"), F_MAX),
         "back_calculation": OptionValue(
@@ -250,7 +250,7 @@ CSTR_OPERATING_CB = 1.117021276595745
 #: Chapter 5's families (Table 5.8; the CSTR), same form as :data:`FAMILIES`.
 CSTR_FAMILIES: dict[str, dict[str, OptionValue]] = {
     "zn_rule": {
-        "classic": OptionValue("Ziegler-Nichols PID, Table 5.1 (today)", _unchanged),
+        "classic": OptionValue("Ziegler-Nichols PID, Table 5.1 (default)", _unchanged),
         "pi": OptionValue("Ziegler-Nichols PI, Table 5.1 (PI instead of PID)", _zn_rule("pi")),
         "pessen": OptionValue("Pessen's integral rule", _zn_rule("pessen")),
         "some_overshoot": OptionValue("ZN 'some overshoot'", _zn_rule("some_overshoot")),
@@ -258,7 +258,7 @@ CSTR_FAMILIES: dict[str, dict[str, OptionValue]] = {
         "tyreus_luyben": OptionValue("Tyreus-Luyben PID", _zn_rule("tyreus_luyben")),
     },
     "cstr_derivative": {
-        "backward": OptionValue("backward difference of e (today)", _unchanged),
+        "backward": OptionValue("backward difference of e (default)", _unchanged),
         "filtered_n100": OptionValue("filtered, N = 100 (Simulink's default)", _derivative_n("filtered", "error", 100)),
         "filtered_n10": OptionValue("filtered, N = 10", _derivative_n("filtered", "error", 10)),
         "measurement": OptionValue(
@@ -266,28 +266,28 @@ CSTR_FAMILIES: dict[str, dict[str, OptionValue]] = {
         ),
     },
     "setpoint_weight": {
-        "one": OptionValue("proportional term on e (today)", _unchanged),
+        "one": OptionValue("proportional term on e (default)", _unchanged),
         "half": OptionValue("proportional term on 0.5 r - y", _setpoint_weight(0.5)),
         "zero": OptionValue("proportional term on -y (b = 0; I-PD with the derivative on y)", _setpoint_weight(0.0)),
     },
     "step_time": {
-        "zero": OptionValue("reference step at t = 0 (today)", _unchanged),
+        "zero": OptionValue("reference step at t = 0 (default)", _unchanged),
         "one_second": OptionValue(
             "reference step at t = 1 s (Simulink's default)", _step_at_one_second, scope="experiment"
         ),
     },
     "actuator_limit": {
-        "none": OptionValue("unlimited dilution rate (today)", _unchanged),
+        "none": OptionValue("unlimited dilution rate (default)", _unchanged),
         "saturated": OptionValue(
             "|u| <= u_max on the input, any controller", _actuator_limit, {"u_max": (0.1, 20.0)}, "experiment"
         ),
     },
     "time_unit": {
-        "minutes": OptionValue("the model's time unit (min) printed as s (today)", _unchanged),
+        "minutes": OptionValue("the model's time unit (min) printed as s (default)", _unchanged),
         "seconds": OptionValue("the model converted to seconds, G(60 s)", _model_in_seconds, scope="experiment"),
     },
     "reactor": {
-        "transfer_function": OptionValue("the transfer function 5.10 (today)", _unchanged),
+        "transfer_function": OptionValue("the transfer function 5.10 (default)", _unchanged),
         "nonlinear": OptionValue(
             "the nonlinear reactor about its operating point", _nonlinear_reactor, scope="experiment"
         ),
@@ -319,7 +319,7 @@ class Hypothesis:
         return out
 
     def neutral(self) -> dict[str, float]:
-        """Each free parameter's value nearest today's loop (:data:`NEUTRAL`)."""
+        """Each free parameter's value nearest the default loop (:data:`NEUTRAL`)."""
         return {name: NEUTRAL[name] for name in self.free()}
 
     def apply(self, raw: Raw, params: Mapping[str, float], inputs: list[str]) -> Raw:

@@ -11,7 +11,7 @@ gains and the hypothesis's own parameters, e.g. F_max) and the plants it applies
     source: nlcx identify configs/identify/pendulum_all.yaml (rank 1 by validation)
     chapter5: {hypothesis: {zn_rule: pessen}, values: {}}   # Table 5.8's experiments
 
-``literal`` is today's behaviour: no option, no value, every experiment exactly as its config.
+``literal`` is the default loop: no option, no value, every experiment exactly as its config.
 ``nlcx reproduce --profile NAME`` runs every figure, table and claim under a profile.
 """
 

@@ -24,17 +24,27 @@ from nlcx.tuning.base import TuneContext, TunerConfig, TunerModel, single_loop
 
 
 class AnfisTunerConfig(TunerConfig):
-    kind: Literal["anfis"] = "anfis"
-    n_mfs: int = Field(3, ge=2, le=7)
-    mf: Literal["gbell", "gauss"] = "gbell"
-    epochs: int = Field(60, ge=1)
-    seed: int = Field(1, ge=0)
-    #: Training samples taken evenly from the ZN run.
-    samples: int = Field(1500, ge=50)
-    #: Gain ranges of the fuzzy teacher: [low x ZN gain, high x ZN gain] (as for the fuzzy PID).
-    range_factors: tuple[float, float] = (0.5, 1.5)
-    #: Overrides of the fuzzy teacher's configuration (sets, universes, rules, ...).
-    teacher: dict[str, Any] = Field(default_factory=dict)
+    kind: Literal["anfis"] = Field(
+        "anfis", description="registered name of this tuner; selects the model that validates this section"
+    )
+    n_mfs: int = Field(3, ge=2, le=7, description="membership functions per input of each trained model")
+    mf: Literal["gbell", "gauss"] = Field("gbell", description="membership functions: generalised bell or Gaussian")
+    epochs: int = Field(
+        60,
+        ge=1,
+        description=(
+            "training epochs (hybrid learning: least squares for the consequents, gradient descent for the premises)"
+        ),
+    )
+    seed: int = Field(1, ge=0, description="seed of the training's random draws")
+    samples: int = Field(1500, ge=50, description="training samples taken evenly from the Ziegler-Nichols run")
+    range_factors: tuple[float, float] = Field(
+        (0.5, 1.5),
+        description="gain ranges of the fuzzy teacher: [low x ZN gain, high x ZN gain] (as for the fuzzy PID)",
+    )
+    teacher: dict[str, Any] = Field(
+        default_factory=dict, description="overrides of the fuzzy teacher's configuration (sets, universes, rules, ...)"
+    )
 
 
 class AnfisTuner(TunerModel):

@@ -21,15 +21,20 @@ PENALTY = 1e6
 
 
 class GATunerConfig(TunerConfig):
-    kind: Literal["ga"] = "ga"
-    objective: Literal["ise"] = "ise"
-    #: Search box of (k_p, k_i, k_d).
-    bounds: dict[str, tuple[float, float]] = Field(
-        default_factory=lambda: {"kp": (0.0, 5.0), "ki": (0.0, 5.0), "kd": (0.0, 2.0)}
+    kind: Literal["ga"] = Field(
+        "ga", description="registered name of this tuner; selects the model that validates this section"
     )
-    optimiser: GASettings = GASettings(pop_size=40, generations=25, seed=1)
-    #: Worker processes evaluating each generation (1: in this process).
-    jobs: int = Field(1, ge=1)
+    objective: Literal["ise"] = Field(
+        "ise", description="the cost the GA minimises: ise, the integral of the squared error of the step response"
+    )
+    bounds: dict[str, tuple[float, float]] = Field(
+        default_factory=lambda: {"kp": (0.0, 5.0), "ki": (0.0, 5.0), "kd": (0.0, 2.0)},
+        description="search box of the gains: kp, ki and kd each [lower, upper]",
+    )
+    optimiser: GASettings = Field(
+        GASettings(pop_size=40, generations=25, seed=1), description="settings of the seeded genetic algorithm"
+    )
+    jobs: int = Field(1, ge=1, description="worker processes evaluating each generation (1: in this process)")
 
     @field_validator("bounds")
     @classmethod

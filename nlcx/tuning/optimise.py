@@ -23,15 +23,17 @@ class GASettings(BaseModel):
     """Settings of the genetic algorithm (recorded with every tuning result)."""
 
     model_config = ConfigDict(extra="forbid")
-    kind: str = "ga"
-    pop_size: int = Field(40, ge=4)
-    generations: int = Field(30, ge=1)
-    seed: int = Field(1, ge=0)
-    #: Simulated binary crossover distribution index and probability (pymoo defaults).
-    crossover_eta: float = Field(15.0, gt=0)
-    crossover_prob: float = Field(0.9, ge=0, le=1)
-    #: Polynomial mutation distribution index.
-    mutation_eta: float = Field(20.0, gt=0)
+    kind: str = Field("ga", description="the optimiser: ga (pymoo's genetic algorithm)")
+    pop_size: int = Field(40, ge=4, description="population size")
+    generations: int = Field(30, ge=1, description="generations evolved")
+    seed: int = Field(1, ge=0, description="seed of the GA's random draws (same seed, same result)")
+    crossover_eta: float = Field(
+        15.0, gt=0, description="distribution index of the simulated binary crossover (pymoo's default)"
+    )
+    crossover_prob: float = Field(
+        0.9, ge=0, le=1, description="probability of the simulated binary crossover (pymoo's default)"
+    )
+    mutation_eta: float = Field(20.0, gt=0, description="distribution index of the polynomial mutation")
 
 
 def check_search_box(

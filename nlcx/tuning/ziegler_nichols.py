@@ -42,13 +42,24 @@ ALL_RULES = {**RULES, **VARIANT_RULES}
 
 
 class ZieglerNicholsConfig(TunerConfig):
-    kind: Literal["ziegler_nichols"] = "ziegler_nichols"
-    rule: Literal["p", "pi", "pid", "pessen", "some_overshoot", "no_overshoot", "tyreus_luyben"] = "pid"
-    #: For a fuzzy schedule: the gain ranges [low x ZN gain, high x ZN gain] of eqs. 5.12-5.14.
-    range_factors: tuple[float, float] = (0.5, 1.5)
-    #: Cross-check K_u and T_u by simulating the P loop at K_u (recorded in tuning.csv).
-    verify: bool = True
-    verify_periods: float = Field(8.0, gt=1)
+    kind: Literal["ziegler_nichols"] = Field(
+        "ziegler_nichols", description="registered name of this tuner; selects the model that validates this section"
+    )
+    rule: Literal["p", "pi", "pid", "pessen", "some_overshoot", "no_overshoot", "tyreus_luyben"] = Field(
+        "pid",
+        description=(
+            "tuning rule from the ultimate gain K_u and period T_u: p, pi, pid (Table 5.1), pessen, some_overshoot, "
+            "no_overshoot, tyreus_luyben"
+        ),
+    )
+    range_factors: tuple[float, float] = Field(
+        (0.5, 1.5),
+        description="for a fuzzy schedule: the gain ranges [low x ZN gain, high x ZN gain] of eqs. 5.12-5.14",
+    )
+    verify: bool = Field(
+        True, description="cross-check K_u and T_u by simulating the P loop at K_u (recorded in tuning.csv)"
+    )
+    verify_periods: float = Field(8.0, gt=1, description="length of that check, in periods T_u")
 
 
 def linear_model(plant: Plant) -> ct.StateSpace:

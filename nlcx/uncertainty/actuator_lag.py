@@ -32,11 +32,13 @@ V = LAG_STATE.at
 
 
 class ActuatorLagConfig(UncertaintyConfig):
-    kind: Literal["actuator_lag"] = "actuator_lag"
-    #: Time constant tau of the lag, s.
-    tau: float = Field(gt=0)
-    #: Inputs that are lagged, by name; default: every input.
-    inputs: list[str] | None = None
+    kind: Literal["actuator_lag"] = Field(
+        "actuator_lag", description="registered name of this uncertainty; selects the model that validates this section"
+    )
+    tau: float = Field(
+        gt=0, description="time constant tau of the first-order lag 1 / (tau s + 1)", json_schema_extra={"unit": "s"}
+    )
+    inputs: list[str] | None = Field(None, description="inputs that are lagged, by name; default: every input")
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)

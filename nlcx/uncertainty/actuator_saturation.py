@@ -26,11 +26,12 @@ M = LIMIT.at
 
 
 class ActuatorSaturationConfig(UncertaintyConfig):
-    kind: Literal["actuator_saturation"] = "actuator_saturation"
-    #: Limit u_max of each limited input, in the input's unit.
-    limit: float = Field(gt=0)
-    #: Inputs that are limited, by name; default: every input.
-    inputs: list[str] | None = None
+    kind: Literal["actuator_saturation"] = Field(
+        "actuator_saturation",
+        description="registered name of this uncertainty; selects the model that validates this section",
+    )
+    limit: float = Field(gt=0, description="limit u_max of each limited input, |u| <= u_max, in the input's unit")
+    inputs: list[str] | None = Field(None, description="inputs that are limited, by name; default: every input")
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)

@@ -17,17 +17,29 @@ from nlcx.validation import join
 
 
 class DisturbanceConfig(UncertaintyConfig):
-    kind: Literal["disturbance"] = "disturbance"
-    #: "sine": amplitude sin(2 pi frequency t + phase) (eq. 2.16); "step": amplitude from t >= start.
-    waveform: Literal["sine", "step"] = "sine"
-    amplitude: float = 20.0
-    #: Hz; 20 pi t in eq. 2.16 is 10 Hz.
-    frequency: float = Field(10.0, ge=0)
-    phase: float = 0.0
-    #: Time the step starts, s (waveform: step).
-    start: float = Field(0.0, ge=0)
-    #: States whose derivative receives d; default: every velocity state (the accelerations).
-    states: list[str] | None = None
+    kind: Literal["disturbance"] = Field(
+        "disturbance", description="registered name of this uncertainty; selects the model that validates this section"
+    )
+    waveform: Literal["sine", "step"] = Field(
+        "sine", description="sine: amplitude sin(2 pi frequency t + phase) (eq. 2.16); step: amplitude from t >= start"
+    )
+    amplitude: float = Field(
+        20.0,
+        description=(
+            "amplitude of d, added to the derivative of each target state (for a velocity state: an acceleration, "
+            "m/s^2 or rad/s^2)"
+        ),
+    )
+    frequency: float = Field(
+        10.0, ge=0, description="frequency of the sine; 20 pi t in eq. 2.16 is 10 Hz", json_schema_extra={"unit": "Hz"}
+    )
+    phase: float = Field(0.0, description="phase of the sine", json_schema_extra={"unit": "rad"})
+    start: float = Field(
+        0.0, ge=0, description="time the step starts (waveform: step)", json_schema_extra={"unit": "s"}
+    )
+    states: list[str] | None = Field(
+        None, description="states whose derivative receives d; default: every velocity state (the accelerations)"
+    )
 
 
 class Disturbance(UncertaintyModel):

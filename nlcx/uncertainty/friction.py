@@ -29,27 +29,43 @@ VERTICAL_INPUT = "F_z"
 
 
 class FrictionConfig(UncertaintyConfig):
-    kind: Literal["friction"] = "friction"
-    #: "none" switches friction off (handy as a sweep value).
-    model: Literal["none", "simple", "exponential"] = "simple"
-    #: Static (breakaway) friction coefficient.
-    mu_s: float = Field(0.2, ge=0)
-    #: Coulomb (sliding) friction coefficient.
-    mu_c: float = Field(0.15, ge=0)
-    #: Viscous friction coefficient eps, N s/m.
-    viscous: float = Field(0.1, ge=0)
-    #: Stribeck velocity v_s of the exponential model, m/s (Appendix A).
-    stribeck_velocity: float = Field(0.105, gt=0)
-    #: Form factor gamma of the exponential model (Appendix A).
-    form_factor: float = Field(2.0, gt=0)
-    #: Normal force F_N, N; "weight" is (M + m) g as Appendix A defines it.
-    normal_force: Literal["weight"] | float = "weight"
-    #: The vertical (z) axis: "same" applies F_N = (M + m) g as Appendix A literally does;
-    #: "viscous_only" keeps only eps z_dot (gravity gives a vertical guide no normal force);
-    #: "none" removes friction from z.
-    vertical: Literal["same", "viscous_only", "none"] = "same"
-    #: Inputs whose axes have friction; default: every input with an axis.
-    axes: list[str] | None = None
+    kind: Literal["friction"] = Field(
+        "friction", description="registered name of this uncertainty; selects the model that validates this section"
+    )
+    model: Literal["none", "simple", "exponential"] = Field(
+        "simple",
+        description=(
+            "simple or exponential (Stribeck) friction of Appendix A; none switches friction off (handy as a sweep "
+            "value)"
+        ),
+    )
+    mu_s: float = Field(0.2, ge=0, description="static (breakaway) friction coefficient mu_s")
+    mu_c: float = Field(0.15, ge=0, description="Coulomb (sliding) friction coefficient mu_c")
+    viscous: float = Field(
+        0.1, ge=0, description="viscous friction coefficient eps", json_schema_extra={"unit": "N s/m"}
+    )
+    stribeck_velocity: float = Field(
+        0.105,
+        gt=0,
+        description="Stribeck velocity v_s of the exponential model (Appendix A)",
+        json_schema_extra={"unit": "m/s"},
+    )
+    form_factor: float = Field(2.0, gt=0, description="form factor gamma of the exponential model (Appendix A)")
+    normal_force: Literal["weight"] | float = Field(
+        "weight",
+        description="normal force F_N in N, or weight: (M + m) g as Appendix A defines it",
+        json_schema_extra={"unit": "N"},
+    )
+    vertical: Literal["same", "viscous_only", "none"] = Field(
+        "same",
+        description=(
+            "the vertical (z) axis: same applies F_N = (M + m) g as Appendix A literally does; viscous_only keeps only"
+            " eps z_dot; none removes friction from z"
+        ),
+    )
+    axes: list[str] | None = Field(
+        None, description="inputs whose axes have friction; default: every input with an axis"
+    )
 
     @model_validator(mode="after")
     def _static_at_least_sliding(self) -> FrictionConfig:

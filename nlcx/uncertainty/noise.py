@@ -22,16 +22,33 @@ from nlcx.validation import join
 
 
 class NoiseConfig(UncertaintyConfig):
-    kind: Literal["noise"] = "noise"
-    #: Noise power P (the block's "Noise power"): sample variance is P / sample_time.
-    power: float = Field(1e-7, ge=0)
-    #: Hold time T_s of each sample, s (rounded to whole simulation steps).
-    sample_time: float = Field(0.01, gt=0)
-    #: "measurement": added to the outputs the controllers read (the errors they form);
-    #: "controller_output": added to the forces the controllers command.
-    injection: Literal["measurement", "controller_output"] = "measurement"
-    #: Signals that receive noise (outputs or inputs by name); default: all of them.
-    signals: list[str] | None = None
+    kind: Literal["noise"] = Field(
+        "noise", description="registered name of this uncertainty; selects the model that validates this section"
+    )
+    power: float = Field(
+        1e-7,
+        ge=0,
+        description=(
+            "noise power P of Simulink's Band-Limited White Noise block: the samples' variance is P / sample_time (in "
+            "the signal's unit squared times s)"
+        ),
+    )
+    sample_time: float = Field(
+        0.01,
+        gt=0,
+        description="hold time T_s of each sample (rounded to whole simulation steps)",
+        json_schema_extra={"unit": "s"},
+    )
+    injection: Literal["measurement", "controller_output"] = Field(
+        "measurement",
+        description=(
+            "measurement: added to the outputs the controllers read; controller_output: added to the inputs the "
+            "controllers command"
+        ),
+    )
+    signals: list[str] | None = Field(
+        None, description="signals that receive noise (outputs or inputs by name); default: all of them"
+    )
 
 
 class Noise(UncertaintyModel):
