@@ -111,8 +111,8 @@ ERROR_METRICS: tuple[str, ...] = ("ise", "iae", "itae", "max_abs_error", "rms_er
 INPUT_METRICS: tuple[str, ...] = ("control_effort", "peak_input", "total_variation")
 
 # Rows per block = max(1, _CHUNK_ELEMENTS // T): bounds the size of the temporaries. 2 MB
-# blocks stay in cache and are reused by the allocator; 32 MB blocks ran 3x slower
-# (memory-bound, and every temporary freshly mapped). Blocks never change a result.
+# blocks stay in cache and are reused by the allocator; much larger blocks are memory-bound,
+# every temporary freshly mapped. Blocks never change a result.
 _CHUNK_ELEMENTS = 1 << 18
 
 

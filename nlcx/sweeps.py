@@ -256,7 +256,7 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
     ``return_metrics=False`` leaves the metrics out of the result (a pool worker's result
     travels back pickled; the sweep reads the metrics from the part files). The garbage
     collector waits for the end of the batch (:func:`_settle_heap`): its collections while the
-    batch built its configs were ~2 % of a sweep's samples under ``perf``."""
+    batch built its configs showed in a sweep's profile under ``perf``."""
     _set_threads()
     collecting = gc.isenabled()
     gc.disable()
@@ -435,8 +435,8 @@ def _run_batches(
     frozen = bool(batches) and executor == "process"
     if frozen:
         # the workers fork with this heap frozen: their first collection (_settle_heap) then
-        # skips what they inherit (imports, the kernel), ~465 -> ~330 ms of a worker's first
-        # batch (medians of six pairs); a list splice, nothing collected, free here
+        # skips what they inherit (imports, the kernel) in each worker's first batch;
+        # a list splice, nothing collected, free here (docs/performance.md)
         gc.freeze()
     pool, close = make_executor(executor, jobs, scheduler) if batches else (None, lambda: None)
     try:
@@ -624,7 +624,7 @@ def _merged_metrics(parts_dir: Path, parts: list[str], chosen: pd.DataFrame) -> 
 
 def _member_of(hashes: pd.Series, wanted: Collection[str]) -> np.ndarray:
     """``hashes.isin(wanted)`` by set lookups: pandas' ``isin`` on Arrow-backed strings loops
-    in Python and took ~0.1 s of assembling a 10 000-variant sweep."""
+    in Python, a noticeable part of assembling a large sweep."""
     return np.fromiter((h in wanted for h in hashes.to_numpy(dtype=object)), dtype=bool, count=len(hashes))
 
 

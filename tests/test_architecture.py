@@ -1,4 +1,4 @@
-"""The package's structure rules (issue 9): no import cycles, small functions, named offsets.
+"""The package's structure rules: no import cycles, small functions, named offsets.
 
 These read the source with :mod:`ast`; they do not import the package.
 """

@@ -122,6 +122,6 @@ def test_the_study_end_to_end_its_counts_recomputed_from_the_loops(tmp_path: Pat
 def test_a_bad_spec_is_one_line(tmp_path: Path) -> None:
     path = tmp_path / "spec.yaml"
     path.write_text(yaml.safe_dump({"name": "bad", "kind": "consistency", "tables": ["9.9"], "free": BOX}))
-    result = runner.invoke(app, ["identify", str(path)])
+    result = runner.invoke(app, ["identify", str(path), "--out", str(tmp_path / "out")])
     assert result.exit_code == 2 and len(result.output.strip().splitlines()) == 1, result.output
     assert "9.9" in result.output

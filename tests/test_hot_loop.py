@@ -2,8 +2,8 @@
 right-hand side, controller step, gain schedule or loop element that allocates nothing is
 compiled without numba's reference counting (``_nrt=False``).
 
-Counting every array a function receives, on entry and on exit, cost the PID step ~50 ns a
-call, more than its arithmetic for one or two variants; a function that loses the option
+Counting every array a function receives, on entry and on exit, costs the PID step more
+than its arithmetic for one or two variants; a function that loses the option
 still computes the same bits (the other tests), only slower, so this is where it shows."""
 
 from __future__ import annotations

@@ -43,10 +43,10 @@ def test_the_family_is_every_combination_of_up_to_three_options() -> None:
     assert all(len({f for f, _ in h.options}) == len(h.options) for h in family)  # one value per family
 
 
-def test_literal_is_todays_experiment() -> None:
+def test_literal_is_the_experiment_as_configured() -> None:
     ours = built(hypotheses.Hypothesis())
-    today = engine.prepare(config.load(THESIS / "ch2" / "fig_2_17.yaml"))
-    for a, b in zip(ours.controllers, today.controllers, strict=True):
+    default = engine.prepare(config.load(THESIS / "ch2" / "fig_2_17.yaml"))
+    for a, b in zip(ours.controllers, default.controllers, strict=True):
         assert np.array_equal(a.cp, b.cp)
 
 

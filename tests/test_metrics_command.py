@@ -301,7 +301,7 @@ def test_a_varying_reference_is_tracked(tmp_path: Path) -> None:
 
 def test_plain_csv_measures_every_column_of_numbers(rig_csv: Path, tmp_path: Path) -> None:
     """No --signal and no reference column: every column of numbers but time, each against its
-    last sample, written as today (signal, metric, value, unit)."""
+    last sample, written as for any plain CSV (signal, metric, value, unit)."""
     out = tmp_path / "m.csv"
     result = runner.invoke(app, ["metrics", str(rig_csv), "--time", "time", "--out", str(out)])
     assert result.exit_code == 0, result.output

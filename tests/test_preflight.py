@@ -1,4 +1,4 @@
-"""Validation gaps and the open-loop step analysis (issue 9), end to end through `nlcx run`."""
+"""Validation gaps and the open-loop step analysis, end to end through `nlcx run`."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Reproduction profiles: literal is today's behaviour; a profile reaches every pendulum experiment."""
+"""Reproduction profiles: literal is the loop as printed (the defaults); a profile reaches every pendulum experiment."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The committed train / validation / test split of the thesis's numbers (issue 10)."""
+"""The committed train / validation / test split of the thesis's numbers."""
 
 from __future__ import annotations
 

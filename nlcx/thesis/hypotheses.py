@@ -73,7 +73,7 @@ def _saturation(anti_windup: str) -> Callable[[Raw, Mapping[str, float], list[st
 
 
 def _unchanged(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
-    """Today's setting: the config as it is."""
+    """The default setting: the config as it is."""
 
 
 def _form(form: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:

@@ -67,7 +67,7 @@ class IdentifySpec(BaseModel):
     #: Fit only these hypotheses (by name; default: the whole family).
     only: list[str] | None = None
     #: GA settings of a first fit of the literal loop whose gains seed every other
-    #: hypothesis's first population, the freed parameters at their values nearest today's
+    #: hypothesis's first population, the freed parameters at their values nearest the default
     #: loop (:data:`nlcx.thesis.hypotheses.NEUTRAL`): each GA then starts from the literal
     #: fit, and its elitism keeps the best candidate. None: every GA starts at random.
     warm_start: GASettings | None = None
