@@ -19,7 +19,10 @@ def _ruff() -> str:
 def test_ruff_clean() -> None:
     ruff = _ruff()
     proc = subprocess.run(
-        [ruff, "check", "nlcx", "tests", "scripts", "benchmarks"], cwd=ROOT, capture_output=True, text=True
+        [ruff, "check", "nlcx", "tests", "scripts", "benchmarks", "examples", "docs"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
