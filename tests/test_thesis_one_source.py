@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import ast
 import copy
+import dataclasses
 import importlib.util
 import math
+import re
 import sys
 from graphlib import CycleError, TopologicalSorter
 from pathlib import Path
@@ -29,6 +31,11 @@ from nlcx.thesis.tables import ags_table
 ROOT = Path(__file__).resolve().parent.parent
 THESIS = ROOT / "configs" / "thesis"
 PACKAGE = ROOT / "nlcx" / "thesis"
+#: What a claim's source may cite: numbered tables and figures, a pendulum's theorem, the conclusion.
+CITATION = re.compile(
+    r"(Table|Table of Fig\.|Fig\.|Figs\.) \d+\.\d+([-, ]+\d+\.\d+)*( and section \d+(\.\d+)+)?"
+    r"|Theorem and V̇ figure of the (x|xy|xz|xyz) pendulum|Conclusion of the chapter"
+)
 
 
 def _load_generator() -> ModuleType:
@@ -41,8 +48,19 @@ def _load_generator() -> ModuleType:
     return sys.modules[name]
 
 
-def _thesis_imports(path: Path) -> set[str]:
+def _thesis_modules() -> dict[str, Path]:
+    """Every module of nlcx.thesis and its subpackages (nlcx.thesis.claims), by dotted name."""
+    modules = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        parts = path.relative_to(PACKAGE.parent.parent).with_suffix("").parts
+        modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    modules.pop("nlcx.thesis")
+    return modules
+
+
+def _thesis_imports(name: str, path: Path) -> set[str]:
     """The nlcx.thesis modules one module imports, at the top or inside functions."""
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
     found = set()
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.Import):
@@ -50,10 +68,10 @@ def _thesis_imports(path: Path) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:  # relative: from .x import y, from . import y
-                base = ".".join(["nlcx", "thesis", *([base] if base else [])])
+                parent = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(parent + ([base] if base else []))
             found |= {base} | {f"{base}.{alias.name}" for alias in node.names}
-    modules = {f"nlcx.thesis.{p.stem}" for p in PACKAGE.glob("*.py") if p.stem != "__init__"}
-    return found & modules
+    return (found & set(_thesis_modules())) - {name}
 
 
 def _departures(table: pd.DataFrame) -> pd.DataFrame:
@@ -73,8 +91,10 @@ def _response_configs() -> list[tuple[str, Path]]:
 
 
 def test_no_import_cycle_among_thesis_modules() -> None:
-    graph = {f"nlcx.thesis.{p.stem}": _thesis_imports(p) for p in PACKAGE.glob("*.py") if p.stem != "__init__"}
-    assert graph["nlcx.thesis.claims"] >= {"nlcx.thesis.tables", "nlcx.thesis.cstr"}  # the walk sees imports
+    graph = {name: _thesis_imports(name, path) for name, path in _thesis_modules().items()}
+    # the walk sees imports, those of a subpackage's modules too
+    assert graph["nlcx.thesis.claims"] >= {"nlcx.thesis.cstr", "nlcx.thesis.claims.table"}
+    assert graph["nlcx.thesis.claims.checks"] >= {"nlcx.thesis.tables"}
     try:
         tuple(TopologicalSorter(graph).static_order())
     except CycleError as exc:
@@ -84,7 +104,7 @@ def test_no_import_cycle_among_thesis_modules() -> None:
 def test_no_thesis_function_longer_than_80_lines() -> None:
     long = [
         f"{path.name}:{node.name} {node.end_lineno - node.lineno + 1}"
-        for path in PACKAGE.glob("*.py")
+        for path in PACKAGE.rglob("*.py")
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
         if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.end_lineno - node.lineno + 1 > 80
     ]
@@ -141,9 +161,31 @@ def test_z_rate_is_not_printed_and_runs_as_a_position_loop() -> None:
         assert ags.run_rates("phi")[gain] == ags.printed_rate("theta", gain)
 
 
+def _citation_problems(claim: claims.Claim) -> list[str]:
+    """What keeps a claim from citing the thesis: an empty or unnumbered source, a template
+    left unfilled, no section number of its chapter, no checks."""
+    problems = []
+    if not CITATION.fullmatch(claim.source):
+        problems.append(f"source {claim.source!r} names no numbered table, figure, theorem or the conclusion")
+    if "{" in claim.source + claim.text:
+        problems.append("an unfilled template")
+    if not all(re.fullmatch(rf"{claim.chapter}(\.\d+)+", s) for s in claim.section.split(", ")):
+        problems.append(f"section {claim.section!r} is no section of chapter {claim.chapter}")
+    if not claim.checks:
+        problems.append("no checks")
+    return problems
+
+
 @pytest.mark.parametrize("plant", ["x", "xy", "xz", "xyz"])
 def test_claims_have_unique_ids_and_cite_numbered_sources(plant: str) -> None:
     declared = claims.claims_for(plant)
-    assert len({c.key for c in declared}) == len(declared)
+    assert declared and len({c.id for c in declared}) == len(declared)
     for claim in declared:
-        assert claim.checks and "{" not in claim.source + claim.text, claim.key
+        assert not _citation_problems(claim), claim.id
+
+
+@pytest.mark.parametrize("source", ["", " ", "Table", "see above", "Fig. {0}"])
+def test_a_claim_citing_no_numbered_source_is_caught(source: str) -> None:
+    """The check above fails on a planted claim with an empty or unnumbered source."""
+    planted = dataclasses.replace(claims.claims_for("x")[0], source=source)
+    assert _citation_problems(planted)[0].startswith(f"source {source!r} names no numbered")

@@ -1,0 +1,412 @@
+"""The claims table (nlcx/thesis/data/claims.yaml) and the evaluators of its kinds of check.
+
+The table must agree with the thesis data it points into: every check of a known kind, every
+cell it reads printed by the thesis (a table's) or produced by the experiment (a figure's),
+every named threshold declared and every declared one used. Each evaluator runs on small
+hand-made runs whose verdicts and evidence follow from their numbers by hand; a table with a
+planted mistake is refused with one line.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from nlcx import config, registry
+from nlcx.errors import NlcxError
+from nlcx.thesis import catalog, claims
+from nlcx.thesis.claims import KINDS, Check, Run
+from nlcx.thesis.reproduce import Record
+
+ROOT = Path(__file__).resolve().parent.parent
+THESIS = ROOT / "configs" / "thesis"
+TABLE = claims.claim_table()
+MINI = """
+thresholds:
+  tol: {value: 0.01, description: zero e_ss}
+claims:
+  - id: x-mini
+    chapter: 2
+    pendulum: x
+    source: Table 2.3
+    claim: lower M_p and t_s, zero e_ss
+    section: "2.5.1.1"
+    quote: some words
+    checks:
+      - {kind: proposed_lower, run: Table 2.3, signals: [x], metric: Mp}
+      - {kind: proposed_lower, run: Table 2.3, signals: [x, theta], metric: ts}
+      - {kind: zero_ess, run: Table 2.3, controllers: [conventional, proposed], signals: [x], thresholds: [tol]}
+"""
+
+
+def _figure_rows() -> dict[str, dict[str, str]]:
+    """figures.csv as the thesis's extract has it: figure number -> row."""
+    with (catalog.DATA / "figures.csv").open(newline="", encoding="utf-8") as fh:
+        return {row["figure"]: row for row in csv.DictReader(fh)}
+
+
+def _record(
+    metrics: dict[tuple[str, str, str], float],
+    extras: dict[tuple[str, str, str], float] | None = None,
+    status: dict[str, str] | None = None,
+    reference: dict[str, Any] | None = None,
+    lyapunov: dict[str, Any] | None = None,
+) -> Record:
+    """A run's record with these (controller, signal, metric) -> value cells."""
+
+    def frame(cells: dict[tuple[str, str, str], float]) -> pd.DataFrame:
+        rows = [[c, s, m, v] for (c, s, m), v in cells.items()]
+        return pd.DataFrame(rows, columns=["controller", "signal", "metric", "value"])
+
+    return Record(
+        config=Path("hand-made.yaml"),
+        name="hand-made",
+        resolved={"reference": reference or {}},
+        metrics=frame(metrics),
+        status=status or {"conventional": "ok", "proposed": "ok"},
+        extras=frame(extras or {}),
+        lyapunov=lyapunov or {},
+    )
+
+
+def _check(kind: str, **fields: Any) -> Check:
+    """A check of ``kind`` with the controllers and metric its kind fixes, unless given."""
+    spec = KINDS[kind]
+    return Check(
+        kind=kind,
+        runs=fields.get("runs", ("Fig. 2.4",)),
+        controllers=fields.get("controllers", spec.controllers or ("proposed",)),
+        signals=fields.get("signals", ("x",)),
+        metric=fields.get("metric", spec.metric or ""),
+        thresholds=(),
+    )
+
+
+def _holds(kind: str, records: list[Record], limits: dict[str, float] | None = None, **fields: Any) -> tuple[bool, str]:
+    runs = [Run(f"Fig. 2.{k}", fields.pop("uncertainty", "none"), r) for k, r in enumerate(records)]
+    return KINDS[kind].evaluate(_check(kind, **fields), runs, limits or {})
+
+
+# -- the table against the thesis data
+
+
+def test_every_check_is_of_a_known_kind_and_every_kind_is_used() -> None:
+    used = {check.kind for claim in TABLE.claims for check in claim.checks}
+    assert used == set(KINDS)
+
+
+def test_claims_are_ordered_as_the_chapters_and_their_pendulums() -> None:
+    order = [(c.chapter, ("x", "xy", "xz", "xyz").index(c.pendulum)) for c in TABLE.claims]
+    assert order == sorted(order) and len(TABLE.claims) == 108
+    assert [c.id for c in TABLE.claims if c.pendulum == "x"][:2] == ["x-time-nominal-Mp", "x-time-nominal-tr"]
+
+
+def test_every_cell_a_check_reads_is_in_the_thesis_data() -> None:
+    """A table's cells are printed in it (pendulum_metrics.csv); a figure is a stabilisation or
+    tracking result of the claim's pendulum (figures.csv); every signal is an output or input
+    of that pendulum."""
+    printed = catalog.thesis_metrics()
+    columns = (printed.table.astype(str), printed.plant, printed.signal, printed.controller, printed.metric)
+    cells = set(zip(*columns, strict=True))
+    figures = _figure_rows()
+    for claim in TABLE.claims:
+        plant = registry.plants.get(catalog.PLANTS[claim.pendulum])
+        signals = set(plant.outputs) | {s.name for s in plant.inputs}
+        for check in claim.checks:
+            assert set(check.signals) <= signals, (claim.id, check)
+            for ref in check.runs:
+                kind, number = ref.split(" ")
+                assert int(number.split(".")[0]) == claim.chapter, (claim.id, ref)
+                if kind == "Table":
+                    assert check.metric in ("Mp", "tr", "ts", "ess"), (claim.id, ref, check.metric)
+                    for controller in check.controllers:
+                        for signal in check.signals:
+                            cell = (number, claim.pendulum, signal, controller, check.metric)
+                            assert cell in cells, (claim.id, cell)
+                else:
+                    row = figures[number]
+                    assert row["kind"] == "result" and row["plant"] == claim.pendulum, (claim.id, ref)
+                    assert row["mode"] in ("stabilization", "tracking"), (claim.id, ref)
+
+
+def test_tracking_checks_read_signals_with_a_sine_reference() -> None:
+    """The tracking kinds divide by the sine's amplitude: each signal they read has one."""
+    for claim in TABLE.claims:
+        for check in claim.checks:
+            if KINDS[check.kind].mode != "tracking":
+                continue
+            figure = check.runs[0].removeprefix("Fig. ")
+            reference = config.load(catalog.figure_config(THESIS, figure)).resolved()["reference"]
+            for signal in check.signals:
+                assert reference[signal]["kind"] == "sine" and reference[signal]["amplitude"] > 0, (claim.id, signal)
+
+
+def test_named_thresholds_are_declared_once_and_all_used() -> None:
+    used = {name for claim in TABLE.claims for check in claim.checks for name in check.thresholds}
+    assert used == set(TABLE.thresholds)
+    for claim in TABLE.claims:
+        for check in claim.checks:
+            assert len(check.thresholds) == len(KINDS[check.kind].thresholds), (claim.id, check.kind)
+    assert all(t.description.strip() for t in TABLE.thresholds.values())
+
+
+def test_every_claim_quotes_the_thesis_in_a_section_of_its_chapter() -> None:
+    for claim in TABLE.claims:
+        sections = claim.section.split(", ")
+        assert all(re.fullmatch(rf"{claim.chapter}(\.\d+)+", s) for s in sections), (claim.id, claim.section)
+        assert len(claim.quote.split()) >= 5, claim.id
+
+
+def test_configs_for_a_chapter_are_its_stabilisation_and_tracking_runs() -> None:
+    """The x pendulum's claims read each of its 20 stabilisation and tracking figures."""
+    expected = {f.configs[0] for f in catalog.figures(THESIS) if f.kind == "response" and f.plant == "x"}
+    assert len(expected) == 20
+    assert set(claims.configs_for(THESIS, {2})) == expected
+
+
+# -- a claim's verdict
+
+
+def _mini_record(prop_overshoot: float, prop_ts_theta: float, prop_ess: float) -> Record:
+    return _record(
+        {
+            ("conventional", "x", "overshoot"): 50.0,
+            ("proposed", "x", "overshoot"): prop_overshoot,
+            ("conventional", "x", "settling_time"): 7.0,
+            ("proposed", "x", "settling_time"): 5.0,
+            ("conventional", "theta", "settling_time"): 6.0,
+            ("proposed", "theta", "settling_time"): prop_ts_theta,
+            ("conventional", "x", "steady_state_error"): 0.001,
+            ("proposed", "x", "steady_state_error"): prop_ess,
+        }
+    )
+
+
+@pytest.mark.parametrize(
+    "prop_overshoot, prop_ts_theta, prop_ess, verdict, evidence",
+    [
+        (
+            30.0, 4.0, -0.002, "yes",
+            "Mp x: conv 0.5 vs prop 0.3 | ts x: conv 7 vs prop 5; ts θ: conv 6 vs prop 4"
+            " | conventional max|e_ss| 0.001; proposed max|e_ss| 0.002",
+        ),
+        (
+            30.0, 8.0, -0.002, "partly",
+            "Mp x: conv 0.5 vs prop 0.3 | ts x: conv 7 vs prop 5; ts θ: conv 6 vs prop 8"
+            " | conventional max|e_ss| 0.001; proposed max|e_ss| 0.002",
+        ),
+        (
+            60.0, 8.0, 0.05, "no",
+            "Mp x: conv 0.5 vs prop 0.6 | ts x: conv 7 vs prop 5; ts θ: conv 6 vs prop 8"
+            " | conventional max|e_ss| 0.001; proposed max|e_ss| 0.05",
+        ),
+    ],
+)  # fmt: skip
+def test_a_claim_is_yes_when_every_check_holds_partly_when_some_no_when_none(
+    prop_overshoot: float, prop_ts_theta: float, prop_ess: float, verdict: str, evidence: str
+) -> None:
+    table = claims.parse(MINI, "mini.yaml")
+    runs = {"Table 2.3": Run("Table 2.3", "none", _mini_record(prop_overshoot, prop_ts_theta, prop_ess))}
+    assert claims.judge(table.claims[0], runs, table) == (verdict, evidence)
+
+
+# -- each kind of check on hand-made runs
+
+
+def test_proposed_lower_and_higher_compare_the_controllers_on_every_signal() -> None:
+    record = _record({("conventional", "x", "rise_time"): 2.0, ("proposed", "x", "rise_time"): 2.4})
+    assert _holds("proposed_higher", [record], metric="tr") == (True, "tr x: conv 2 vs prop 2.4")
+    assert _holds("proposed_lower", [record], metric="tr") == (False, "tr x: conv 2 vs prop 2.4")
+    undershoot = _record(
+        {
+            ("conventional", "x", "undershoot"): 12.0,
+            ("proposed", "x", "undershoot"): 4.0,
+            ("conventional", "y", "undershoot"): 12.0,
+        }
+    )
+    ok, text = _holds("proposed_lower", [undershoot], metric="undershoot", signals=("x", "y"))
+    assert not ok and text == "undershoot x: conv 12 vs prop 4; undershoot y: conv 12 vs prop nan"
+
+
+def test_proposed_zero_takes_an_overshoot_up_to_the_limit_as_none() -> None:
+    cells = {("conventional", "z", "overshoot"): 20.0, ("proposed", "z", "overshoot"): 0.3}
+    limit = {"limit": 0.005}
+    assert _holds("proposed_zero", [_record(cells)], limit, metric="Mp", signals=("z",)) == (
+        True,
+        "Mp z: conv 0.2 vs prop 0.003",
+    )
+    cells[("proposed", "z", "overshoot")] = 1.0
+    assert not _holds("proposed_zero", [_record(cells)], limit, metric="Mp", signals=("z",))[0]
+
+
+def test_less_chattering_needs_every_force_to_vary_less() -> None:
+    cells = {
+        ("conventional", "F_x", "total_variation"): 120.0,
+        ("proposed", "F_x", "total_variation"): 80.0,
+        ("conventional", "F_y", "total_variation"): 100.0,
+        ("proposed", "F_y", "total_variation"): 150.0,
+    }
+    assert _holds("less_chattering", [_record(cells)], signals=("F_x",)) == (True, "TV(F_x): conv 120 N vs prop 80 N")
+    assert _holds("less_chattering", [_record(cells)], signals=("F_x", "F_y")) == (
+        False,
+        "TV(F_x): conv 120 N vs prop 80 N; TV(F_y): conv 100 N vs prop 150 N",
+    )
+
+
+def test_bounded_and_unbounded_read_the_status_and_the_largest_position() -> None:
+    limit = {"limit": 10.0}
+    diverged = _record(
+        {},
+        extras={("conventional", "all", "t_end_reached"): 3.25, ("proposed", "x", "max_abs"): 1.2},
+        status={"conventional": "unstable", "proposed": "ok"},
+    )
+    conventional = {"controllers": ("conventional",)}
+    assert _holds("unbounded", [diverged], limit, **conventional) == (True, "conventional diverged (t = 3.25 s)")
+    assert _holds("bounded", [diverged], limit, **conventional) == (False, "conventional diverged (t = 3.25 s)")
+    assert _holds("bounded", [diverged], limit) == (True, "proposed max|position| 1.2 m")
+    drifted = _record({}, extras={("proposed", "x", "max_abs"): 12.0, ("proposed", "z", "max_abs"): 0.5})
+    assert _holds("unbounded", [drifted], limit, signals=("x", "z")) == (True, "proposed max|position| 12 m")
+    assert not _holds("bounded", [drifted], limit, signals=("x", "z"))[0]
+
+
+def test_oscillatory_reads_the_peak_to_peak_of_the_last_seconds() -> None:
+    limit = {"limit": 0.02}
+    moving = _record({}, extras={("proposed", "x", "tail_ptp"): 0.05})
+    still = _record({}, extras={("proposed", "x", "tail_ptp"): 0.01})
+    failed = _record({}, status={"conventional": "ok", "proposed": "unstable"})
+    assert _holds("oscillatory", [moving], limit) == (True, "proposed position peak-to-peak over the last 5 s 0.05 m")
+    assert _holds("not_oscillatory", [moving], limit)[0] is False
+    assert _holds("not_oscillatory", [still], limit) == (
+        True,
+        "proposed position peak-to-peak over the last 5 s 0.01 m",
+    )
+    assert _holds("oscillatory", [failed], limit) == (False, "proposed unstable")
+    assert _holds("not_oscillatory", [failed], limit) == (False, "proposed unstable")
+
+
+def test_zero_ess_fails_on_a_failed_run() -> None:
+    record = _record(
+        {("conventional", "x", "steady_state_error"): 0.0}, status={"conventional": "ok", "proposed": "unstable"}
+    )
+    both = {"controllers": ("conventional", "proposed")}
+    assert _holds("zero_ess", [record], {"tolerance": 0.01}, **both) == (
+        False,
+        "conventional max|e_ss| 0; proposed unstable",
+    )
+
+
+def test_tracks_divides_the_rms_error_by_the_sine_amplitude() -> None:
+    fraction = {"fraction": 0.10}
+    sine = {"x": {"kind": "sine", "amplitude": 0.3}, "z": {"kind": "sine", "amplitude": 0.15}}
+    good = _record({}, extras={("proposed", "x", "tail_rms_error"): 0.015}, reference=sine)
+    poor = _record(
+        {},
+        extras={("proposed", "x", "tail_rms_error"): 0.015, ("proposed", "z", "tail_rms_error"): 0.03},
+        reference=sine,
+    )
+    failed = _record({}, status={"conventional": "ok", "proposed": "unstable"}, reference=sine)
+    mode = {"runs": ("Fig. 2.12",)}
+    assert _holds("tracks", [good], fraction, **mode) == (True, "proposed RMS tracking error 5 % of amplitude")
+    assert _holds("fails_to_track", [good], fraction, **mode)[0] is False
+    # z: 0.03 / 0.15 = 20 % of its amplitude
+    assert _holds("fails_to_track", [poor], fraction, signals=("x", "z")) == (
+        True,
+        "proposed RMS tracking error 20 % of amplitude",
+    )
+    assert _holds("tracks", [failed], fraction) == (False, "proposed unstable")
+    assert _holds("fails_to_track", [failed], fraction) == (True, "proposed unstable")
+
+
+def test_better_tracking_counts_a_failed_run_as_infinitely_poor() -> None:
+    cells = {("conventional", "x", "tail_rms_error"): 0.02, ("proposed", "x", "tail_rms_error"): 0.01}
+    assert _holds("better_tracking", [_record({}, extras=cells)], uncertainty="noise") == (
+        True,
+        "noise: RMS error conv 0.02 vs prop 0.01 m",
+    )
+    failed = _record({}, extras=cells, status={"conventional": "ok", "proposed": "unstable"})
+    assert _holds("better_tracking", [failed], uncertainty="noise") == (
+        False,
+        "noise: RMS error conv 0.02 vs prop inf m",
+    )
+
+
+def test_lyapunov_needs_v_dot_equal_to_the_power_and_decaying() -> None:
+    limits = {"agreement": 1e-3, "decay": 0.05, "window": 5.0}
+    t = np.linspace(0.0, 20.0, 201)
+    dV = -np.exp(-t / 2)  # peak 1 at t = 0; over t >= 15: at most exp(-7.5) = 5.5e-4
+    decaying = _record({}, lyapunov={"proposed": (t, dV, dV * (1 + 1e-4))})
+    assert _holds("lyapunov", [decaying], limits) == (
+        True,
+        "max|V̇ - F·v|/max|V̇| 1.0e-04; max|V̇| over the last 5 s / peak 0.00055",
+    )
+    steady = _record({}, lyapunov={"proposed": (t, -np.ones_like(t), -np.ones_like(t))})
+    assert _holds("lyapunov", [steady], limits) == (
+        False,
+        "max|V̇ - F·v|/max|V̇| 0.0e+00; max|V̇| over the last 5 s / peak 1",
+    )
+    assert _holds("lyapunov", [_record({})], limits) == (False, "proposed run unavailable")
+
+
+def test_the_schedules_compare_the_proposed_controller_of_two_runs() -> None:
+    time_run = _record({("proposed", "x", "overshoot"): 40.0})
+    error_run = _record({("proposed", "x", "overshoot"): 10.0})
+    assert _holds("error_ags_lower", [time_run, error_run], metric="Mp") == (True, "Mp x: time 0.4 vs error 0.1")
+    assert _holds("time_ags_lower", [time_run, error_run], metric="Mp") == (False, "Mp x: time 0.4 vs error 0.1")
+
+
+# -- a table with a mistake is refused with one line
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("kind: proposed_lower, run: Table 2.3, signals: [x], metric: Mp",
+         "kind: proposed_lowest, run: Table 2.3, signals: [x], metric: Mp",
+         "checks[0].kind = 'proposed_lowest': unknown kind of check; allowed: better_tracking, bounded"),
+        ("thresholds: [tol]", "thresholds: [tolerance]",
+         "mini.yaml:claims[x-mini].checks[2].thresholds = 'tolerance': not a declared threshold; declared: tol"),
+        ("  tol: {value: 0.01, description: zero e_ss}",
+         "  tol: {value: 0.01, description: zero e_ss}\n  spare: {value: 1.0, description: unused}",
+         "mini.yaml:thresholds.spare = 1.0: declared but named by no check"),
+        ("source: Table 2.3", "source: ''", "mini.yaml:claims[x-mini].source = '': a non-empty text"),
+        ("quote: some words", "quote: '  '", "mini.yaml:claims[x-mini].quote = '  ': a non-empty text"),
+        ("run: Table 2.3, signals: [x], metric: Mp", "run: Table 3.2, signals: [x], metric: Mp",
+         "checks[0].run = 'Table 3.2': a run of the x pendulum (chapter 2)"),
+        ("run: Table 2.3, signals: [x], metric: Mp", "run: Table 9.9, signals: [x], metric: Mp",
+         "checks[0].run = 'Table 9.9': a metrics table or a result figure of chapters 2-4"),
+        ("kind: zero_ess, run: Table 2.3", "kind: tracks, run: Table 2.3",
+         "checks[2].run = 'Table 2.3': tracks reads a tracking experiment"),
+        ("signals: [x], thresholds: [tol]", "signals: [x], metric: ess, thresholds: [tol]",
+         "checks[2].metric = 'ess': zero_ess reads ess; name none"),
+        ("thresholds: [tol]", "thresholds: [tol, tol]",
+         "checks[2].thresholds = ['tol', 'tol']: zero_ess takes 1 threshold(s): tolerance"),
+        ("controllers: [conventional, proposed]", "controllers: [pid]",
+         "checks[2].controllers = ['pid']: controllers among conventional, proposed"),
+        ("metric: Mp}", "metric: Mp, limit: 3}", "checks[0].limit = 3: unknown key; allowed: kind, run, controllers"),
+        ("pendulum: x", "pendulum: xy", "mini.yaml:claims[x-mini].pendulum = 'xy': a pendulum of chapter 2"),
+    ],
+)  # fmt: skip
+def test_a_planted_mistake_is_refused_with_one_line(old: str, new: str, message: str) -> None:
+    assert old in MINI
+    with pytest.raises(NlcxError) as caught:
+        claims.parse(MINI.replace(old, new, 1), "mini.yaml")
+    text = str(caught.value)
+    assert "\n" not in text and message in text, text
+
+
+def test_a_repeated_id_is_refused() -> None:
+    header, entry = MINI.split("claims:\n")
+    with pytest.raises(NlcxError, match=r"claims\[x-mini\]\.id = 'x-mini': an id no other claim has"):
+        claims.parse(f"{header}claims:\n{entry}{entry}", "mini.yaml")
+
+
+def test_the_mini_table_itself_is_accepted() -> None:
+    table = claims.parse(MINI, "mini.yaml")
+    (check,) = (c for c in table.claims[0].checks if c.kind == "zero_ess")
+    assert check.metric == "ess" and table.limits(check) == {"tolerance": 0.01}
