@@ -1,4 +1,4 @@
-"""Chapter 5: the CSTR model, Ziegler-Nichols, the single neuron, the GA tuner, Table 5.8."""
+"""Chapter 5: the CSTR model, Ziegler-Nichols, the single neuron, the GA tuner, Table 5.8, the claims."""
 
 from __future__ import annotations
 
@@ -17,12 +17,23 @@ from nlcx.cli import app
 from nlcx.controllers.neuron import neuron_step
 from nlcx.controllers.schedules import schedule_slots
 from nlcx.plants.base import equilibrium_input, linearize
+from nlcx.thesis import claims
+from nlcx.thesis.reproduce import Record
 from nlcx.tuning.ziegler_nichols import RULES, ultimate, zn_gains
 
 ROOT = Path(__file__).resolve().parent.parent
 CH5 = ROOT / "configs" / "thesis" / "ch5"
 runner = CliRunner()
 NUM, DEN = [-1.117, 3.1472], [1.0, 4.6429, 5.3821]  # eq. 5.10
+#: Table 5.8 as the thesis prints it (t_r, t_s, M_p %, e_ss), with the inverse responses (%) of
+#: sections 5.3.1-5.4.4, by each method's config and controller label.
+PRINTED_5_8 = {
+    ("fig_5_02.yaml", "zn"): (1.78, 3.74, 20.05, 0.0, 44.46),
+    ("fig_5_10.yaml", "fuzzy"): (1.865, 5.624, 17.95, 0.0, 39.98),
+    ("fig_5_12.yaml", "ann"): (2.98, 6.85, 10.47, 0.0, 2.9),
+    ("fig_5_15.yaml", "anfis"): (2.57, 3.42, 1.01, 0.0, 21.2),
+    ("fig_5_17.yaml", "ga"): (4.84, 7.12, 0.0, 0.0, 7.29),
+}
 
 
 def cstr_plant():
@@ -168,3 +179,57 @@ def test_controllers_also_run_on_the_nonlinear_cstr(tmp_path: Path) -> None:
     assert abs(ess["zn"]) < 1e-6  # integral action on the nonlinear plant
     assert abs(ess["ann"]) < 0.1 * 0.05  # the integral-dominated neuron is still converging at 15 s
     assert set(metrics.status) == {"ok"}
+
+
+def _record(cells: dict[tuple[str, str, str], float]) -> Record:
+    """A run's record with these (controller, signal, metric) cells."""
+    rows = [[c, s, m, v] for (c, s, m), v in cells.items()]
+    metrics = pd.DataFrame(rows, columns=["controller", "signal", "metric", "value"])
+    status = {c: "ok" for c, _, _ in cells}
+    return Record(Path("hand-made.yaml"), "hand-made", {}, metrics, status, metrics.iloc[:0])
+
+
+def _chapter_5_records(ga_overshoot: float, hinf_ise: float) -> dict[Path, Record]:
+    """The runs chapter 5's claims read, with the thesis's Table 5.8 numbers (GA's M_p aside) and
+    Fig. 5.19's H2 ISE 0.15 and control effort 30, H∞'s control effort 29."""
+    names = ("rise_time", "settling_time", "overshoot", "steady_state_error", "undershoot")
+    records = {}
+    for (file, label), values in PRINTED_5_8.items():
+        cells = dict(zip([(label, "C_B", name) for name in names], values, strict=True))
+        if label == "ga":
+            cells[(label, "C_B", "overshoot")] = ga_overshoot
+        records[CH5 / file] = _record(cells)
+    records[CH5 / "fig_5_19.yaml"] = _record(
+        {
+            ("h2", "C_B", "ise"): 0.15,
+            ("hinf", "C_B", "ise"): hinf_ise,
+            ("h2", "u", "control_effort"): 30.0,
+            ("hinf", "u", "control_effort"): 29.0,
+        }
+    )
+    return records
+
+
+def test_the_thesis_s_own_numbers_bear_out_every_chapter_5_claim() -> None:
+    """Chapter 5's claims, evaluated on runs that give Table 5.8's printed numbers and an H∞
+    preview controller that tracks better with less effort, are each reproduced."""
+    table = claims.evaluate(CH5.parent, _chapter_5_records(ga_overshoot=0.0, hinf_ise=0.12), {5})
+    assert list(table.columns) == ["chapter", "pendulum", "id", "source", "claim", "reproduced", "evidence"]
+    assert table.id.tolist()[:2] == ["cstr-zn-fastest-rise", "cstr-anfis-best-ts"] and len(table) == 11
+    assert set(table.chapter) == {5} and set(table.pendulum) == {"cstr"}
+    assert set(table.reproduced) == {"yes"}, table[table.reproduced != "yes"].to_string()
+    evidence = table.set_index("id").evidence
+    assert evidence["cstr-rhp-zero-inverse"] == "ZN inverse response 44.5 %"
+    assert evidence["cstr-hinf-better-tracking"] == "ISE: H2 0.15, H∞ 0.12"
+    ann = evidence["cstr-ann-smallest-inverse"]  # its M_p check decides but is not shown
+    assert ann.startswith("inverse response %: ZN 44.5; ") and "M_p" not in ann and " | " not in ann
+
+
+def test_chapter_5_claims_fail_where_the_runs_depart_from_the_thesis() -> None:
+    """GA's 5 % overshoot: GA is still the slowest but the claim of no overshoot is "no" as a
+    whole; the H∞ controller's higher ISE: it does not track better."""
+    table = claims.evaluate(CH5.parent, _chapter_5_records(ga_overshoot=5.0, hinf_ise=0.2), {5}).set_index("id")
+    failed = table.index[table.reproduced != "yes"].tolist()
+    assert failed == ["cstr-ga-sluggish-no-overshoot", "cstr-hinf-better-tracking"]
+    assert table.reproduced[failed].tolist() == ["no", "no"]
+    assert table.evidence["cstr-ga-sluggish-no-overshoot"].endswith(" | M_p GA 5 %")

@@ -31,9 +31,11 @@ from nlcx.thesis.tables import ags_table
 ROOT = Path(__file__).resolve().parent.parent
 THESIS = ROOT / "configs" / "thesis"
 PACKAGE = ROOT / "nlcx" / "thesis"
-#: What a claim's source may cite: numbered tables and figures, a pendulum's theorem, the conclusion.
+#: What a claim's source may cite: numbered tables and figures (and sections beside them),
+#: numbered sections, a pendulum's theorem, the conclusion.
 CITATION = re.compile(
     r"(Table|Table of Fig\.|Fig\.|Figs\.) \d+\.\d+([-, ]+\d+\.\d+)*( and section \d+(\.\d+)+)?"
+    r"|\d+(\.\d+)+(, \d+(\.\d+)+)*"
     r"|Theorem and V̇ figure of the (x|xy|xz|xyz) pendulum|Conclusion of the chapter"
 )
 
@@ -176,7 +178,7 @@ def _citation_problems(claim: claims.Claim) -> list[str]:
     return problems
 
 
-@pytest.mark.parametrize("plant", ["x", "xy", "xz", "xyz"])
+@pytest.mark.parametrize("plant", ["x", "xy", "xz", "xyz", "cstr"])
 def test_claims_have_unique_ids_and_cite_numbered_sources(plant: str) -> None:
     declared = claims.claims_for(plant)
     assert declared and len({c.id for c in declared}) == len(declared)
@@ -184,7 +186,7 @@ def test_claims_have_unique_ids_and_cite_numbered_sources(plant: str) -> None:
         assert not _citation_problems(claim), claim.id
 
 
-@pytest.mark.parametrize("source", ["", " ", "Table", "see above", "Fig. {0}"])
+@pytest.mark.parametrize("source", ["", " ", "Table", "see above", "Fig. {0}", "5.", "section 5.4"])
 def test_a_claim_citing_no_numbered_source_is_caught(source: str) -> None:
     """The check above fails on a planted claim with an empty or unnumbered source."""
     planted = dataclasses.replace(claims.claims_for("x")[0], source=source)

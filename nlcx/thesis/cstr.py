@@ -1,14 +1,15 @@
-"""Chapter 5 (the CSTR): Table 5.8, the parameter tables 5.1-5.7, the ZN variants and claims.
+"""Chapter 5 (the CSTR): Table 5.8, the parameter tables 5.1-5.7 and the ZN variants.
 
 Table 5.8 compares five PID tunings on the transfer function 5.10: t_r, t_s (2 % band),
 M_p (%), e_ss and the inverse-response magnitude (our undershoot, %) of sections 5.3-5.4.
+The chapter's claims about it and about Fig. 5.19 are rows of the claims table
+(:mod:`nlcx.thesis.claims`), which reads our Table 5.8 through :func:`method_values`.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +38,7 @@ def _value(metrics: pd.DataFrame, controller: str, metric: str, signal: str = "C
     return float(rows.value.iloc[0]) if not rows.empty else math.nan
 
 
-def method_values(records: dict[Path, Any], root: Path) -> MethodValues:
+def method_values(records: Mapping[Path, Any], root: Path) -> MethodValues:
     """Our Table 5.8 numbers: method -> thesis column -> value."""
     out = {}
     for method, (file, label) in catalog.CSTR_METHODS.items():
@@ -176,138 +177,3 @@ def zn_variants(root: Path, out_dir: Path) -> pd.DataFrame:
     table = pd.concat([pd.DataFrame([thesis_row]), table], ignore_index=True)
     report.write_csv(out_dir / "tables" / "zn_variants.csv", table)
     return table
-
-
-def _best(v: MethodValues, col: str) -> str:
-    """The method with the smallest value in a Table 5.8 column (NaN counts as worst)."""
-    return min(v, key=lambda m: v[m][col] if not math.isnan(v[m][col]) else math.inf)
-
-
-def _listing(v: MethodValues, col: str) -> str:
-    """Every method's value in a Table 5.8 column, e.g. ``ZN 1.2; Fuzzy 1.5; ...``."""
-    return "; ".join(f"{m} {v[m][col]:.3g}" for m in v)
-
-
-@dataclass(frozen=True)
-class CstrClaim:
-    """A claim of section 5.4 or the conclusion 5.6 about Table 5.8: ``holds`` decides it and
-    ``evidence`` quotes the numbers, both from our Table 5.8 values (method -> column -> value)."""
-
-    key: str
-    source: str
-    text: str
-    holds: Callable[[MethodValues], bool]
-    evidence: Callable[[MethodValues], str]
-
-
-TABLE_5_8_CLAIMS = (
-    CstrClaim(
-        "zn-fastest-rise",
-        "Table 5.8, 5.6",
-        "ZN gives the shortest rise time",
-        lambda v: _best(v, "tr_s") == "ZN",
-        lambda v: "t_r: " + _listing(v, "tr_s"),
-    ),
-    CstrClaim(
-        "anfis-best-ts",
-        "Table 5.8, 5.6",
-        "ANFIS gives the best settling time",
-        lambda v: _best(v, "ts_s") == "ANFIS",
-        lambda v: "t_s: " + _listing(v, "ts_s"),
-    ),
-    CstrClaim(
-        "anfis-best-mp",
-        "Table 5.8, 5.6",
-        "ANFIS gives the smallest overshoot of the methods with overshoot (GA has none)",
-        lambda v: min([m for m in v if m != "GA"], key=lambda m: v[m]["Mp_percent"]) == "ANFIS",
-        lambda v: "M_p %: " + _listing(v, "Mp_percent"),
-    ),
-    CstrClaim(
-        "hybrids-lower-mp",
-        "Table 5.8",
-        "Every hybrid method lowers M_p below ZN's",
-        lambda v: all(v[m]["Mp_percent"] < v["ZN"]["Mp_percent"] for m in v if m != "ZN"),
-        lambda v: "M_p %: " + _listing(v, "Mp_percent"),
-    ),
-    CstrClaim(
-        "anfis-less-inverse",
-        "5.4.3, 5.6",
-        "ANFIS's inverse response is smaller than ZN's and fuzzy's",
-        lambda v: (
-            v["ANFIS"]["inverse_response_percent"]
-            < min(v["ZN"]["inverse_response_percent"], v["Fuzzy"]["inverse_response_percent"])
-        ),
-        lambda v: "inverse response %: " + _listing(v, "inverse_response_percent"),
-    ),
-    CstrClaim(
-        "ann-smallest-inverse",
-        "5.4.2, 5.6",
-        "The ANN PID reduces the inverse response the most and lowers M_p",
-        lambda v: _best(v, "inverse_response_percent") == "ANN" and v["ANN"]["Mp_percent"] < v["ZN"]["Mp_percent"],
-        lambda v: "inverse response %: " + _listing(v, "inverse_response_percent"),
-    ),
-    CstrClaim(
-        "ga-sluggish-no-overshoot",
-        "5.4.4",
-        "GA tuning is sluggish (longest t_r) with zero overshoot",
-        lambda v: max(v, key=lambda m: v[m]["tr_s"]) == "GA" and v["GA"]["Mp_percent"] <= 0.5,
-        lambda v: f"t_r: {_listing(v, 'tr_s')} | M_p GA {v['GA']['Mp_percent']:.3g} %",
-    ),
-    CstrClaim(
-        "zero-ess",
-        "Table 5.8",
-        "Every method reaches zero steady-state error",
-        lambda v: all(abs(v[m]["ess"]) <= 0.01 for m in v),
-        lambda v: "e_ss: " + _listing(v, "ess"),
-    ),
-    CstrClaim(
-        "rhp-zero-inverse",
-        "5.2, 5.3.1",
-        "The RHP zero gives the ZN loop an inverse response (44.46 %)",
-        lambda v: v["ZN"]["inverse_response_percent"] > 10,
-        lambda v: f"ZN inverse response {v['ZN']['inverse_response_percent']:.3g} %",
-    ),
-)
-
-
-def _preview_claims(preview: Any) -> list[tuple[str, str, str, bool, str]]:
-    """Section 5.5 and 5.6 on Fig. 5.19: H∞ preview control tracks better, with less effort, than H2."""
-    ise_h2, ise_inf = (_value(preview.metrics, label, "ise") for label in ("h2", "hinf"))
-    eff_h2, eff_inf = (_value(preview.metrics, label, "control_effort", signal="u") for label in ("h2", "hinf"))
-    return [
-        (
-            "hinf-better-tracking",
-            "5.5, 5.6",
-            "H∞ preview control tracks better (lower ISE) than H2",
-            ise_inf < ise_h2,
-            f"ISE: H2 {ise_h2:.4g}, H∞ {ise_inf:.4g}",
-        ),
-        (
-            "hinf-less-effort",
-            "5.5, 5.6",
-            "H∞ preview control needs less control effort than H2",
-            eff_inf < eff_h2,
-            f"∫u² dt: H2 {eff_h2:.4g}, H∞ {eff_inf:.4g}",
-        ),
-    ]
-
-
-def claims(records: dict[Path, Any], root: Path) -> list[dict[str, Any]]:
-    """The claims of chapter 5 (section 5.4 and the conclusion 5.6), checked on our runs."""
-    v = method_values(records, root)
-    rows = [(c.key, c.source, c.text, c.holds(v), c.evidence(v)) for c in TABLE_5_8_CLAIMS]
-    preview = records.get(root / "ch5" / "fig_5_19.yaml")
-    if preview is not None:
-        rows += _preview_claims(preview)
-    return [
-        {
-            "chapter": 5,
-            "pendulum": "cstr",
-            "id": f"cstr-{key}",
-            "source": source,
-            "claim": text,
-            "reproduced": "yes" if ok else "no",
-            "evidence": evidence,
-        }
-        for key, source, text, ok, evidence in rows
-    ]

@@ -1,17 +1,19 @@
 """The qualitative claims of chapters 2-5, checked against our runs.
 
-The claims of chapters 2-4 are data: ``nlcx/thesis/data/claims.yaml`` holds each one (its
-id, the thesis's sentence and section, our paraphrase, and the checks that decide it: which
-cells of which runs, compared how, against which named threshold), read and checked by
+The claims are data: ``nlcx/thesis/data/claims.yaml`` holds each one (its id, the thesis's
+sentence and section, our paraphrase, and the checks that decide it: which cells of which
+runs, compared how, against which named threshold), read and checked by
 :mod:`nlcx.thesis.claims.table`. It is YAML, not CSV, because a claim is a conjunction of a
 varying number of checks, each reading its own cells: nested, a check per line; as CSV rows
 the claim's words would repeat on every check. Each kind of check is one evaluator of
-:mod:`nlcx.thesis.claims.checks`. Chapter 5's claims (Table 5.8, Fig. 5.19) are
-:func:`nlcx.thesis.cstr.claims`.
+:mod:`nlcx.thesis.claims.checks`. The pendulums' claims (chapters 2-4) read their
+stabilisation and tracking runs; the CSTR's (chapter 5) read our Table 5.8 (one run per
+tuning method) and the preview run of Fig. 5.19.
 
-A claim is ``yes`` when every check holds, ``partly`` when some do, ``no`` when none does;
-the evidence column gives the numbers of each check, joined by " | ". Definitions the checks
-use (the thresholds' values are named in the table):
+A claim is ``yes`` when every check holds, ``partly`` when some do, ``no`` when none does
+(an ``all_or_nothing`` claim: ``yes`` or ``no``); the evidence column gives the numbers of
+each check, joined by " | ". Definitions the checks use (the thresholds' values are named in
+the table):
 
 - M_p, t_r, t_s, e_ss as in the tables (docs/metrics.md; M_p of a position = overshoot
   fraction, of an angle = peak deviation in rad);
@@ -23,7 +25,12 @@ use (the thresholds' values are named in the table):
   over the last 5 s (``oscillation_ptp``); zero e_ss = |e_ss| <= 0.01 (``ess_tolerance``;
   positions, per unit step) and the run completed;
 - tracks well = RMS tracking error over the last 5 s <= 10 % of the sine's amplitude
-  (``tracking_rms_fraction``).
+  (``tracking_rms_fraction``);
+- the CSTR (Table 5.8's columns, docs/metrics.md): no overshoot = M_p <= 0.5 %
+  (``zero_overshoot``); zero e_ss = |e_ss| <= 0.01 (``ess_tolerance``; the step is a unit
+  step); an inverse response = an undershoot above 10 % of the step
+  (``marked_inverse_response``); ISE and control effort (the integral of u²) of Fig. 5.19's
+  run.
 """
 
 from __future__ import annotations
@@ -36,8 +43,8 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from nlcx.drawing import new_figure
-from nlcx.thesis import catalog, cstr
-from nlcx.thesis.catalog import FigureSpec
+from nlcx.thesis import cstr
+from nlcx.thesis.catalog import FigureSpec, TableSpec
 from nlcx.thesis.claims.checks import KINDS, Check, Run
 from nlcx.thesis.claims.table import CHAPTER_PLANTS, Claim, ClaimTable, Threshold, claim_table, parse, thesis_runs
 
@@ -60,7 +67,7 @@ __all__ = [
 
 
 def claims_for(pendulum: str) -> list[Claim]:
-    """Every claim about one pendulum of chapters 2-4, in the order of ``claims.csv``."""
+    """Every claim about one plant (x, xy, xz, xyz, cstr), in the order of ``claims.csv``."""
     return [c for c in claim_table().claims if c.pendulum == pendulum]
 
 
@@ -68,31 +75,33 @@ def configs_for(root: Path, chapters: set[int]) -> list[Path]:
     """Every experiment the claims of these chapters look at."""
     checks = [check for claim in claim_table().claims if claim.chapter in chapters for check in claim.checks]
     refs = dict.fromkeys(ref for check in checks for ref in check.runs)
-    configs = [catalog.figure_config(root, thesis_runs()[ref].figure) for ref in refs]
-    if 5 in chapters:
-        configs += [f.configs[0] for f in catalog.figures(root) if f.kind == "response" and f.plant == "cstr"]
-    return list(dict.fromkeys(configs))
+    return list(dict.fromkeys(root / config for ref in refs for config in thesis_runs()[ref].configs))
 
 
 def judge(claim: Claim, runs: Mapping[str, Run], table: ClaimTable) -> tuple[str, str]:
     """(reproduced, evidence) of one claim on the runs of the thesis tables and figures it reads
-    (``runs``: reference -> run): yes when every check holds, partly when some do, no when none."""
+    (``runs``: reference -> run): yes when every check holds, partly when some do (no for an
+    ``all_or_nothing`` claim), no when none; the evidence of the checks it shows."""
     results = [
         KINDS[check.kind].evaluate(check, [runs[ref] for ref in check.runs], table.limits(check))
         for check in claim.checks
     ]
     n_ok = sum(ok for ok, _ in results)
-    verdict = "yes" if n_ok == len(results) else ("no" if n_ok == 0 else "partly")
-    return verdict, " | ".join(text for _, text in results)
+    verdict = "yes" if n_ok == len(results) else ("no" if n_ok == 0 or claim.all_or_nothing else "partly")
+    return verdict, " | ".join(text for check, (_, text) in zip(claim.checks, results, strict=True) if check.shown)
 
 
 def _runs(root: Path, records: Mapping[Path, Any]) -> dict[str, Run]:
-    """Every thesis table and figure of chapters 2-4 whose run is among ``records``."""
+    """Every thesis table and figure the claims read whose runs are all among ``records``."""
     runs = {}
     for ref, spec in thesis_runs().items():
-        config = catalog.figure_config(root, spec.figure)
-        if config in records:
-            runs[ref] = Run(ref, spec.uncertainty, records[config])
+        configs = [root / config for config in spec.configs]
+        if not all(config in records for config in configs):
+            continue
+        if isinstance(spec, TableSpec):  # Table 5.8: our values, one run per tuning method
+            runs[ref] = Run(ref, "none", cstr.method_values(records, root))
+        else:
+            runs[ref] = Run(ref, spec.uncertainty, records[configs[0]])
     return runs
 
 
@@ -102,8 +111,6 @@ def evaluate(root: Path, records: dict[Path, Any], chapters: set[int]) -> pd.Dat
     runs = _runs(root, records)
     rows = []
     for chapter in sorted(chapters):
-        if chapter == 5:
-            rows += cstr.claims(records, root)
         for claim in (c for c in table.claims if c.chapter == chapter):
             verdict, evidence = judge(claim, runs, table)
             rows.append(

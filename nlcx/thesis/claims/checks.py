@@ -6,8 +6,14 @@ whether it holds and gives the numbers it looked at (the evidence). The limits i
 against are named thresholds of the claims table, handed over by the role the kind gives
 each (``tolerance``, ``limit``, ...).
 
+The pendulums' kinds (chapters 2-4) read the conventional and the proposed controller of a
+stabilisation or tracking run. The CSTR's (chapter 5) read our Table 5.8, whose
+"controllers" are its five tuning methods (ZN, Fuzzy, ANN, ANFIS, GA) and whose metrics are
+its columns (``tr_s``, ``Mp_percent``, ...), or the H2 and H∞ preview controllers of
+Fig. 5.19.
+
 Every evidence text below is what ``claims.csv`` shows; numbers are written to three
-significant digits (``nan`` where a cell is missing).
+significant digits (Fig. 5.19's to four; ``nan`` where a cell is missing).
 """
 
 from __future__ import annotations
@@ -19,10 +25,23 @@ from typing import Any
 
 import numpy as np
 
+from nlcx.thesis.catalog import CSTR_METHODS
 from nlcx.thesis.tables import thesis_value
 
 #: The two controllers of every pendulum experiment: the literature's PID and the AGS PID.
 CONTROLLERS = ("conventional", "proposed")
+#: Table 5.8's tuning methods, in its order: the "controllers" a CSTR check of the table names.
+METHODS = tuple(CSTR_METHODS)
+#: Table 5.8's columns (:data:`nlcx.thesis.cstr.CSTR_METRICS`) as the evidence writes them.
+TABLE_5_8_LABELS = {
+    "tr_s": "t_r",
+    "ts_s": "t_s",
+    "Mp_percent": "M_p %",
+    "ess": "e_ss",
+    "inverse_response_percent": "inverse response %",
+}
+#: Fig. 5.19's preview controllers and the metrics its checks read, as the evidence writes them.
+PREVIEW_LABELS = {"h2": "H2", "hinf": "H∞", "ise": "ISE", "control_effort": "∫u² dt"}
 #: The metrics the thesis's tables print (:func:`nlcx.thesis.tables.thesis_value` maps them onto ours).
 TABLE_METRICS = ("Mp", "tr", "ts", "ess")
 #: Greek signals as the evidence writes them.
@@ -35,7 +54,10 @@ class Check:
 
     ``runs`` are the thesis tables and figures whose runs it reads ("Table 2.3", "Fig. 2.9"),
     ``controllers``, ``signals`` and ``metric`` the cells it reads of them, ``thresholds`` the
-    names of the limits it compares against, in the order of its kind's roles.
+    names of the limits it compares against, in the order of its kind's roles. ``than``: the
+    controllers (Table 5.8's methods) the ``controllers`` are compared with, for the kinds that
+    compare them. ``shown``: whether the claim's evidence gives this check's numbers (it decides
+    the verdict either way).
     """
 
     kind: str
@@ -44,6 +66,8 @@ class Check:
     signals: tuple[str, ...]
     metric: str
     thresholds: tuple[str, ...]
+    than: tuple[str, ...] = ()
+    shown: bool = True
 
 
 @dataclass(frozen=True)
@@ -51,8 +75,10 @@ class Run:
     """The run behind one thesis table or figure, as a check reads it.
 
     ``record`` is what the reproduction keeps of the run (:class:`nlcx.thesis.reproduce.Record`:
-    ``metrics``, ``extras``, ``status``, ``resolved``, ``lyapunov``); ``uncertainty`` is the
-    figure's, as the figure list names it.
+    ``metrics``, ``extras``, ``status``, ``resolved``, ``lyapunov``) or, for Table 5.8, whose
+    five runs are one per tuning method, our values of the table (method -> column -> value,
+    :func:`nlcx.thesis.cstr.method_values`); ``uncertainty`` is the figure's, as the figure
+    list names it.
     """
 
     reference: str
@@ -68,20 +94,27 @@ Evaluator = Callable[[Check, Sequence[Run], Mapping[str, float]], Outcome]
 class Kind:
     """What a kind of check reads, and its evaluator.
 
-    ``schedules``: one entry per run it reads, the AGS schedule that run must use ("" for
-    any). ``mode``: the experiments it reads ("stabilization", "tracking", "" for either).
-    ``controllers`` and ``metric``: fixed by the kind, or None where each check names its own.
-    ``signals``: whether a check names signals. ``thresholds``: the roles of the named
-    thresholds a check hands over, in order.
+    ``reads``: the one thesis table or figure it reads ("Table 5.8"), or "" for the run behind
+    any stabilisation or tracking figure or metrics table of a pendulum. ``schedules``: one
+    entry per run it reads, the AGS schedule that run must use ("" for any). ``mode``: the
+    experiments it reads ("stabilization", "tracking", "" for either). ``controllers`` and
+    ``metric``: fixed by the kind, or None where each check names its own, ``choices`` and
+    ``metrics`` (if not empty) saying which it may name. ``signals``: whether a check names
+    signals. ``rivals``: whether a check names the controllers it compares with (``than``).
+    ``thresholds``: the roles of the named thresholds a check hands over, in order.
     """
 
     name: str
     evaluate: Evaluator
+    reads: str = ""
     schedules: tuple[str, ...] = ("",)
     mode: str = "stabilization"
     controllers: tuple[str, ...] | None = CONTROLLERS
+    choices: tuple[str, ...] = CONTROLLERS
     metric: str | None = None
+    metrics: tuple[str, ...] = ()
     signals: bool = True
+    rivals: bool = False
     thresholds: tuple[str, ...] = ()
 
 
@@ -325,3 +358,71 @@ def time_ags_lower(check: Check, runs: Sequence[Run], limits: Mapping[str, float
     """The chapters' comparative study: the proposed controller's ``metric`` is lower under
     time-AGS (the first run) than under error-AGS (the second) on every signal."""
     return _schedules(check, runs, error_lower=False)
+
+
+def _listing(values: Mapping[str, Mapping[str, float]], column: str) -> str:
+    """Every method's value in one column of our Table 5.8: "t_r: ZN 0.338; Fuzzy 0.227; ..."."""
+    return f"{TABLE_5_8_LABELS[column]}: " + "; ".join(f"{m} {fmt(row[column])}" for m, row in values.items())
+
+
+#: What every kind of check of Table 5.8 reads: the table, the methods a check names, no signals.
+READS_TABLE_5_8 = {"reads": "Table 5.8", "mode": "", "controllers": None, "choices": METHODS, "signals": False}
+
+
+@kind("method_lower", metrics=tuple(TABLE_5_8_LABELS), rivals=True, **READS_TABLE_5_8)
+def method_lower(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+    """Table 5.8's comparisons ("the rise time which is less in case of ZN", "the best
+    performance in terms of settling time ... given by ANFIS"): each of the check's methods has
+    a lower value in the ``metric`` column than each method it is compared with (``than``); a
+    missing value compares as not lower. The evidence lists the column."""
+    values = runs[0].record
+    lower = all(values[m][check.metric] < values[r][check.metric] for m in check.controllers for r in check.than)
+    return lower, _listing(values, check.metric)
+
+
+@kind("method_zero_ess", metric="ess", thresholds=("tolerance",), **READS_TABLE_5_8)
+def method_zero_ess(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+    """Table 5.8's zero steady-state errors: each of the check's methods has |e_ss| at most
+    ``tolerance`` (the CSTR's step is a unit step). The evidence lists the column."""
+    values = runs[0].record
+    zero = all(abs(values[m][check.metric]) <= limits["tolerance"] for m in check.controllers)
+    return zero, _listing(values, check.metric)
+
+
+@kind("method_no_overshoot", metric="Mp_percent", thresholds=("limit",), **READS_TABLE_5_8)
+def method_no_overshoot(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+    """Section 5.4.4's "zero maximum overshoot": each of the check's methods has an M_p (in %, as
+    Table 5.8 prints it) of at most ``limit``, an overshoot fraction."""
+    values = runs[0].record
+    return _joined(
+        [
+            (values[m][check.metric] <= 100 * limits["limit"], f"M_p {m} {fmt(values[m][check.metric])} %")
+            for m in check.controllers
+        ]
+    )
+
+
+@kind("method_inverse_response", metric="inverse_response_percent", thresholds=("limit",), **READS_TABLE_5_8)
+def method_inverse_response(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+    """The "inverse response behavior ... due to RHP zero": each of the check's methods' step
+    response first moves the wrong way by more than ``limit`` % of the step (our undershoot)."""
+    values = runs[0].record
+    return _joined(
+        [
+            (values[m][check.metric] > limits["limit"], f"{m} inverse response {fmt(values[m][check.metric])} %")
+            for m in check.controllers
+        ]
+    )
+
+
+@kind("hinf_lower", reads="Fig. 5.19", mode="", controllers=("h2", "hinf"), metrics=("ise", "control_effort"))
+def hinf_lower(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+    """Section 5.5's "improvement in the steady state tracking performance ... with minimum
+    control effort": the H∞ preview controller's ``metric`` (ISE, or the control effort, the
+    integral of u²) is below the H2 one's on every signal."""
+    label = PREVIEW_LABELS
+    outcomes = []
+    for s in check.signals:
+        h2, hinf = (metric_value(runs[0].record, c, s, check.metric) for c in check.controllers)
+        outcomes.append((hinf < h2, f"{label[check.metric]}: {label['h2']} {h2:.4g}, {label['hinf']} {hinf:.4g}"))
+    return _joined(outcomes)

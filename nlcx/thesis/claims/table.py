@@ -1,10 +1,11 @@
 """The claims table, ``nlcx/thesis/data/claims.yaml``: read, and refused where it is inconsistent.
 
 Two sections. ``thresholds``: every named limit, once, with its value, unit and what it
-decides. ``claims``: one entry per statement of the thesis about one pendulum, in the order
-of ``claims.csv``, with
+decides. ``claims``: one entry per statement of the thesis about one plant (a pendulum of
+chapters 2-4, the CSTR of chapter 5), in the order of ``claims.csv``, with
 
-- ``id``, ``chapter``, ``pendulum``;
+- ``id``, ``chapter``, ``pendulum`` (the plant, as ``claims.csv`` names it: x, xy, xz, xyz,
+  cstr);
 - ``source`` (what ``claims.csv`` cites: "Table 2.3", "Fig. 2.9", ...) and ``claim`` (our
   paraphrase, the ``claim`` column);
 - ``section`` and ``quote``: the thesis's own words and the section they stand in (sentences
@@ -12,13 +13,17 @@ of ``claims.csv``, with
   table quotes the table's caption);
 - ``checks``: each a ``kind`` (:data:`nlcx.thesis.claims.checks.KINDS`), the ``run`` (or runs)
   of the thesis tables and figures it reads, and, where the kind does not fix them, its
-  ``controllers``, ``signals`` and ``metric``; ``thresholds`` names its limits.
+  ``controllers``, ``signals`` and ``metric``, and ``than`` (the controllers it compares
+  them with); ``thresholds`` names its limits; ``evidence: false`` leaves its numbers out of
+  the claim's evidence (it still decides the verdict);
+- optionally ``all_or_nothing: true``: the claim is ``yes`` when every check holds and ``no``
+  otherwise, never ``partly``.
 
 :func:`parse` refuses, with one line naming the key, the value and what is allowed, an
 unknown kind or key, a threshold named but not declared or declared but never named, a run
-that is not a stabilisation or tracking experiment of the claim's pendulum and chapter (or
-not of the schedule or mode its kind reads), an empty source, claim, section or quote, and a
-repeated id.
+that is not one of the claim's plant and chapter, or not what its kind reads (the schedule
+and mode of a pendulum's run; Table 5.8 or Fig. 5.19), a controller or metric its kind
+cannot read, an empty source, claim, section or quote, and a repeated id.
 """
 
 from __future__ import annotations
@@ -34,17 +39,19 @@ import yaml
 
 from nlcx.errors import MISSING, ConfigError, NlcxError
 from nlcx.thesis import catalog
-from nlcx.thesis.catalog import FigureSpec
-from nlcx.thesis.claims.checks import CONTROLLERS, KINDS, Check, Kind
+from nlcx.thesis.catalog import FigureSpec, TableSpec
+from nlcx.thesis.claims.checks import KINDS, Check, Kind
 
 #: The table as the package ships it.
 FILENAME = "claims.yaml"
-#: The pendulums of each chapter, in the order of their claims.
-CHAPTER_PLANTS = {2: ("x",), 3: ("xy", "xz"), 4: ("xyz",)}
-CLAIM_KEYS = ("id", "chapter", "pendulum", "source", "claim", "section", "quote", "checks")
-CHECK_KEYS = ("kind", "run", "controllers", "signals", "metric", "thresholds")
+#: The plants of each chapter, in the order of their claims.
+CHAPTER_PLANTS = {2: ("x",), 3: ("xy", "xz"), 4: ("xyz",), 5: ("cstr",)}
+CLAIM_KEYS = ("id", "chapter", "pendulum", "source", "claim", "section", "quote", "checks", "all_or_nothing")
+CHECK_KEYS = ("kind", "run", "controllers", "signals", "metric", "than", "thresholds", "evidence")
 THRESHOLD_KEYS = ("value", "unit", "description")
 REFERENCE = re.compile(r"(Table|Fig\.) \d+\.\d+")
+#: What a check's ``run`` may name.
+RUNS = "a metrics table or a result figure of chapters 2-4 (e.g. Table 2.3, Fig. 2.9), Table 5.8 or a CSTR figure"
 
 
 @dataclass(frozen=True)
@@ -59,7 +66,8 @@ class Threshold:
 
 @dataclass(frozen=True)
 class Claim:
-    """One statement of the thesis about one pendulum, and the checks that decide it."""
+    """One statement of the thesis about one plant, and the checks that decide it
+    (``all_or_nothing``: yes or no, never partly)."""
 
     id: str
     chapter: int
@@ -69,6 +77,7 @@ class Claim:
     section: str
     quote: str
     checks: tuple[Check, ...]
+    all_or_nothing: bool = False
 
 
 @dataclass(frozen=True)
@@ -85,14 +94,16 @@ class ClaimTable:
 
 
 @cache
-def thesis_runs() -> dict[str, FigureSpec]:
-    """The run behind each thesis reference: "Fig. 2.4" and "Table 2.3" -> the stabilisation or
-    tracking figure of chapters 2-4 whose run each shows (a metrics table shows its figure's
-    run). The specs' config paths are relative to the configs' root."""
-    figures = {f"Fig. {f.figure}": f for f in catalog.figures(Path()) if f.kind == "response" and f.chapter < 5}
+def thesis_runs() -> dict[str, FigureSpec | TableSpec]:
+    """The runs behind each thesis reference a claim may read: "Fig. 2.4" and "Table 2.3" -> the
+    stabilisation or tracking figure of chapters 2-4 whose run each shows (a metrics table
+    shows its figure's run); "Fig. 5.19" -> that CSTR figure, "Table 5.8" -> the table (one run
+    per tuning method). The specs' config paths are relative to the configs' root."""
+    figures = {f"Fig. {f.figure}": f for f in catalog.figures(Path()) if f.kind == "response"}
     by_config = {f.configs[0]: f for f in figures.values()}
     tables = {f"Table {t.table}": by_config[t.configs[0]] for t in catalog.tables(Path()) if t.kind == "metrics"}
-    return figures | tables
+    cstr = {f"Table {t.table}": t for t in catalog.tables(Path()) if t.kind == "cstr_metrics"}
+    return figures | tables | cstr
 
 
 @cache
@@ -163,14 +174,14 @@ def _threshold(path: str, name: str, raw: Any) -> Threshold:
 
 
 def _claim(path: str, raw: Any, thresholds: Mapping[str, Threshold]) -> Claim:
-    fields = _fields(path, raw, CLAIM_KEYS, ())
+    fields = _fields(path, raw, CLAIM_KEYS[:-1], CLAIM_KEYS[-1:])
     claim_id = _text(f"{path}.id", fields["id"])
     path = f"{path.rsplit('[', 1)[0]}[{claim_id}]"
     chapter, pendulum = fields["chapter"], fields["pendulum"]
     if chapter not in CHAPTER_PLANTS:
-        raise ConfigError(f"{path}.chapter", chapter, f"a pendulum chapter: {', '.join(map(str, CHAPTER_PLANTS))}")
+        raise ConfigError(f"{path}.chapter", chapter, f"a chapter with claims: {', '.join(map(str, CHAPTER_PLANTS))}")
     if pendulum not in CHAPTER_PLANTS[chapter]:
-        raise ConfigError(f"{path}.pendulum", pendulum, f"a pendulum of chapter {chapter}: {CHAPTER_PLANTS[chapter]}")
+        raise ConfigError(f"{path}.pendulum", pendulum, f"a plant of chapter {chapter}: {CHAPTER_PLANTS[chapter]}")
     if not claim_id.startswith(f"{pendulum}-"):
         raise ConfigError(f"{path}.id", claim_id, f"an id starting with the pendulum, {pendulum}-")
     checks = fields["checks"]
@@ -187,6 +198,7 @@ def _claim(path: str, raw: Any, thresholds: Mapping[str, Threshold]) -> Claim:
         checks=tuple(
             _check(f"{path}.checks[{i}]", entry, chapter, pendulum, thresholds) for i, entry in enumerate(checks)
         ),
+        all_or_nothing=_flag(f"{path}.all_or_nothing", fields.get("all_or_nothing", False)),
     )
 
 
@@ -196,29 +208,42 @@ def _check(path: str, raw: Any, chapter: int, pendulum: str, thresholds: Mapping
     if name not in KINDS:
         raise ConfigError(f"{path}.kind", name, f"unknown kind of check; allowed: {', '.join(sorted(KINDS))}")
     kind = KINDS[name]
+    runs = _runs(f"{path}.run", fields["run"], kind, chapter, pendulum)
+    controllers = _controllers(f"{path}.controllers", fields.get("controllers"), kind)
     return Check(
         kind=name,
-        runs=_runs(f"{path}.run", fields["run"], kind, chapter, pendulum),
-        controllers=_controllers(f"{path}.controllers", fields.get("controllers"), kind),
+        runs=runs,
+        controllers=controllers,
         signals=_signals(f"{path}.signals", fields.get("signals"), kind),
         metric=_metric(f"{path}.metric", fields.get("metric"), kind),
         thresholds=_threshold_names(f"{path}.thresholds", fields.get("thresholds", []), kind, thresholds),
+        than=_than(f"{path}.than", fields.get("than"), kind, controllers),
+        shown=_flag(f"{path}.evidence", fields.get("evidence", True)),
     )
+
+
+def _plant_words(plant: str) -> str:
+    """A plant as the error messages name it: "the x pendulum", "the CSTR"."""
+    return "the CSTR" if plant == "cstr" else f"the {plant} pendulum"
 
 
 def _runs(path: str, value: Any, kind: Kind, chapter: int, pendulum: str) -> tuple[str, ...]:
     """The thesis tables and figures a check reads: one per schedule its kind compares, each a
-    stabilisation or tracking experiment of the claim's pendulum."""
+    run of the claim's plant and chapter that its kind reads."""
     refs = tuple(value) if isinstance(value, list) else (value,)
     if len(refs) != len(kind.schedules):
         raise ConfigError(path, value, f"{kind.name} reads {len(kind.schedules)} run(s)")
     known = thesis_runs()
     for ref, schedule in zip(refs, kind.schedules, strict=True):
         if not isinstance(ref, str) or not REFERENCE.fullmatch(ref) or ref not in known:
-            raise ConfigError(path, ref, "a metrics table or a result figure of chapters 2-4, e.g. Table 2.3, Fig. 2.9")
+            raise ConfigError(path, ref, RUNS)
         spec = known[ref]
         if (spec.chapter, spec.plant) != (chapter, pendulum):
-            raise ConfigError(path, ref, f"a run of the {pendulum} pendulum (chapter {chapter})")
+            raise ConfigError(path, ref, f"a run of {_plant_words(pendulum)} (chapter {chapter})")
+        if kind.reads or isinstance(spec, TableSpec) or spec.plant == "cstr":  # the CSTR's runs, each its kinds'
+            if ref != kind.reads:
+                raise ConfigError(path, ref, f"{kind.name} reads {kind.reads or 'a pendulum run'}")
+            continue
         if schedule and spec.ags != schedule:
             raise ConfigError(path, ref, f"{kind.name} reads a {'-AGS then '.join(kind.schedules)}-AGS run")
         if kind.mode and spec.mode != kind.mode:
@@ -233,9 +258,31 @@ def _controllers(path: str, value: Any, kind: Kind) -> tuple[str, ...]:
             raise ConfigError(path, value, f"{kind.name} reads {', '.join(kind.controllers)}; name none")
         return kind.controllers
     names = _names(path, value)
-    if not set(names) <= set(CONTROLLERS):
-        raise ConfigError(path, value, f"controllers among {', '.join(CONTROLLERS)}")
+    if not set(names) <= set(kind.choices):
+        raise ConfigError(path, value, f"controllers among {', '.join(kind.choices)}")
     return names
+
+
+def _than(path: str, value: Any, kind: Kind, controllers: tuple[str, ...]) -> tuple[str, ...]:
+    """The controllers a check compares its own with: none, or (kinds that compare) others it names."""
+    if not kind.rivals:
+        if value is not None:
+            raise ConfigError(path, value, f"{kind.name} compares with no other controllers; name none")
+        return ()
+    if value is None:
+        raise ConfigError(path, MISSING, f"{kind.name} compares the check's controllers with others; name them")
+    names = _names(path, value)
+    others = [c for c in kind.choices if c not in controllers]
+    if not set(names) <= set(others):
+        raise ConfigError(path, value, f"controllers among {', '.join(others)} (not the check's own)")
+    return names
+
+
+def _flag(path: str, value: Any) -> bool:
+    """A yes/no key: true or false."""
+    if not isinstance(value, bool):
+        raise ConfigError(path, value, "true or false")
+    return value
 
 
 def _signals(path: str, value: Any, kind: Kind) -> tuple[str, ...]:
@@ -252,7 +299,10 @@ def _metric(path: str, value: Any, kind: Kind) -> str:
         if value is not None:
             raise ConfigError(path, value, f"{kind.name} reads {kind.metric or 'the V̇ trace'}; name none")
         return kind.metric
-    return _text(path, value)
+    metric = _text(path, value)
+    if kind.metrics and metric not in kind.metrics:
+        raise ConfigError(path, metric, f"{kind.name} reads one of {', '.join(kind.metrics)}")
+    return metric
 
 
 def _threshold_names(path: str, value: Any, kind: Kind, thresholds: Mapping[str, Threshold]) -> tuple[str, ...]:
