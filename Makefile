@@ -10,7 +10,7 @@ JOBS ?= 2
 BASELINE_TABLES := table-2.3,table-2.5,table-3.2,table-3.7,table-4.2,table-4.4,table-5.1,table-5.8
 
 .PHONY: install dev-install run test lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
-	baseline baseline-diff sweep-demo bench docs clean
+	baseline baseline-diff sweep-demo bench docs clean typecheck
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -49,6 +49,10 @@ docs: dev-install
 ## lint: ruff on the package, tests and scripts
 lint: dev-install
 	$(BIN)/ruff check nlcx tests scripts
+
+## typecheck: mypy on the package (configured in pyproject.toml's [tool.mypy])
+typecheck: dev-install
+	$(BIN)/python -m mypy nlcx
 
 ## reproduce-pendulums: every figure and table of chapters 2-4, and claims.csv, in results/thesis/
 reproduce-pendulums: install

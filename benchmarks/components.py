@@ -37,6 +37,8 @@ from nlcx import config, engine, report
 from nlcx import sweeps as sweep
 from nlcx.controllers import pid
 from nlcx.controllers.base import ControllerInstance
+from nlcx.engine import pipeline as engine_pipeline
+from nlcx.engine import simulate as engine_simulate
 from nlcx.kernel.abi import ARR3, F64, I64, MAT, CallbackTuple, ControllerFn, RhsFn, callback_slots
 from nlcx.kernel.trig import sincos_column
 
@@ -190,8 +192,8 @@ def batch_stages(batches: int = 6) -> dict[str, float]:
         (sweep.Variant, "resolve", "resolve the variant's config"),
         (config, "build", "validate it"),
         (engine, "prepare", "prepare it (plant, controller, references)"),
-        (engine, "simulate_items", "kernel"),
-        (engine, "_measure_all", "metrics"),
+        (engine_simulate, "simulate_items", "kernel"),
+        (engine_pipeline, "measure_experiments", "metrics"),
         (report, "write_csv", "write the part files"),
     ):
         timed(owner, name, stage)

@@ -23,10 +23,10 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 #: Stage -> the functions whose cumulative time it is (by module path and name).
 STAGES = {
     "kernel": ("kernel/integrator.py", "simulate"),
-    "metrics": ("engine.py", "_measure_all"),
-    "config: resolve": ("sweep.py", "resolve"),
-    "config: validate": ("config.py", "build"),
-    "config: prepare": ("engine.py", "prepare"),
+    "metrics": ("engine/measure.py", "measure_experiments"),
+    "config: resolve": ("sweeps/planning.py", "resolve"),
+    "config: validate": ("config/building.py", "build"),
+    "config: prepare": ("engine/pipeline.py", "prepare"),
     "writing": ("report.py", "write_csv"),
 }
 

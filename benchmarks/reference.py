@@ -11,12 +11,16 @@ or a state is not finite, as nlcx's does. Like nlcx, it records the state and th
 computed from them); ``record=False`` measures the loop alone.
 
 It is not part of nlcx: it exists to say how fast this one loop can be simulated on this
-machine, so that nlcx's speed is quoted as a ratio to it, measured in the same run.
+machine, so that nlcx's speed is quoted as a ratio to it, measured in the same run. Its PID and
+plant are its own hand-written copies, kept only as the independent check they are: nothing
+here imports nlcx's PID or plant code, and ``tests/test_reference_loops.py`` holds the loops
+against nlcx's runs (to the bit where they use nlcx's sin and cos).
 
-:func:`simulate_nlcx_pid` is the same loop with nlcx's PID in place of the written-out one,
-and nlcx's sin and cos (one angle at a time), so that it computes nlcx's bits: it measures how
-much of the distance between nlcx's kernel and the limit is the kernel's design (every variant
-in lock step, states in arrays, sin and cos in vector code) and how much is nlcx's generic PID.
+:func:`simulate_nlcx_pid` is the same loop with its PID reading nlcx's packed parameter and
+state rows (through nlcx's layout declarations) and nlcx's sin and cos (one angle at a time),
+so that it computes nlcx's bits: it measures how much of the distance between nlcx's kernel and
+the limit is the kernel's design (every variant in lock step, states in arrays, sin and cos in
+vector code, plant and controller called as compiled-function values).
 :func:`simulate_lockstep` is the limit's loop stepped as nlcx's kernel steps a batch, every
 variant together, with nlcx's sin and cos: nlcx's bits at the speed a kernel with the plant and
 the PID compiled into it would have.
@@ -31,12 +35,18 @@ import numpy as np
 from numba import njit
 
 from nlcx import compiled_cache
-from nlcx.controllers.pid import G, H, I, L, S, _row_loop_update, _update_period
-from nlcx.kernel.trig import _sincos_reduced, sincos
-from nlcx.layout import Layout
 
-# numba keys this module's cache on this file alone, but its loops inline nlcx's PID and sin and
-# cos: a change to nlcx would otherwise leave the old code in the cache (and in the timings)
+compiled_cache.ready()  # before nlcx's compiled functions are loaded from numba's cache
+
+from nlcx._numba_compat import hot_njit  # noqa: E402
+from nlcx.controllers.pid import DIRECT_ERROR_AGS, FORMS, H, I, L, S, structure_of  # noqa: E402
+from nlcx.controllers.schedules import EA, ERROR_AGS  # noqa: E402
+from nlcx.kernel.trig import _sincos_reduced, sincos  # noqa: E402
+from nlcx.layout import Layout  # noqa: E402
+
+# numba keys this module's cache on this file alone, but its loops inline nlcx's sin and cos and
+# read nlcx's layout offsets as constants: a change to nlcx would otherwise leave the old code in
+# the cache (and in the timings)
 compiled_cache.ensure_consistent(Path(__file__).resolve().parent, depends=(compiled_cache.PACKAGE,))
 
 #: Where :func:`_rhs` takes sin and cos from.
@@ -223,35 +233,39 @@ def simulate_lockstep(p, theta_loop, x_loop, dt, n_steps, bound, X, U, n_valid):
                 break
 
 
-@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _pid_row(t, dt, y, r, cp, cs, row, log, callbacks):  # pragma: no cover - compiled
-    """nlcx's :func:`~nlcx.controllers.pid.pid_step` for row ``row`` of its parameter and state
-    arrays (cp, cs, log, callbacks as nlcx packs them), one input, without saturation; the
-    outputs y and references r as tuples. Returns u_0. Each loop is nlcx's own loop body
-    (:func:`~nlcx.controllers.pid._row_loop_update`); :func:`simulate_nlcx_pid` checks itself
-    against nlcx bit for bit. Compiled, like its caller, without numba's reference counting:
-    with it, the inlined body would count its arrays at every call."""
+@hot_njit(cache=True, error_model="numpy", inline="always")
+def _pid_row(dt, y, r, cp, cs, row):  # pragma: no cover - compiled
+    """The PID of :func:`simulate` on row ``row`` of nlcx's packed parameters cp and loop
+    states cs (nlcx's layouts, :func:`packed_pid`): per loop the error-AGS gains of
+    :func:`_ags`, a backward difference of the error, the integral gain outside the integral,
+    the parallel form, updated every step, one input, no saturation; the outputs y and
+    references r as tuples. Returns u_0. Compiled, like its caller, without numba's reference
+    counting: with it, the inlined body would count its arrays at every call."""
     u0 = cp[row, len(H) + I.bias]
     base = len(H) + len(I) * 1
     for i in range(int(cp[row, H.n_loops])):
         h = base + len(L) * i
         c = len(S) * i
-        period = _update_period(t, dt, cp[row, H.sample_time], cs, row, c)
-        cs[row, c + S.period] = period
-        if period == 0.0:
-            u0 += cs[row, c + S.held]
-            continue
         y_i = y[int(cp[row, h + L.y_index])] * cp[row, h + L.scale]
         r_i = r[int(cp[row, h + L.r_index])] * cp[row, h + L.scale]
-        u0 += _row_loop_update(t, period, y_i, r_i, cp, cs, log, row, h, c, len(G) * i, callbacks)
+        e = r_i - y_i
+        if cs[row, c + S.started] == 0.0:
+            cs[row, c + S.e_prev], cs[row, c + S.started] = e, 1.0
+        d = (e - cs[row, c + S.e_prev]) / dt
+        o = int(cp[row, h + L.schedule_offset])
+        kp, ki, kd = _ags(abs(e * cp[row, o + EA.error_scale]), cp[row, o : o + len(AGS)])
+        cs[row, c + S.integral] += e * dt
+        u0 += cp[row, h + L.sign] * (kp * (cp[row, h + L.setpoint_weight] * r_i - y_i) + cs[row, c + S.integral] * ki
+                                     + kd * d)  # fmt: skip
+        cs[row, c + S.e_prev] = e
     return u0
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def simulate_nlcx_pid(p, pid, ref, dt, n_steps, bound, X, U, n_valid):  # pragma: no cover - compiled
-    """:func:`simulate` with nlcx's PID (:func:`_pid_row`) in place of the written-out loops:
-    ``pid`` = (cp, cs, log, callbacks) as nlcx packs them, ``ref`` (K+1, 2) the references of
-    x and theta.
+    """:func:`simulate` with its PID (:func:`_pid_row`) reading nlcx's packed rows: ``pid`` =
+    (cp, cs) of nlcx's controllers (:func:`packed_pid`), ``ref`` (K+1, 2) the references of x
+    and theta.
 
     The plant state stays in local variables, the controller's in nlcx's arrays. What
     separates this loop from nlcx's kernel is only that design (one variant at a time, the
@@ -259,13 +273,13 @@ def simulate_nlcx_pid(p, pid, ref, dt, n_steps, bound, X, U, n_valid):  # pragma
     kernel's (every variant in lock step, states in arrays, plant and controller called as
     compiled-function values, sin and cos of the batch's angles in vector code): it measures
     what the kernel would gain by it."""
-    cp, cs, log, callbacks = pid
+    cp, cs = pid
     for b in range(p.shape[0]):
         M, m, l, g = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
         x, xd, th, thd = 0.0, 0.0, 0.0, 0.0
         n_valid[b] = n_steps + 1
         for k in range(n_steps + 1):
-            F = _pid_row(k * dt, dt, (x, th), (ref[k, 0], ref[k, 1]), cp, cs, b, log, callbacks)
+            F = _pid_row(dt, (x, th), (ref[k, 0], ref[k, 1]), cp, cs, b)
             X[b, k, 0], X[b, k, 1], X[b, k, 2], X[b, k, 3] = x, xd, th, thd
             U[b, k] = F
             if not math.isfinite(F):
@@ -280,13 +294,19 @@ def simulate_nlcx_pid(p, pid, ref, dt, n_steps, bound, X, U, n_valid):  # pragma
 
 
 def packed_pid(controllers: list) -> tuple:
-    """(cp, cs, log, callbacks) of nlcx PIDs, one row each, as the kernel hands them to the
-    controller: the ``pid`` argument of :func:`simulate_nlcx_pid`."""
-    from nlcx.kernel.abi import callback_slots
-
-    first = controllers[0]
-    return (np.stack([c.cp for c in controllers]), np.stack([c.cs0 for c in controllers]),
-            np.zeros((len(controllers), len(first.log_names))), callback_slots(first.callbacks))  # fmt: skip
+    """(cp, cs) of nlcx PIDs, one row each, as the kernel hands them to the controller: the
+    ``pid`` argument of :func:`simulate_nlcx_pid`. ValueError unless each has the structure
+    :func:`_pid_row` is written for."""
+    for controller in controllers:
+        s = structure_of(controller.cp)
+        written_for = (
+            s.n_inputs == 1 and not s.discrete and not s.saturated and set(s.direct) == {DIRECT_ERROR_AGS}
+            and not any(s.filtered + s.on_measurement + s.inside) and set(s.form) == {FORMS["parallel"]}
+            and all(controller.cp[o + EA.on_abs_error] == 1.0 for o in s.offset)
+        )  # fmt: skip
+        if not written_for or ERROR_AGS.fields[: len(AGS)] != AGS:
+            raise ValueError(f"the reference's PID is not written for the loop structure {s}")
+    return np.stack([c.cp for c in controllers]), np.stack([c.cs0 for c in controllers])
 
 
 def loop_parameters(schedule: dict) -> np.ndarray:

@@ -13,8 +13,9 @@ the table from a saved output without running anything.
     --jobs 2 (target <= 30 s wall, <= 2 GB peak memory of the whole process tree), beside the
     limit reference (benchmarks/reference.py) of the same variants, alternated in one run:
     ns per variant-step, simulated seconds per wall second and their ratio (goal <= 1.3); and
-    the kernels alone in one process: nlcx's kernel, the reference's loop with nlcx's PID and
-    the limit, per variant-step; the loop with nlcx's PID checked bit for bit against nlcx's,
+    the kernels alone in one process: nlcx's kernel, the reference's loop with its PID reading
+    nlcx's packed rows (and nlcx's sin/cos) and the limit, per variant-step; that loop checked bit
+    for bit against nlcx's,
     the limit (libm's sin and cos, nlcx's own: docs/assumptions.md A30) to rounding; and the
     floor of the sweep at this kernel's speed: the parent's serial time (its manifest.json's
     timings) plus the kernel's CPU time on two cores; and the limit's loop stepped in lock step
@@ -314,7 +315,8 @@ def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[s
     """The first ``n`` variants of the sweep in this process, batches of 100, through three
     loops, alternated, CPU time of the best of ``repeats``: nlcx's kernel (with its array
     packing and its records lent by an arena, as a sweep batch calls it), the reference's loop
-    with nlcx's PID (:func:`reference.simulate_nlcx_pid`: the plant state in registers) and the
+    with its PID reading nlcx's packed rows (:func:`reference.simulate_nlcx_pid`: the plant state in
+    registers) and the
     limit reference. Where a sweep's time goes beyond the kernel (metrics, configs, files,
     processes) is the difference to (b)'s ratio."""
     import reference
@@ -523,10 +525,10 @@ def print_b(b: dict[str, Any]) -> None:
     ns, alone = b["alone"]["ns"], b["alone"]
     print(
         f"    kernels alone, one process, {b['alone']['variants']} of the variants in batches of 100 (CPU time): "
-        f"nlcx's kernel {ns['nlcx']:.0f} ns per variant-step; the reference's loop with nlcx's PID "
+        f"nlcx's kernel {ns['nlcx']:.0f} ns per variant-step; the reference's loop with its PID on nlcx's rows "
         f"and sin/cos (plant state in registers) {ns['nlcx_pid']:.0f} ns; limit {ns['limit']:.0f} ns; ratios to the "
         f"limit {ns['nlcx'] / ns['limit']:.2f} and {ns['nlcx_pid'] / ns['limit']:.2f}; trajectories: the loop with "
-        f"nlcx's PID bit-identical to nlcx's: {alone['same']}; the limit (libm's sin/cos) max |difference| "
+        f"its PID on nlcx's rows bit-identical to nlcx's: {alone['same']}; the limit (libm's sin/cos) max |difference| "
         f"{alone['limit_dev']:.1e}"
     )
     lockstep_cpu_s = 1e-9 * ns["lockstep"] * b["variant_steps"]

@@ -1,7 +1,9 @@
 """nlcx: reproducible experiments on the control of nonlinear systems.
 
 The Python API in one namespace. Importing ``nlcx`` is light: each name loads its module (and
-numpy, pandas, numba) on first use.
+numpy, pandas, numba) on first use, and nothing of the process (the garbage collector, the
+warning filters, matplotlib's backend) or of numba's cache is changed
+(:func:`nlcx.compiled_cache.ready` runs when the API first builds an experiment).
 
 >>> import nlcx
 >>> result = nlcx.run("configs/x_error_ags.yaml", ["simulation.t_end=10"])
@@ -15,14 +17,14 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 from nlcx._version import __version__
-from nlcx.compiled_cache import ensure_consistent
 
 if TYPE_CHECKING:
-    from nlcx.api import Result, SweepResult, experiment, load_run, run, sweep
+    from nlcx.api import experiment, run, sweep
     from nlcx.comparison import compare, improvement
     from nlcx.errors import ConfigError, NlcxError
     from nlcx.metrics import step_info
     from nlcx.plants.scalar import plant
+    from nlcx.results import Result, SweepResult, load_run
 
 __all__ = [
     "ConfigError",
@@ -42,10 +44,10 @@ __all__ = [
 
 #: Where each public name lives (imported on first access, PEP 562).
 _HOMES = {
-    "Result": "nlcx.api",
-    "SweepResult": "nlcx.api",
+    "Result": "nlcx.results",
+    "SweepResult": "nlcx.results",
     "experiment": "nlcx.api",
-    "load_run": "nlcx.api",
+    "load_run": "nlcx.results",
     "run": "nlcx.api",
     "sweep": "nlcx.api",
     "compare": "nlcx.comparison",
@@ -68,7 +70,3 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted({*globals(), *__all__})
-
-
-# before any compiled function is loaded from numba's disk cache (see nlcx.compiled_cache)
-ensure_consistent()

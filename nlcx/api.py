@@ -1,31 +1,27 @@
-"""nlcx from Python: run and sweep experiments, compare controllers, read run directories back.
+"""nlcx from Python: run and sweep experiments.
 
-:func:`run` simulates every controller of a config on its plant and returns a :class:`Result`
-(metrics, comparison, trajectories, figure) without writing anything unless asked;
-:func:`load_run` reads a run directory into the same object; :func:`sweep` runs a config's
-``sweep:`` section and returns a :class:`SweepResult`. The command line (``nlcx run``,
-``nlcx sweep``) runs the same code.
+:func:`run` simulates every controller of a config on its plant and returns a
+:class:`~nlcx.results.Result` (metrics, comparison, trajectories, figure) without writing
+anything unless asked; :func:`sweep` runs a config's ``sweep:`` section and returns a
+:class:`~nlcx.results.SweepResult`; :func:`nlcx.results.load_run` reads a run directory back into
+a ``Result``. The command line (``nlcx run``, ``nlcx sweep``) runs the same code.
 """
 
 from __future__ import annotations
 
 import copy
-import json
 import os
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Union
 
-import numpy as np
-
+from nlcx import compiled_cache
+from nlcx._numba_compat import quiet_first_class_functions
 from nlcx.errors import ConfigError
+from nlcx.results import Result, SweepResult, load_run
 
 if TYPE_CHECKING:
-    import pandas as pd
-    from matplotlib.figure import Figure
-
-    from nlcx import engine
     from nlcx.config import Experiment
 
 __all__ = ["Result", "SweepResult", "experiment", "load_run", "run", "sweep"]
@@ -34,9 +30,6 @@ __all__ = ["Result", "SweepResult", "experiment", "load_run", "run", "sweep"]
 ConfigLike = Union[str, "os.PathLike[str]", Mapping[str, Any], "Experiment"]
 #: Overrides: ``["key=value", "+key=value", "~key"]`` strings, or a nested mapping merged on top.
 OverridesLike = Union[Sequence[str], Mapping[str, Any], None]  # noqa: UP007 - a runtime alias, as ConfigLike
-
-#: The columns of metrics.csv, in order.
-METRIC_COLUMNS = ("controller", "signal", "metric", "value", "unit", "status", "note")
 
 
 def _raw(config: ConfigLike) -> dict[str, Any]:
@@ -49,7 +42,7 @@ def _raw(config: ConfigLike) -> dict[str, Any]:
     if isinstance(config, Mapping):
         return copy.deepcopy(dict(config))
     if isinstance(config, (str, os.PathLike)):
-        return cfg.read_config(config)
+        return cfg.read_config(os.fspath(config))
     raise ConfigError("config", type(config).__name__, "a YAML path, a mapping of sections or an Experiment")
 
 
@@ -96,6 +89,7 @@ def experiment(config: ConfigLike, overrides: OverridesLike = None) -> Experimen
     >>> exp.section.simulation.t_end, [c.label for c in exp.controllers]
     (5.0, ['conventional', 'proposed'])
     """
+    compiled_cache.ready()  # before a plugin's compiled functions are loaded
     from nlcx import config as cfg
 
     raw = _with_overrides(_raw(config), overrides)
@@ -135,422 +129,14 @@ def run(config: ConfigLike, overrides: OverridesLike = None, *, out: str | os.Pa
     >>> list(table.columns)
     ['unit', 'conventional', 'proposed', 'improvement_proposed_pct']
     """
+    exp = experiment(config, overrides)  # checks numba's cache before anything compiled is loaded
     from nlcx import engine
 
-    exp = experiment(config, overrides)
-    result = Result.from_engine(engine.run_experiment(exp))
+    with quiet_first_class_functions():  # numba's note on compiling the kernel's function values
+        result = Result.from_engine(engine.run_experiment(exp))
     if out is not None:
         result.save(out)
     return result
-
-
-def _metrics_frame(frame: pd.DataFrame) -> pd.DataFrame:
-    """A metrics table with metrics.csv's columns and types: text columns as str (a missing
-    note is ""), ``value`` as float64 (undefined is NaN)."""
-    out = frame.loc[:, list(METRIC_COLUMNS)].copy()
-    for column in METRIC_COLUMNS:
-        if column == "value":
-            out[column] = out[column].astype(np.float64)
-        else:
-            out[column] = out[column].fillna("").astype(str)
-    return out.reset_index(drop=True)
-
-
-def _read_metrics(path: Path) -> pd.DataFrame:
-    """metrics.csv as :func:`_metrics_frame` gives it."""
-    import pandas as pd
-
-    text = {c: str for c in METRIC_COLUMNS if c != "value"}
-    frame = pd.read_csv(path, dtype=text, keep_default_na=False, na_values={"value": [""]})
-    return _metrics_frame(frame)
-
-
-class Result:
-    """The runs of one experiment: its metrics, trajectories and figure, by name.
-
-    Built by :func:`run` (from the simulation) or :func:`load_run` (from a run directory);
-    both give the same metrics, column for column.
-
-    Attributes
-    ----------
-    name : str
-        The experiment's name.
-    config : dict
-        The resolved config: every default filled in, as config.yaml holds it.
-    metrics : pandas.DataFrame
-        Long form, the columns of metrics.csv: controller, signal, metric, value, unit,
-        status, note (docs/metrics.md defines each metric).
-    controllers : list of str
-        The controllers' labels, in the config's order.
-    directory : pathlib.Path or None
-        The run directory it was read from or last saved to.
-    """
-
-    def __init__(
-        self,
-        name: str,
-        config: dict[str, Any],
-        metrics: pd.DataFrame,
-        statuses: dict[str, str],
-        trajectories: dict[str, pd.DataFrame] | None,
-        outputs: list[tuple[str, str, str]],
-        *,
-        source: engine.Result | None = None,
-        directory: Path | None = None,
-    ) -> None:
-        self.name = name
-        self.config = config
-        self.metrics = metrics
-        self._statuses = statuses
-        self._trajectories = trajectories
-        self._outputs = outputs
-        self._source = source
-        self.directory = directory
-
-    @classmethod
-    def from_engine(cls, result: engine.Result) -> Result:
-        """The :class:`Result` of a run the engine returned (:func:`nlcx.engine.run_experiment`)."""
-        from nlcx import report
-
-        plant = result.prepared.plant
-        trajectories = {run.label: _frame(report._run_columns(run, plant)) for run in result.runs}
-        return cls(
-            name=result.prepared.experiment.name,
-            config=result.prepared.experiment.resolved(),
-            metrics=_metrics_frame(result.metrics),
-            statuses={run.label: run.status for run in result.runs},
-            trajectories=trajectories,
-            outputs=[(s.name, s.unit, s.label) for s in plant.outputs],
-            source=result,
-        )
-
-    @property
-    def controllers(self) -> list[str]:
-        return list(self._statuses)
-
-    def status(self, controller: str) -> str:
-        """``ok``, or ``unstable`` for a run stopped where it diverged (a result, not an error)."""
-        return self._statuses[self._known(controller)]
-
-    def _known(self, controller: str) -> str:
-        if controller not in self._statuses:
-            raise ConfigError(
-                "controller", controller, f"not a controller of this run; allowed: {', '.join(self._statuses)}"
-            )
-        return controller
-
-    def compare(self, metrics: Sequence[str] | None = None) -> pd.DataFrame:
-        """Controllers side by side: per (signal, metric), one column per controller and the
-        improvement % of each controller over the first.
-
-        The improvement is the thesis's formula, (first - other) / other x 100: positive when
-        the other controller has the smaller value (:func:`nlcx.comparison.improvement`).
-
-        Parameters
-        ----------
-        metrics : sequence of str, optional
-            Metric names; default: rise and settling time, overshoot, peak (peak deviation for
-            a regulated signal), ISE, IAE and ITAE.
-
-        Returns
-        -------
-        pandas.DataFrame
-            Indexed by (signal, metric), with columns ``unit``, one per controller and
-            ``improvement_<controller>_pct`` per controller after the first.
-
-        Examples
-        --------
-        >>> import nlcx
-        >>> result = nlcx.run("configs/x_error_ags.yaml", ["simulation.t_end=10"])
-        >>> row = result.compare(["overshoot"]).loc[("x", "overshoot")]
-        >>> expected = (row.conventional - row.proposed) / row.proposed * 100
-        >>> bool(abs(row.improvement_proposed_pct - expected) < 1e-9)
-        True
-        """
-        from nlcx.comparison import compare
-
-        return compare(self.metrics, metrics)
-
-    def trajectory(self, controller: str) -> pd.DataFrame:
-        """One controller's samples: ``t`` and every state, input, reference (``<output>_ref``)
-        and logged loop quantity (gains ``<loop>.kp``, ..., loop outputs) by name; the outputs
-        are states and appear under their names.
-
-        Parameters
-        ----------
-        controller : str
-            A label of :attr:`controllers`.
-
-        Returns
-        -------
-        pandas.DataFrame
-            One row a sample, SI units, angles in rad. A run that diverged ends where it stopped.
-
-        Raises
-        ------
-        nlcx.errors.ConfigError
-            For an unknown controller, or a run directory written without time series.
-
-        Examples
-        --------
-        >>> import nlcx
-        >>> result = nlcx.run("configs/x_error_ags.yaml", ["simulation.t_end=2"])
-        >>> frame = result.trajectory("proposed")
-        >>> list(frame.columns[:6])
-        ['t', 'x', 'x_dot', 'theta', 'theta_dot', 'F_x']
-        >>> float(frame.t.iloc[-1])
-        2.0
-        """
-        self._known(controller)
-        if self._trajectories is None:
-            raise ConfigError(
-                "trajectory", controller, "this run directory has no time series (outputs.timeseries: false)"
-            )
-        return self._trajectories[controller].copy()
-
-    def plot(self, signals: Sequence[str] | None = None, *, title: str | None = None) -> Figure:
-        """The thesis's figure layout: one axes per output, every controller overlaid, the
-        reference dotted.
-
-        Parameters
-        ----------
-        signals : sequence of str, optional
-            Outputs to draw; default: every output.
-        title : str, optional
-            Figure title; default: the config's title.
-
-        Returns
-        -------
-        matplotlib.figure.Figure
-            Not shown or saved; in a notebook it displays as the cell's value.
-
-        Examples
-        --------
-        >>> import nlcx
-        >>> fig = nlcx.run("configs/x_error_ags.yaml", ["simulation.t_end=2"]).plot()
-        >>> [ax.get_title() for ax in fig.axes]
-        ['(a) Position x vs time', '(b) Angle θ vs time']
-        """
-        from nlcx.drawing import draw
-
-        return draw(self._plan(signals, title))
-
-    def _plan(self, signals: Sequence[str] | None, title: str | None) -> Any:
-        """The figure's plan (:class:`nlcx.drawing.FigurePlan`) from the trajectories."""
-        from nlcx.drawing import FigurePlan, Line, Panel
-        from nlcx.report import LINE_STYLES, _finite, _thin
-
-        names = [o[0] for o in self._outputs]
-        chosen = list(signals) if signals is not None else names
-        for name in chosen:
-            if name not in names:
-                raise ConfigError("signals", name, f"not an output of the plant; allowed: {', '.join(names)}")
-        panels = []
-        for k, name in enumerate(chosen):
-            _, unit, label = self._outputs[names.index(name)]
-            lines = []
-            for i, controller in enumerate(self.controllers):
-                frame = self.trajectory(controller)
-                color, ls = LINE_STYLES[i % len(LINE_STYLES)]
-                legend = controller if self.status(controller) == "ok" else f"{controller} ({self.status(controller)})"
-                t, y = _thin(frame.t.to_numpy(), _finite(frame[name].to_numpy()))
-                lines.append(Line(t, y, color=color, ls=ls, lw=1.3, label=legend))
-            first = self.trajectory(self.controllers[0])
-            if f"{name}_ref" in first:
-                t, r = _thin(first.t.to_numpy(), first[f"{name}_ref"].to_numpy())
-                lines.append(Line(t, r, color="k", ls=":", lw=1.0, label="reference"))
-            ylabel = f"{label or name} ({unit})" if unit else (label or name)
-            panels.append(Panel(tuple(lines), f"({chr(ord('a') + k)}) {label or name} vs time",
-                                xlabel="Time (s)", ylabel=ylabel, legend_size=8))  # fmt: skip
-        heading = title if title is not None else self.config.get("title")
-        return FigurePlan(
-            len(panels), 1, (7.5, 2.9 * len(panels)), tuple(panels), title=heading or None, layout="column"
-        )
-
-    def save(self, directory: str | os.PathLike[str], *, report: bool = True) -> Path:
-        """Write the run directory, exactly as ``nlcx run --out DIRECTORY`` does: metrics.csv,
-        timeseries, figures, config.yaml, manifest.json and (``report=True``) report.html and
-        report.md. A directory that nlcx wrote before is replaced whole.
-
-        Parameters
-        ----------
-        directory : str or path
-            The run directory.
-        report : bool
-            Also write the report page.
-
-        Returns
-        -------
-        pathlib.Path
-            The run directory.
-        """
-        target = Path(directory)
-        if self._source is not None:
-            from nlcx.rundir import save_run
-
-            save_run(self._source, target, with_report=report)
-        elif self.directory is not None:
-            _copy_run(self.directory, target)
-        else:  # pragma: no cover - a Result is built from a run or a directory
-            raise ConfigError("directory", str(target), "a result of nlcx.run or nlcx.load_run")
-        self.directory = target
-        return target
-
-    def __repr__(self) -> str:
-        runs = ", ".join(f"{c} ({s})" for c, s in self._statuses.items())
-        return f"<nlcx.Result {self.name}: {runs}; {len(self.metrics)} metric rows>"
-
-    def _repr_html_(self) -> str:
-        """In a notebook: the comparison table under the experiment's name (escaped by pandas)."""
-        import html
-
-        return f"<p><b>{html.escape(self.name)}</b>: {html.escape(repr(self))}</p>" + self.compare().to_html()
-
-
-def _frame(columns: Mapping[str, np.ndarray]) -> pd.DataFrame:
-    import pandas as pd
-
-    return pd.DataFrame({name: np.asarray(values) for name, values in columns.items()})
-
-
-def _read_timeseries(directory: Path) -> dict[str, pd.DataFrame] | None:
-    """timeseries.csv (or .parquet) split by controller, each without the columns its run
-    does not have (another controller's logs: empty in its rows)."""
-    import pandas as pd
-
-    csv, parquet = directory / "timeseries.csv", directory / "timeseries.parquet"
-    if parquet.is_file():
-        frame = pd.read_parquet(parquet)
-    elif csv.is_file():
-        frame = pd.read_csv(csv, dtype={"controller": str}, keep_default_na=False, na_values=[""])
-    else:
-        return None
-    out = {}
-    for controller, rows in frame.groupby("controller", sort=False):
-        rows = rows.drop(columns="controller").reset_index(drop=True).astype(np.float64)  # "1" in a CSV is 1.0
-        out[str(controller)] = rows.loc[:, rows.notna().any(axis=0)]
-    return out
-
-
-def _outputs_of(config: Mapping[str, Any]) -> list[tuple[str, str, str]]:
-    """(name, unit, label) of the plant's outputs, from the registered plant of ``config``."""
-    from nlcx import config as cfg
-
-    exp = cfg.build(copy.deepcopy(dict(config)))
-    model = exp.plant_model
-    plant = model.build(exp.section.plant.name, exp.plant_params, exp.section.plant.x0, {})
-    return [(s.name, s.unit, s.label) for s in plant.outputs]
-
-
-def load_run(directory: str | os.PathLike[str]) -> Result:
-    """Read a run directory (written by ``nlcx run`` or :meth:`Result.save`) back.
-
-    Parameters
-    ----------
-    directory : str or path
-        The run directory: metrics.csv and config.yaml; timeseries.csv or .parquet if the run
-        wrote them.
-
-    Returns
-    -------
-    Result
-        The metrics equal those :func:`run` returned; trajectories when the directory has
-        time series.
-
-    Raises
-    ------
-    nlcx.errors.ConfigError
-        If ``directory`` is not a run directory.
-
-    Examples
-    --------
-    >>> import tempfile, nlcx
-    >>> result = nlcx.run("configs/x_error_ags.yaml", ["simulation.t_end=2"])
-    >>> with tempfile.TemporaryDirectory() as tmp:
-    ...     again = nlcx.load_run(result.save(f"{tmp}/run", report=False))
-    >>> again.metrics.equals(result.metrics)
-    True
-    """
-    import yaml
-
-    path = Path(directory)
-    missing = [name for name in ("metrics.csv", "config.yaml") if not (path / name).is_file()]
-    if missing:
-        raise ConfigError("directory", str(path), f"a run directory (no {' or '.join(missing)} in it)")
-    config = yaml.safe_load((path / "config.yaml").read_text(encoding="utf-8"))
-    metrics = _read_metrics(path / "metrics.csv")
-    manifest = json.loads((path / "manifest.json").read_text()) if (path / "manifest.json").is_file() else {}
-    statuses = {r["controller"]: r["status"] for r in manifest.get("runs", [])}
-    if not statuses:
-        statuses = dict(metrics.groupby("controller", sort=False).status.first())
-    return Result(
-        name=str(config.get("name", path.name)),
-        config=config,
-        metrics=metrics,
-        statuses=statuses,
-        trajectories=_read_timeseries(path),
-        outputs=_outputs_of(config),
-        directory=path,
-    )
-
-
-def _copy_run(source: Path, target: Path) -> None:
-    """Copy a run directory whole (a loaded result saved elsewhere), staged as a run is."""
-    import shutil
-
-    from nlcx.rundir import staged
-
-    with staged(target) as tmp:
-        for item in source.iterdir():
-            if item.is_file():
-                shutil.copy2(item, tmp / item.name)
-
-
-class SweepResult:
-    """A sweep's variants and metrics.
-
-    Attributes
-    ----------
-    variants : pandas.DataFrame
-        sweep.csv: one row a variant: its index, the varied values (``value:<key>``), seed,
-        config hash, status (ok, unstable or failed) and message.
-    metrics : pandas.DataFrame
-        metrics.csv: the metrics of every variant's runs (a ``variant`` column in front).
-    directory : pathlib.Path or None
-        Where the sweep was written, if ``out`` was given.
-    """
-
-    def __init__(self, variants: pd.DataFrame, metrics: pd.DataFrame, directory: Path | None) -> None:
-        self.variants = variants
-        self.metrics = metrics
-        self.directory = directory
-
-    def summary(self) -> pd.DataFrame:
-        """Per controller, signal and metric over the variants: n, median, quartiles, IQR, min,
-        max and the counts of undefined, unstable and failed (summary.csv of the sweep report).
-
-        Returns
-        -------
-        pandas.DataFrame
-            One row per (controller, signal, metric).
-
-        Examples
-        --------
-        >>> import nlcx
-        >>> swept = nlcx.sweep("configs/sweeps/robustness.yaml",
-        ...                    ["sweep.random.n=2", "simulation.t_end=2"], executor="serial")
-        >>> row = swept.summary().set_index(["controller", "signal", "metric"]).loc[("proposed", "x", "peak")]
-        >>> int(row.n + row.unstable + row.undefined)
-        6
-        """
-        from nlcx.pages.sweep import summary
-
-        return summary(self.metrics, self.variants)
-
-    def __repr__(self) -> str:
-        counts = self.variants.status.value_counts().to_dict() if "status" in self.variants else {}
-        shown = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
-        return f"<nlcx.SweepResult {len(self.variants)} variants: {shown}>"
 
 
 def sweep(
@@ -592,6 +178,7 @@ def sweep(
     """
     import pandas as pd
 
+    compiled_cache.ready()  # before the kernel is loaded; the workers fork from here
     from nlcx import sweeps
 
     if executor not in ("process", "serial", "dask"):
@@ -599,7 +186,8 @@ def sweep(
     raw = _with_overrides(_raw(config), overrides)
     with tempfile.TemporaryDirectory(prefix="nlcx-sweep-") as scratch:
         target = Path(out) if out is not None else Path(scratch) / "sweep"
-        outcome = sweeps.run(raw, [], target, executor, jobs or 2, with_report=out is not None)
+        with quiet_first_class_functions():
+            outcome = sweeps.run(raw, [], target, executor, jobs or 2, with_report=out is not None)
         text = {"controller": str, "signal": str, "metric": str, "unit": str, "status": str, "note": str}
         metrics = pd.read_csv(target / "metrics.csv", dtype=text, keep_default_na=False, na_values={"value": [""]})
         return SweepResult(outcome.index, metrics, target if out is not None else None)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from nlcx.errors import NlcxError
 
@@ -253,7 +253,8 @@ def compare(metrics: pd.DataFrame, names: Sequence[str] | None = None) -> pd.Dat
     import pandas as pd
 
     _check_columns(metrics.columns)
-    table = comparison(metrics.to_dict("records"), names)
+    records = cast("list[dict[str, Any]]", metrics.to_dict("records"))  # its columns are named by strings
+    table = comparison(records, names)
     index = pd.MultiIndex.from_tuples([(r.signal, r.metric) for r in table.rows], names=["signal", "metric"])
     columns: dict[str, list[Any]] = {"unit": [r.unit for r in table.rows]}
     for k, controller in enumerate(table.controllers):

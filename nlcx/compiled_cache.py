@@ -6,13 +6,16 @@ gain schedules, the integrator calls the friction physics) keeps its cached mach
 with the *old* callee inlined, after only the callee's module changed. nlcx therefore
 stamps the cache with a hash of every source file of the package; when the stamp differs,
 the package's cache files (``*.nbi``, ``*.nbc`` in its ``__pycache__`` folders) are removed
-before anything is compiled or loaded, and numba rebuilds them.
+before anything is compiled or loaded, and numba rebuilds them. :func:`ready` does this once
+per process, before the first module with compiled functions is imported: the command line
+calls it before a command runs, the Python API (:mod:`nlcx.api`) before it builds or
+simulates an experiment. Importing ``nlcx`` reads and removes nothing.
 
 Rebuilding takes a while: the kernel alone compiles for seconds, in the process that needs it.
 :class:`CompileHelper` lets ``nlcx run`` compile the rest of what the run needs (its plugins'
 functions, the metric functions) in a second process meanwhile. Processes that share the
 cache (that helper, a sweep's or a reproduction's workers) read and write a function's cache
-files one at a time (:func:`serialize_cache_access`).
+files one at a time (:func:`nlcx._numba_compat.serialize_cache_access`).
 """
 
 from __future__ import annotations
@@ -23,9 +26,10 @@ import hashlib
 import os
 import subprocess
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+
+from nlcx._numba_compat import check_version, serialize_cache_access
 
 PACKAGE = Path(__file__).resolve().parent
 STAMP = PACKAGE / "__pycache__" / "numba-source.sha256"
@@ -66,50 +70,19 @@ def ensure_consistent(root: Path = PACKAGE, stamp: Path | None = None, depends: 
     return True
 
 
-#: The operations on a function's cache files that :func:`serialize_cache_access` serializes.
-_CACHE_FILE_OPERATIONS = ("save", "load", "flush")
+@functools.cache
+def ready() -> None:
+    """Prepare this process to load the package's compiled functions (once; the processes it
+    forks inherit it): say in one line if numba's version is untested
+    (:func:`nlcx._numba_compat.check_version`), drop the package's numba cache if the source
+    changed since it was stamped (:func:`ensure_consistent`), and serialise every process's
+    reads and writes of the cache files (:func:`nlcx._numba_compat.serialize_cache_access`).
 
-
-def serialize_cache_access() -> None:
-    """Make each read or write of a compiled function's files in numba's disk cache one step
-    for every process that shares the cache (idempotent; every numba cache of the process).
-
-    numba keeps a function's overloads in an index file and one data file each. To save one it
-    reads the index, takes the first free data-file number, writes the index, then the data file,
-    with no lock (numba 0.68; numba/numba#10128 reports the same race for GUFuncs, and its
-    maintainers suggest a file lock). Two processes saving different overloads of one function
-    at once can both take number 1: the index then names one overload and the data file holds
-    the other's machine code, which a later run loads for the wrong types (a crash, or a wrong
-    result). Here a save, a load and a flush each hold an exclusive lock (:mod:`filelock`) on
-    ``<index>.lock`` beside the index, so the second save reads the first's entry and a load
-    never reads an index entry whose data file is still being written. Where the lock file
-    cannot be made (a read-only cache), the operation runs unlocked, as numba's own."""
-    from numba.core.caching import IndexDataCacheFile
-
-    for name in _CACHE_FILE_OPERATIONS:
-        operation = getattr(IndexDataCacheFile, name)
-        if not getattr(operation, "serialized", False):
-            setattr(IndexDataCacheFile, name, _locked(operation))
-
-
-def _locked(operation: Callable[..., Any]) -> Callable[..., Any]:
-    """``operation`` of an ``IndexDataCacheFile`` run under the lock of the file's index."""
-    from filelock import FileLock
-
-    @functools.wraps(operation)
-    def run(cache_file: Any, *args: Any) -> Any:
-        try:
-            lock = FileLock(f"{cache_file._index_path}.lock")
-            lock.acquire()
-        except OSError:
-            return operation(cache_file, *args)
-        try:
-            return operation(cache_file, *args)
-        finally:
-            lock.release()
-
-    run.serialized = True  # type: ignore[attr-defined]
-    return run
+    Call it before importing a module that declares compiled functions: a function compiled
+    for an explicit signature is loaded from the cache when its module is imported."""
+    check_version()
+    ensure_consistent()
+    serialize_cache_access()
 
 
 class CompileHelper:
@@ -117,7 +90,7 @@ class CompileHelper:
     ``after`` seconds: ``nlcx run`` watches loading the kernel, which is quick from numba's
     cache and takes seconds when it compiles, and then starts ``nlcx prewarm`` with the run's config
     (:func:`nlcx.engine.prewarm`). Both processes write numba's cache, one function's files at a
-    time (:func:`serialize_cache_access`), so either may finish first."""
+    time (:func:`nlcx._numba_compat.serialize_cache_access`), so either may finish first."""
 
     def __init__(self, command: list[str], after: float = 1.0) -> None:
         self.command = command

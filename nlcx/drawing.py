@@ -15,9 +15,9 @@ import gc
 import io
 import os
 import pickle
+import secrets
 import subprocess
 import sys
-import tempfile
 import textwrap
 from collections.abc import Callable
 from contextlib import suppress
@@ -31,25 +31,35 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-_UMASK = os.umask(0)
-os.umask(_UMASK)
 #: Resolution of every PNG written.
 DPI = 120
 
 
-def atomic_write(path: Path, writer: Callable[[Path], None]) -> None:
-    """Call ``writer(tmp)`` on a temporary file beside ``path``, then rename it to ``path``."""
+def atomic_write(path: Path, writer: Callable[[Path], object]) -> None:
+    """Call ``writer(tmp)`` on a temporary file beside ``path``, then rename it to ``path``.
+
+    The file gets the permissions of a file the process creates (``0o666`` less its umask),
+    not those of a private temporary file."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
+    tmp = _new_file_beside(path)
     try:
         writer(tmp)
-        os.chmod(tmp, 0o666 & ~_UMASK)
         os.replace(tmp, path)
     finally:
         with suppress(FileNotFoundError):
             tmp.unlink()
+
+
+def _new_file_beside(path: Path) -> Path:
+    """A new empty file ``.<name>.<random>.tmp`` in ``path``'s folder, made with mode ``0o666``
+    (which the process's umask reduces, as for any file it creates)."""
+    while True:
+        tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+        try:
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        except FileExistsError:
+            continue
+        return tmp
 
 
 @dataclass(frozen=True)
@@ -108,7 +118,10 @@ def write_figure(path: Path, fig: Figure) -> None:
 def _draw_panel(ax: Axes, panel: Panel) -> None:
     for line in panel.lines:
         ax.plot(line.t, line.y, color=line.color, ls=line.ls, lw=line.lw, label=line.label)
-    ax.set_title(panel.title, **({"fontsize": panel.title_size} if panel.title_size else {}))
+    if panel.title_size:
+        ax.set_title(panel.title, fontsize=panel.title_size)
+    else:
+        ax.set_title(panel.title)  # matplotlib's title size
     if panel.xlabel:
         ax.set_xlabel(panel.xlabel)
     if panel.ylabel:

@@ -36,8 +36,9 @@ class Layout:
         self.name = name
         self.fields: tuple[str, ...] = tuple(fields)
         self._names = frozenset(self.fields)
-        #: The offset of each field, as a namedtuple the compiled code reads (``at.sign``).
-        self.at = namedtuple(name, self.fields)(*range(len(self.fields)))  # type: ignore[misc]
+        #: The offset of each field, as a namedtuple the compiled code reads (``at.sign``); Any to
+        #: the type checker, which cannot see the fields a namedtuple is given at run time.
+        self.at: Any = namedtuple(name, self.fields)(*range(len(self.fields)))
 
     @property
     def size(self) -> int:

@@ -3,11 +3,17 @@
 A plugin is registered under the name the YAML uses, either as an object or as a lazy
 ``"package.module:attribute"`` string. Third-party packages add plugins through
 ``importlib.metadata`` entry points in the groups ``nlcx.plants``, ``nlcx.controllers``,
-``nlcx.schedules``, ``nlcx.uncertainties`` and ``nlcx.references``; the entry point's name is
-the registered name and its value the entry point, e.g. in a third party's pyproject.toml::
+``nlcx.schedules``, ``nlcx.uncertainties``, ``nlcx.references`` and ``nlcx.tuners``; the entry
+point's name is the registered name and its value the entry point, e.g. in a third party's
+pyproject.toml::
 
     [project.entry-points."nlcx.plants"]
     furuta = "mypkg.furuta:FurutaPendulum"
+
+Each registry holds one kind of plugin, typed by that kind's protocol (:mod:`nlcx.protocols`).
+``register`` checks what it can without importing a lazy entry point (the name, and the form of
+a ``"module:attribute"`` string); the first ``get`` of a plugin checks that it has every member
+of its kind's protocol, and refuses it in one line naming what it lacks.
 """
 
 from __future__ import annotations
@@ -15,16 +21,34 @@ from __future__ import annotations
 import difflib
 import importlib
 import json
+import re
 import types
 import typing
 from collections.abc import Iterator
 from dataclasses import dataclass
 from importlib.metadata import entry_points
-from typing import Any, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 from nlcx.errors import ConfigError
+from nlcx.protocols import (
+    ControllerPlugin,
+    PlantPlugin,
+    ReferencePlugin,
+    SchedulePlugin,
+    TunerPlugin,
+    UncertaintyPlugin,
+    missing_members,
+)
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
 
 T = TypeVar("T")
+
+#: A plugin's name: what a config writes after ``kind:`` (``name:`` for a plant).
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
+#: A lazy entry point: ``package.module`` or ``package.module:attribute.attribute``.
+_ENTRY_POINT = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*(:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*)?")
 
 
 def load_entry_point(entry_point: str) -> Any:
@@ -37,17 +61,29 @@ def load_entry_point(entry_point: str) -> Any:
 
 
 class Registry(Generic[T]):
-    """Names the YAML may use for one kind of plugin, mapped to their entry points."""
+    """Names the YAML may use for one kind of plugin, mapped to their entry points.
 
-    def __init__(self, kind: str, group: str) -> None:
+    ``protocol`` is the kind's protocol (:mod:`nlcx.protocols`), which every plugin is checked
+    against on its first load; ``T`` is the same protocol, as the type :meth:`get` returns."""
+
+    def __init__(self, kind: str, group: str, protocol: type) -> None:
         self.kind = kind
         self.group = group
+        self.protocol = protocol
         self._entries: dict[str, Any] = {}
         self._loaded: dict[str, T] = {}
         self._scanned = False
 
-    def register(self, name: str, entry_point: str | T, *, replace: bool = False) -> None:
-        """Register ``entry_point`` (an object or a ``"module:attr"`` string) as ``name``."""
+    def register(self, name: str, entry_point: str | T | type[T], *, replace: bool = False) -> None:
+        """Register ``entry_point`` (an object, a class or a ``"module:attr"`` string) as ``name``.
+
+        A ConfigError if ``name`` is not a plugin name (a letter, then letters, digits, ``_`` and
+        ``-``) or a string ``entry_point`` is not of the form ``"package.module:attribute"``; the
+        plugin itself is checked when it is first loaded (:meth:`get`)."""
+        if not isinstance(name, str) or not _NAME.fullmatch(name):
+            raise ConfigError(self.group, name, "a plugin name: a letter, then letters, digits, '_' and '-'")
+        if isinstance(entry_point, str) and not _ENTRY_POINT.fullmatch(entry_point):
+            raise ConfigError(f"{self.group}.{name}", entry_point, "an entry point 'package.module:attribute'")
         if name in self._entries and not replace:
             raise ValueError(f"{self.kind} {name!r} is already registered")
         self._entries[name] = entry_point
@@ -75,15 +111,42 @@ class Registry(Generic[T]):
     def get(self, name: str, *, path: str = "") -> T:
         """The plugin registered as ``name`` (a class is instantiated once, without arguments).
 
-        A ConfigError at ``path`` if nothing is registered under ``name``.
+        A ConfigError at ``path`` if nothing is registered under ``name``, or if the plugin
+        lacks a member of its kind's protocol (checked once, when it is first loaded).
         """
         if name not in self.names():
             raise ConfigError(path, name, self.unknown_message(name))
         if name not in self._loaded:
-            entry = self._entries[name]
-            obj = load_entry_point(entry) if isinstance(entry, str) else entry
-            self._loaded[name] = obj() if isinstance(obj, type) else obj
+            self._loaded[name] = self._load(name, path)
         return self._loaded[name]
+
+    def _load(self, name: str, path: str) -> T:
+        """The plugin registered as ``name``, imported, instantiated and checked against the protocol."""
+        entry = self._entries[name]
+        obj = load_entry_point(entry) if isinstance(entry, str) else entry
+        where = path or self.group
+        if isinstance(obj, type):
+            try:
+                obj = obj()
+            except TypeError as exc:
+                raise ConfigError(
+                    where, name, f"{self._source(name)} cannot be made without arguments: {exc}"
+                ) from None
+        missing = missing_members(obj, self.protocol)
+        if missing:
+            raise ConfigError(
+                where,
+                name,
+                f"{self._source(name)} lacks {', '.join(missing)}, which every {self.kind} plugin has "
+                f"(nlcx.protocols.{self.protocol.__name__})",
+            )
+        plugin: T = obj
+        return plugin
+
+    def _source(self, name: str) -> str:
+        """'the <kind> registered as <name>', with its entry point when it was given as one."""
+        entry = self._entries[name]
+        return f"the {self.kind} registered as {name!r}" + (f" ({entry})" if isinstance(entry, str) else "")
 
     def unknown_message(self, name: object) -> str:
         """'unknown <kind>; allowed: ...' with a close match suggested when there is one."""
@@ -176,11 +239,11 @@ def _signal_row(signal: Any) -> tuple[str, str, str]:
     return str(signal.name), str(getattr(signal, "unit", "")), str(getattr(signal, "label", ""))
 
 
-def nested_models(model: type) -> list[type]:
+def nested_models(model: type[BaseModel]) -> list[type[BaseModel]]:
     """``model`` and every pydantic model its fields' annotations name, depth first, once each."""
     from pydantic import BaseModel
 
-    found: list[type] = []
+    found: list[type[BaseModel]] = []
 
     def visit(annotation: Any) -> None:
         if isinstance(annotation, type) and issubclass(annotation, BaseModel):
@@ -197,10 +260,10 @@ def nested_models(model: type) -> list[type]:
     return found
 
 
-def model_doc(model: type) -> ModelDoc:
+def model_doc(model: type[BaseModel]) -> ModelDoc:
     """The fields of the pydantic ``model`` with their type, default, unit and description."""
     fields = []
-    for name, info in model.model_fields.items():  # type: ignore[attr-defined]
+    for name, info in model.model_fields.items():
         extra = info.json_schema_extra if isinstance(info.json_schema_extra, dict) else {}
         bounds = " ".join(_bounds(info.metadata))
         fields.append(
@@ -264,13 +327,14 @@ def _default_text(value: Any) -> str:
     return json.dumps(value, default=str, ensure_ascii=False)
 
 
-plants: Registry[Any] = Registry("plant", "nlcx.plants")
-controllers: Registry[Any] = Registry("controller", "nlcx.controllers")
-schedules: Registry[Any] = Registry("gain schedule", "nlcx.schedules")
-uncertainties: Registry[Any] = Registry("uncertainty", "nlcx.uncertainties")
-references: Registry[Any] = Registry("reference", "nlcx.references")
-tuners: Registry[Any] = Registry("tuner", "nlcx.tuners")
+plants: Registry[PlantPlugin] = Registry("plant", "nlcx.plants", PlantPlugin)
+controllers: Registry[ControllerPlugin] = Registry("controller", "nlcx.controllers", ControllerPlugin)
+schedules: Registry[SchedulePlugin] = Registry("gain schedule", "nlcx.schedules", SchedulePlugin)
+uncertainties: Registry[UncertaintyPlugin] = Registry("uncertainty", "nlcx.uncertainties", UncertaintyPlugin)
+references: Registry[ReferencePlugin] = Registry("reference", "nlcx.references", ReferencePlugin)
+tuners: Registry[TunerPlugin] = Registry("tuner", "nlcx.tuners", TunerPlugin)
 
+#: Every registry by its kind in the plural; each holds plugins of its own protocol.
 ALL: dict[str, Registry[Any]] = {
     "plants": plants,
     "controllers": controllers,

@@ -12,12 +12,12 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from datetime import datetime, timezone
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import yaml
@@ -105,20 +105,20 @@ def _arrow_column(values: np.ndarray | Sequence[str]) -> pa.Array:
     return pa.Array.from_buffers(pa.large_string(), len(encoded), buffers)
 
 
-def _arrow_table(columns: dict[str, np.ndarray | Sequence[str]]) -> pa.Table:
+def _arrow_table(columns: Mapping[str, np.ndarray | Sequence[str]]) -> pa.Table:
     """Columns (name -> float array or strings) as an Arrow table (:func:`_arrow_column`)."""
     import pyarrow as pa
 
     return pa.table({name: _arrow_column(values) for name, values in columns.items()})
 
 
-def write_columns(path: Path, columns: dict[str, np.ndarray | Sequence[str]]) -> None:
+def write_columns(path: Path, columns: Mapping[str, np.ndarray | Sequence[str]]) -> None:
     """Columns (name -> float array or strings) as a CSV without importing pandas: the bytes
     :func:`write_csv` writes for the DataFrame of the same columns."""
     _write_table(path, _arrow_table(columns))
 
 
-def write_parquet(path: Path, columns: dict[str, np.ndarray | Sequence[str]]) -> None:
+def write_parquet(path: Path, columns: Mapping[str, np.ndarray | Sequence[str]]) -> None:
     """Columns (name -> float array or strings) as a Parquet file, zstd-compressed: the table
     :func:`write_columns` writes as CSV (NaN as null), every float as its 8 bytes, and the
     same bytes for the same columns (and pyarrow version)."""
@@ -128,7 +128,7 @@ def write_parquet(path: Path, columns: dict[str, np.ndarray | Sequence[str]]) ->
     atomic_write(path, lambda tmp: pq.write_table(table, str(tmp), compression="zstd"))
 
 
-def write_timeseries(stem: Path, columns: dict[str, np.ndarray | Sequence[str]], fmt: str) -> Path:
+def write_timeseries(stem: Path, columns: Mapping[str, np.ndarray | Sequence[str]], fmt: str) -> Path:
     """The time series ``columns`` as ``stem``.csv or ``stem``.parquet (``outputs.timeseries_format``)."""
     path = stem.with_name(f"{stem.name}.{fmt}")
     (write_parquet if fmt == "parquet" else write_columns)(path, columns)
@@ -155,8 +155,9 @@ def _run_columns(run: Run, plant: Plant) -> dict[str, np.ndarray]:
     offsets = run.controller.reference_offsets or (0.0,) * len(run.controller.reference_signals)
     for i, (name, off) in enumerate(zip(run.controller.reference_signals, offsets, strict=True)):
         cols[f"{name}_ref" if off == 0 else f"{name}_ref{off:+g}"] = run.r[:, i]
-    for i, name in enumerate(run.controller.log_names):
-        cols[name] = run.log[:, i]
+    if run.log is not None:
+        for i, name in enumerate(run.controller.log_names):
+            cols[name] = run.log[:, i]
     return cols
 
 
@@ -207,7 +208,9 @@ def _run_label(run: Run, result: Result | None = None) -> str:
     """The legend entry: the controller, its status if not ok, and the requested metrics."""
     if run.status != "ok":
         return f"{run.label} ({run.status})"
-    names = result.prepared.experiment.section.outputs.figure_metrics if result is not None else []
+    if result is None:
+        return run.label
+    names = result.prepared.experiment.section.outputs.figure_metrics
     if not names:
         return run.label
     rows = [row for row in result.metric_rows if row[0] == run.label]
@@ -281,7 +284,7 @@ def gains_plan(result: Result) -> FigurePlan:
             values = None
             if name in plant.input_names:
                 values, unit = run.u[:, plant.input_names.index(name)], plant.unit_of(name)
-            elif name in run.controller.log_names:
+            elif name in run.controller.log_names and run.log is not None:
                 i = run.controller.log_names.index(name)
                 values, unit = run.log[:, i], run.controller.log_units[i]
             run_values.append((run, values, run.label))
@@ -375,7 +378,7 @@ def manifest(
         **provenance(overrides, started),
         **(environment() if where is None else where),
         "seed": {
-            "entropy": int(ss.entropy),
+            "entropy": int(cast(int, ss.entropy)),  # prepare seeds it with the config's integer seed
             # the children prepare spawned, one an uncertainty in config order (spawn(0) listed none)
             "uncertainty_spawn_keys": [[*ss.spawn_key, i] for i in range(ss.n_children_spawned)],
         },

@@ -391,7 +391,7 @@ def _emit_batch(d: Derivation, angles: list[tuple[str, int]], trig: str) -> str:
         raise ValueError(f"{key}: {len(angles)} angles need {2 * len(angles)} rows of q'', it has {len(d.q)}")
     batch_trig = ", ".join(f"dx[{s}, b], dx[{c}, b]" for s, c in rows)
     lines = [
-        '@njit(cache=True, error_model="numpy", _nrt=False)',
+        '@hot_njit(cache=True, error_model="numpy")',
         f"def {key}_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled",
         f'{head}"""The {d.spec.title} derived from {d.spec.source}.\n',
         f"{head}Column b of x is one variant: state ({', '.join(s.name for s in d.states)}),",
@@ -477,7 +477,7 @@ def emit_module() -> str:
         "from __future__ import annotations\n",
         "from collections.abc import Sequence\n",
         "import numpy as np\nfrom numba import njit\n",
-        "from nlcx.kernel.trig import COLUMN_ROWS, sincos, sincos_column\n",
+        "from nlcx._numba_compat import hot_njit\nfrom nlcx.kernel.trig import COLUMN_ROWS, sincos, sincos_column\n",
     ]
     text = "\n".join(parts)
     for d in derivations:

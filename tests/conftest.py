@@ -10,7 +10,11 @@ import numpy as np
 import pytest
 import yaml
 
-from nlcx import config, engine
+from nlcx import compiled_cache
+
+compiled_cache.ready()  # before any module with compiled functions loads them from numba's cache
+
+from nlcx import config, engine  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIGS = ROOT / "configs"

@@ -145,6 +145,7 @@ def test_bad_input_is_one_line() -> None:
         nlcx.run(X_CONFIG, "a=1")
 
 
+@pytest.mark.slow
 def test_sweep_returns_variants_and_metrics_as_the_cli_writes_them(tmp_path: Path) -> None:
     overrides = ["sweep.random.n=2", "simulation.t_end=2"]
     config = ROOT / "configs" / "sweeps" / "robustness.yaml"

@@ -1,4 +1,5 @@
-"""The package's structure rules: no import cycles, small functions, named offsets.
+"""The package's structure rules: no import cycles, small functions and modules, named offsets
+and named fields.
 
 These read the source with :mod:`ast`; they do not import the package.
 """
@@ -10,8 +11,20 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "nlcx"
 MAX_FUNCTION_LINES = 80
-#: Packed parameter and state blocks: read through named offsets (nlcx.layout), never ``o + 6``.
-PACKED_ARRAYS = {"p", "cp", "cs", "sp", "ep", "es"}
+MAX_MODULE_LINES = 600
+#: Packed parameter, state and log blocks: read through named offsets (nlcx.layout), never ``o + 6``.
+PACKED_ARRAYS = {"p", "cp", "cs", "cs0", "sp", "ep", "es", "es0", "log", "LOG"}
+#: The names the kernel, the engine and the plugins give the kernel's named structures
+#: (nlcx.kernel.structures and the kernel's own work spaces), the engine's (a tableau, a metric
+#: block, a kernel call) and the positional tuples they replaced (``control``, ``state``,
+#: ``one_path``, ``frictional``), and the packed state of the friction modes.
+STRUCTURES = {
+    "integration", "tableau", "plant", "controller", "control", "elements", "forces", "records", "outcome",
+    "friction_path", "frictional", "slots", "signals", "stages", "flat", "work", "scratch", "one", "one_path",
+    "state", "modes", "block", "call",
+}  # fmt: skip
+#: Where values are structures read by name: the kernel, the engine and the plugins.
+NAMED_FIELD_PACKAGES = ("kernel", "engine", "plants", "controllers", "uncertainty", "references")
 
 
 def _modules() -> dict[str, Path]:
@@ -147,3 +160,65 @@ def test_no_bare_numeric_offsets_into_packed_arrays() -> None:
         if not _generated(path):
             found += [f"{path.relative_to(PACKAGE.parent)}:{hit}" for hit in _bare_offsets(path.read_text())]
     assert found == []
+
+
+def _is_position(node: ast.expr) -> bool:
+    """Whether ``node`` is an integer literal (``3``, ``-1``): a position, not a name."""
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub | ast.UAdd):
+        node = node.operand
+    return isinstance(node, ast.Constant) and type(node.value) is int
+
+
+def _positional_reads(source: str) -> list[str]:
+    """Subscripts of a structure (a name of :data:`STRUCTURES`, bare or as an attribute,
+    ``scratch[9]``, ``self.records[3]``) whose index is an integer literal or holds one as an
+    element (``state[0][b]``, ``forces[..., 2]``): a field read by its position. Offsets into
+    packed arrays are :func:`_bare_offsets`' business; slices and computed indices pass."""
+    found: list[tuple[int, int, str]] = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.Subscript):
+            continue
+        value = node.value
+        name = value.id if isinstance(value, ast.Name) else value.attr if isinstance(value, ast.Attribute) else None
+        index = node.slice.elts if isinstance(node.slice, ast.Tuple) else [node.slice]
+        if name in STRUCTURES and any(_is_position(i) for i in index):
+            found.append((node.lineno, node.col_offset, ast.unparse(node)))
+    return [f"{line}: {text}" for line, _, text in sorted(found)]
+
+
+def test_positional_read_checker_flags_literal_positions_only() -> None:
+    source = (
+        "a = scratch[9]\nb = self.records[3]\nc = state[0][b]\nd = forces[..., 2]\ne = slots.x[i, 0]\n"
+        "f = scratch.one\ng = stages[j]\nh = plant[1:]\nk = rows[0]\nm = outcome[-1]\n"
+    )
+    assert _positional_reads(source) == [
+        "1: scratch[9]", "2: self.records[3]", "3: state[0]", "4: forces[..., 2]", "10: outcome[-1]",
+    ]  # fmt: skip
+
+
+def test_structures_are_read_by_name_in_the_kernel_engine_and_plugins() -> None:
+    found = []
+    for path in _modules().values():
+        if path.relative_to(PACKAGE).parts[0] in NAMED_FIELD_PACKAGES and not _generated(path):
+            found += [f"{path.relative_to(PACKAGE.parent)}:{hit}" for hit in _positional_reads(path.read_text())]
+    assert found == []
+
+
+def _too_long(source: str) -> int | None:
+    """The number of lines of a module over :data:`MAX_MODULE_LINES`, else None."""
+    lines = len(source.splitlines())
+    return lines if lines > MAX_MODULE_LINES else None
+
+
+def test_module_length_checker_flags_a_long_module() -> None:
+    assert _too_long("x = 1\n" * MAX_MODULE_LINES) is None
+    assert _too_long("x = 1\n" * (MAX_MODULE_LINES + 1)) == MAX_MODULE_LINES + 1
+
+
+def test_no_module_longer_than_600_lines() -> None:
+    """Every module of nlcx (generated code aside) has at most 600 lines, its docstrings included."""
+    long = {}
+    for path in _modules().values():
+        if not _generated(path) and (lines := _too_long(path.read_text())):
+            long[str(path.relative_to(PACKAGE.parent))] = lines
+    assert long == {}

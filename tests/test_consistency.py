@@ -108,6 +108,7 @@ def test_the_study_end_to_end_its_counts_recomputed_from_the_loops(tmp_path: Pat
     loops = pd.concat([pd.read_csv(p) for p in sorted((out / "fits" / "2_3").glob("*.loops.csv"))])
     loops = pd.concat([loops, pd.read_csv(next((out / "loops" / "2_3").glob("random_*.csv")))])
     assert columns.loops.iloc[0] == len(loops) == 4 + 3 * 4 + 6  # literal fit, three saturations, the cloud
+    assert len(cells) > 0 and set(cells.table) == {"2.3"}
     for row in cells.itertuples():
         scale = max(abs(row.printed), FLOORS[row.cell.split(".")[1]])
         assert row.loops_hitting == int(np.sum(np.abs(loops[row.cell] - row.printed) <= 0.1 * scale))

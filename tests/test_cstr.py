@@ -154,6 +154,7 @@ def test_ga_tuner_same_result_serial_or_parallel(tmp_path: Path) -> None:
     assert tuning["evaluations"] == "24"
 
 
+@pytest.mark.slow
 def test_chapter_5_tables_and_figures(tmp_path: Path) -> None:
     out = tmp_path / "thesis"
     result = reproduce_only("table-5.8,table-5.1,table-5.2,table-5.3,fig-5.4,fig-5.19", out)

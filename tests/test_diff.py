@@ -48,6 +48,7 @@ def test_a_changed_verdict_is_a_missing_and_an_extra_row(tmp_path: Path) -> None
     assert "Table 2.3 | not" in result.output and "extra in NEW" in result.output
 
 
+@pytest.mark.slow
 def test_committed_baselines_still_reproduce(tmp_path: Path) -> None:
     """The fast subset of thesis tables (chapters 2-5) regenerates to the committed numbers.
 
@@ -85,6 +86,7 @@ def test_a_changed_status_is_one_line_not_missing_rows(run_dirs: tuple[Path, Pat
     assert result.output.splitlines()[-1] == "drift: 1 cell(s) in 1 of 1 file(s): metrics.csv 1 (1 status change(s))"
 
 
+@pytest.mark.slow
 def test_only_and_the_drift_of_each_file(run_dirs: tuple[Path, Path]) -> None:
     """Every file by default, its drift counted per file; the time series capped in the table."""
     base, new = run_dirs

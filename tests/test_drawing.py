@@ -111,3 +111,26 @@ def test_a_painter_left_without_figures_exits_quietly() -> None:
     # the run failed or was interrupted before handing its figures over: no traceback
     done = subprocess.run([sys.executable, "-m", "nlcx.drawing"], input=b"", capture_output=True, timeout=120)
     assert (done.returncode, done.stderr) == (0, b"")
+
+
+def test_a_written_file_has_a_new_files_permissions_and_the_umask_is_never_changed(tmp_path: Path) -> None:
+    """A file written atomically is readable as any file the process creates (0o666 less the
+    umask, here 0o640), not private as a temporary file; neither importing nlcx.drawing nor
+    writing sets the process's umask, not even for a moment (another thread may create files)."""
+    target = tmp_path / "out" / "table.csv"
+    code = (
+        "import os\n"
+        "from pathlib import Path\n"
+        "os.umask(0o027)\n"
+        "set_masks, umask = [], os.umask\n"
+        "os.umask = lambda mask: set_masks.append(mask) or umask(mask)\n"
+        "from nlcx import drawing\n"
+        f"drawing.atomic_write(Path({str(target)!r}), lambda tmp: tmp.write_text('t,y\\n'))\n"
+        f"drawing.atomic_write(Path({str(target)!r}), lambda tmp: tmp.write_text('t,y,u\\n'))\n"
+        "print(set_masks)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
+    assert target.read_text() == "t,y,u\n" and target.stat().st_mode & 0o777 == 0o640
+    assert [p.name for p in target.parent.iterdir()] == ["table.csv"]  # no temporary file left

@@ -131,6 +131,7 @@ def test_dead_zone_at_the_actuator_hook_acts_on_the_applied_force(third_party: N
     """The applied force is the dead zone of the controller's summed loop outputs."""
     w = 0.5
     result = _run(x_error_raw, {"dz": {"kind": "dead_zone", "width": w}})
+    assert [run.label for run in result.runs] == ["conventional", "proposed"]
     for run in result.runs:
         names = run.controller.log_names
         commanded = run.log[:, names.index("theta.u")] + run.log[:, names.index("x.u")]

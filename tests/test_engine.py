@@ -313,7 +313,7 @@ def test_metrics_measured_in_blocks_of_runs_equal_one_block(x_error_raw: dict, m
     whole = engine.shared_metrics(results)
     assert len({r.prepared.plant.p.tobytes() for r in results}) == 5 and len(whole) > 100
     runs = [run for r in results for run in r.runs]
-    monkeypatch.setattr(metrics, "_CHUNK_ELEMENTS", rows * runs[0].t.size)
+    monkeypatch.setattr(metrics.rows, "_CHUNK_ELEMENTS", rows * runs[0].t.size)
     assert metrics.rows_per_block(runs[0].t.size) == rows
     blocks = engine.shared_metrics(engine.remeasure(results, {}))
     assert whole.equals(blocks)
@@ -345,9 +345,9 @@ def test_controllers_of_several_structures_share_a_call_of_few_rows_and_split_wh
     steps: list[list[Any]] = []
     original = integrator.simulate
 
-    def recording(rhs, step, *args):
-        steps[-1].append(step)
-        return original(rhs, step, *args)
+    def recording(integration, plant, controller, *rest):
+        steps[-1].append(controller.step)
+        return original(integration, plant, controller, *rest)
 
     monkeypatch.setattr(integrator, "simulate", recording)
     runs = {}
@@ -369,24 +369,149 @@ def test_controllers_of_several_structures_share_a_call_of_few_rows_and_split_wh
         assert np.array_equal(a.log, b.log)
 
 
-def test_function_tables_are_typed_as_the_kernels_arguments() -> None:
-    """The kernel's tables of compiled functions are typed by a lookup, as the very types of
-    its signature: numba's own typing of the plain tuples gives those types or, for the
-    friction path's two functions, types that convert to them."""
+def _kernel_arguments(x_error_raw: dict, monkeypatch, **uncertainty: Any) -> tuple[tuple[Any, ...], list[Any]]:
+    """The arguments of the kernel call of ``x_error_raw`` (2 s, ``uncertainty``), as the engine
+    makes them, and their numba types when the kernel is called."""
+    import numba
+
+    from nlcx.kernel import integrator
+
+    calls: list[tuple[Any, ...]] = []
+    typed: list[Any] = []
+    original = integrator.simulate
+
+    def recording(*args: Any) -> None:
+        calls.append(args)
+        typed.extend(numba.typeof(a) for a in args)
+        original(*args)
+
+    monkeypatch.setattr(integrator, "simulate", recording)
+    raw = copy.deepcopy(x_error_raw)
+    raw["simulation"]["t_end"] = 2.0
+    raw["uncertainty"] = uncertainty
+    engine.evaluate([config.build(raw)], measure=False)
+    (call,) = calls
+    return call, typed
+
+
+@pytest.mark.parametrize("friction", [False, True])
+def test_the_kernels_structures_are_typed_as_its_signature_declares(
+    x_error_raw: dict, monkeypatch, friction: bool
+) -> None:
+    """Every argument the engine hands the kernel is a named structure, typed by a lookup as the
+    very type of the kernel's signature (its function tables and the friction path included),
+    whatever plugins it carries; a structure holding an array of another dtype, dimension or
+    layout, a read-only one or a plain tuple where a function table belongs is refused with a
+    message naming the field."""
+    import numba
+
+    from nlcx.kernel import structures
+    from nlcx.kernel.friction import FRICTIONAL, FRICTIONLESS
+
+    unc = {"friction": {"kind": "friction", "model": "simple", "mu_s": 0.2, "mu_c": 0.15}} if friction else {}
+    args, typed = _kernel_arguments(x_error_raw, monkeypatch, **unc)
+    declared = structures.SIMULATE_SIG.args
+    assert len(args) == len(typed) == len(declared) == 8
+    kinds = (structures.Integration, structures.PlantCall, structures.ControllerCall, structures.LoopElements,
+             structures.PlantForces, structures.Records, structures.Outcome, structures.FrictionPath)  # fmt: skip
+    for arg, kind, numba_type, declared_type in zip(args, kinds, typed, declared, strict=True):
+        assert type(arg) is kind and numba_type == declared_type == kind.numba_type
+    assert args[-1] is (FRICTIONAL if friction else FRICTIONLESS)
+    records = structures.Records(*(np.zeros_like(a) for a in args[5]))  # the kernel's are read-only after it
+    numba.typeof(records)
+    for field, bad in (
+        ("X", records.X.astype(np.float32)),
+        ("U", records.U[:, ::2]),
+        ("LOG", np.zeros(3)),
+        ("FRICTION", np.broadcast_to(records.FRICTION, records.FRICTION.shape)),
+    ):
+        with pytest.raises(TypeError, match=rf"Records\.{field}: a writeable C-contiguous 3-d float64 array"):
+            numba.typeof(records._replace(**{field: bad}))
+    controller = args[2]
+    with pytest.raises(TypeError, match=r"ControllerCall\.callbacks: a FunctionTable"):
+        numba.typeof(controller._replace(callbacks=tuple(controller.callbacks)))
+    with pytest.raises(TypeError, match=r"Integration\.dt: a float"):
+        numba.typeof(args[0]._replace(dt=1))
+
+
+def test_the_integration_method_is_chosen_by_the_integrators_name(x_error_raw: dict, monkeypatch) -> None:
+    """``rk4`` is stepped by the kernel's written-out classic Runge-Kutta method, any other
+    integrator by its tableau; the tableau path given rk4's tableau computes the same
+    trajectory to rounding, so the written-out method is the classic one."""
+    from nlcx.engine import simulate
+    from nlcx.kernel import structures
+
+    assert structures.method_of("rk4") == structures.CLASSIC_RK4
+    assert {structures.method_of(name) for name in ("euler", "heun")} == {structures.ANY_TABLEAU}
+    assert _kernel_arguments(x_error_raw, monkeypatch)[0][0].method == structures.CLASSIC_RK4
+    raw = copy.deepcopy(x_error_raw)
+    raw["simulation"]["t_end"] = 2.0
+    written_out = engine.evaluate([config.build(raw)], measure=False)[0].runs
+    monkeypatch.setattr(simulate, "method_of", lambda name: structures.ANY_TABLEAU)
+    tableau = engine.evaluate([config.build(raw)], measure=False)[0].runs
+    for a, b in zip(written_out, tableau, strict=True):
+        assert a.status == b.status == "ok"
+        np.testing.assert_allclose(a.x, b.x, rtol=1e-9, atol=1e-12)
+
+
+def test_paddings_are_handed_over_by_address_called_anyway_run_and_pickle_by_reference() -> None:
+    """The slots the kernel never calls (a table's padding, the friction path of a batch
+    without friction) are paddings: numba takes their address, and a compiled caller that
+    calls one anyway runs its function; they, and the tables holding them, pickle to the
+    very same objects."""
     import pickle
 
-    from numba.core.typing.typeof import Purpose, typeof
+    from numba import njit, types
 
     from nlcx.kernel import abi
-    from nlcx.kernel.friction import FRICTIONAL, FRICTIONLESS
-    from nlcx.kernel.integrator import SIMULATE_SIG, simulate
+    from nlcx.kernel.friction import FRICTIONLESS, no_frictional_sample, no_frictional_step
+    from nlcx.kernel.structures import FrictionPath
 
-    tables = {2: abi.callback_slots(), 3: abi.element_slots(), 12: FRICTIONAL}
-    for position, table in tables.items():
-        declared = SIMULATE_SIG.args[position]
-        assert typeof(table, Purpose.argument) == declared
-        plain = typeof(tuple(table), Purpose.argument)
-        assert plain == declared or simulate.typingctx.can_convert(plain, declared)
-    assert typeof(FRICTIONLESS, Purpose.argument) == SIMULATE_SIG.args[12]
-    again = pickle.loads(pickle.dumps(FRICTIONLESS))
-    assert tuple(again) == tuple(FRICTIONLESS) and again.numba_type == FRICTIONLESS.numba_type
+    table = abi.callback_slots()
+    assert all(slot is abi.no_callback for slot in table) and len(table) == abi.CALLBACK_SLOTS
+    assert all(slot is abi.no_element for slot in abi.element_slots())
+    assert FRICTIONLESS.sample is no_frictional_sample and FRICTIONLESS.step is no_frictional_step
+    assert isinstance(abi.no_callback.__wrapper_address__(), int) and abi.no_callback.__wrapper_address__() > 0
+
+    @njit(types.UniTuple(types.float64, 3)(abi.CallbackTuple))
+    def call_slot_3(callbacks):  # pragma: no cover - compiled
+        return callbacks[3](0.5, 1.0, 2.0, np.zeros((1, 1)), 0, 0)
+
+    assert call_slot_3(table) == (0.0, 0.0, 0.0)
+    again = pickle.loads(pickle.dumps((table, FRICTIONLESS)))
+    assert all(slot is abi.no_callback for slot in again[0]) and again[0].numba_type == table.numba_type
+    assert again[1] == FRICTIONLESS and type(again[1]) is FrictionPath
+
+
+def test_reference_cache_shares_an_array_per_key_and_drops_the_least_recently_used() -> None:
+    """Equal channels on the same grid share one array; a new key beyond the cache's size drops
+    the array used longest ago, which is then computed anew (equal, not the same object)."""
+    from types import SimpleNamespace
+
+    from nlcx.engine.prepared import Reference, ReferenceCache
+
+    class Ramp:
+        calls = 0
+
+        def values(self, cfg: Any, t: np.ndarray) -> np.ndarray:
+            Ramp.calls += 1
+            return cfg.slope * t
+
+    class Slope(SimpleNamespace):
+        def model_dump(self) -> dict[str, float]:
+            return {"slope": self.slope}
+
+    grid = SimpleNamespace(dt=0.1, n_steps=10, t=np.arange(11) * 0.1)
+    prepared = SimpleNamespace(
+        grid=grid, references={f"r{k}": Reference(Ramp(), Slope(slope=float(k))) for k in range(3)}
+    )
+    cache = ReferenceCache(size=2)
+    first = cache.array(prepared, ("r0",))
+    assert cache.array(prepared, ("r0",), (0.0,)) is first and Ramp.calls == 1
+    np.testing.assert_array_equal(
+        cache.array(prepared, ("r1", "r2"), (0.0, 0.1)), np.stack([grid.t, 2 * (grid.t + 0.1)], -1)
+    )
+    cache.array(prepared, ("r1",))
+    assert Ramp.calls == 4
+    again = cache.array(prepared, ("r0",))
+    assert again is not first and np.array_equal(again, first) and Ramp.calls == 5

@@ -1,6 +1,6 @@
 """The kernel's per-step calls follow the hot-loop rule of nlcx.kernel.abi: a built-in plant
 right-hand side, controller step, gain schedule or loop element that allocates nothing is
-compiled without numba's reference counting (``_nrt=False``).
+compiled without numba's reference counting (``nlcx._numba_compat.hot_njit``).
 
 Counting every array a function receives, on entry and on exit, costs the PID step more
 than its arithmetic for one or two variants; a function that loses the option

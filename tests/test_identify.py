@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 import yaml
 from typer.testing import CliRunner
 
@@ -110,6 +111,7 @@ def _spec(tmp_path: Path, split: Path) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_identify_fits_on_train_only_ranks_on_validation_and_resumes(tmp_path: Path) -> None:
     out = tmp_path / "out"
     result = runner.invoke(app, ["identify", str(_spec(tmp_path, SPLIT)), "--out", str(out)])
@@ -168,6 +170,7 @@ def test_a_diverged_cell_counts_as_a_failure_not_as_missing() -> None:
     assert got["validation_conventional_tr_median_rel_error"] == np.inf
 
 
+@pytest.mark.slow
 def test_a_warm_start_seeds_the_first_population_and_the_fit_never_loses_to_it(tmp_path: Path) -> None:
     """With warm_start, each hypothesis's GA starts from the literal fit (the freed T_s at its
     neutral 1 ms = dt, which is the literal loop): elitism keeps its train loss <= the literal's.

@@ -64,3 +64,29 @@ def test_actuator_saturation_clips_what_any_controller_commands() -> None:
     np.testing.assert_array_equal(run.r[:, 0], free.r[:, 0])
     np.testing.assert_array_equal(run.u[:, 0], np.clip(free.u[:, 0], -0.7, 0.7))
     assert np.max(np.abs(free.u[:, 0])) > 1.9
+
+
+def test_the_pids_saturation_and_the_actuator_element_are_one_clamp() -> None:
+    """A PID whose own saturation has no anti-windup and the same PID behind an
+    ``actuator_saturation`` element of the same limit apply one clamp (the element's
+    ``saturate``): the two closed loops are the same to the bit, and the limit is reached."""
+    pid = {
+        "kind": "pid",
+        "loops": {
+            "theta": {"sign": -1, "schedule": {"kind": "constant", "kp": 40, "ki": 2, "kd": 5}},
+            "x": {"sign": 1, "schedule": {"kind": "constant", "kp": -3, "ki": -1, "kd": -2}},
+        },
+    }
+    raw = {
+        "name": "one_clamp",
+        "plant": {"name": "x_pendulum"},
+        "reference": {"x": {"kind": "step", "final": 1.0}},
+        "simulation": {"t_end": 2.0, "dt": 0.01},
+    }
+    limited = {**pid, "saturation": {"limits": {"F_x": 3.0}, "anti_windup": "none"}}
+    (own,) = engine.run_experiment(config.build(raw | {"controllers": {"c": limited}})).runs
+    element = {"limit": {"kind": "actuator_saturation", "limit": 3.0}}
+    (behind,) = engine.run_experiment(config.build(raw | {"controllers": {"c": pid}, "uncertainty": element})).runs
+    assert np.array_equal(own.x.view(np.int64), behind.x.view(np.int64))
+    assert np.array_equal(own.u.view(np.int64), behind.u.view(np.int64))
+    assert np.max(np.abs(own.u)) == 3.0

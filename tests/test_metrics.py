@@ -268,7 +268,7 @@ def _batch() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def test_batch_equals_single_exactly(monkeypatch, chunk):
     t, y, final, initial = _batch()
     if chunk is not None:  # force several row blocks
-        monkeypatch.setattr(metrics, "_CHUNK_ELEMENTS", chunk * t.size)
+        monkeypatch.setattr(metrics.rows, "_CHUNK_ELEMENTS", chunk * t.size)
     calls = [
         (step_response_metrics, {"final": final}, True),
         (step_response_metrics, {"final": final, "initial": initial, "t_step": 0.3}, True),

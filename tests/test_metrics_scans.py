@@ -1,4 +1,4 @@
-"""The compiled row scans of nlcx.metrics equal their numpy formulation to the last bit.
+"""The compiled row scans of nlcx.metrics.scans equal their numpy formulation to the last bit.
 
 The scans (first crossing, last exit, extremes, deviation peak, the trapezoid terms the
 integrals sum) replaced whole-array numpy passes; each is checked here against the numpy
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nlcx import metrics as m
+from nlcx.metrics import scans
 
 
 def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
@@ -72,15 +72,15 @@ def test_scans_equal_their_numpy_formulation(seed: int) -> None:
     s = rng.choice([-1.0, 0.0, 1.0], y.shape[0])
     level = s * rng.uniform(-1, 2, y.shape[0])
     sy = s[:, np.newaxis] * y
-    t_cross, index = m._first_crossing(tau, y, s, level)
+    t_cross, index = scans.first_crossing(tau, y, s, level)
     t_np, index_np = numpy_first_crossing(tau, sy, level)
     assert same_bits(t_cross, t_np)
     found = ~np.isnan(t_np)
     assert np.array_equal(index[found], index_np[found])
     center, band = rng.uniform(-1, 2, y.shape[0]), rng.uniform(0, 0.3, y.shape[0])
-    assert same_bits(m._last_exit(tau, y, center, band), numpy_last_exit(tau, y, center, band))
+    assert same_bits(scans.last_exit(tau, y, center, band), numpy_last_exit(tau, y, center, band))
     s_final, s_initial = s * center, s * rng.uniform(-1, 1, y.shape[0])
-    over, under, peak = m._extremes(y, s, s_final, s_initial)
+    over, under, peak = scans.extremes(y, s, s_final, s_initial)
     for ours, theirs in ((over, np.max(sy - s_final[:, np.newaxis], axis=1)),
                          (under, np.max(s_initial[:, np.newaxis] - sy, axis=1))):  # fmt: skip
         # equal values; numpy's SIMD max returns either zero of a row holding +0 and -0, and
@@ -88,7 +88,7 @@ def test_scans_equal_their_numpy_formulation(seed: int) -> None:
         assert np.array_equal(ours, theirs, equal_nan=True)
         assert same_bits(np.maximum(ours, 0.0), np.maximum(theirs, 0.0))
     assert np.array_equal(peak, np.argmax(sy, axis=1))
-    index, deviation = m._deviation_peak(y, center)
+    index, deviation = scans.deviation_peak(y, center)
     absdev = np.abs(y - center[:, np.newaxis])
     assert np.array_equal(index, np.argmax(absdev, axis=1))
     assert same_bits(deviation, absdev[np.arange(y.shape[0]), index])
@@ -98,12 +98,12 @@ def test_scans_equal_their_numpy_formulation(seed: int) -> None:
 def test_integral_terms_equal_the_trapezoid_numpy_formed(seed: int) -> None:
     t, e = rows(seed)
     start = t[0] - 0.003
-    squared, absolute, weighted, max_abs = m._error_terms(t, e, start)
+    squared, absolute, weighted, max_abs = scans.error_terms(t, e, start)
     assert same_bits(squared, numpy_trapz_terms(t, e * e))
     assert same_bits(absolute, numpy_trapz_terms(t, np.abs(e)))
     assert same_bits(weighted, numpy_trapz_terms(t, (t - start) * np.abs(e)))
     assert same_bits(max_abs, np.max(np.abs(e), axis=1))
-    squared, steps, peak = m._input_terms(t, e)
+    squared, steps, peak = scans.input_terms(t, e)
     assert same_bits(squared, numpy_trapz_terms(t, e * e))
     assert same_bits(steps, np.abs(np.diff(e, axis=1)))
     assert same_bits(peak, np.max(np.abs(e), axis=1))

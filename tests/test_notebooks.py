@@ -20,6 +20,7 @@ def test_there_are_the_three_example_notebooks() -> None:
 def test_the_notebook_is_committed_without_outputs(path: Path) -> None:
     book = nbformat.read(path, as_version=4)
     nbformat.validate(book)
+    assert any(cell.cell_type == "code" for cell in book.cells)
     for cell in book.cells:
         if cell.cell_type == "code":
             assert cell.outputs == [] and cell.execution_count is None, f"{path.name}: a cell has outputs"

@@ -48,6 +48,21 @@ def test_malformed_overrides_are_one_line_errors(text: str) -> None:
     assert str(info.value) == f"config error: <config> = {text!r}: {OVERRIDE_FORMS}"
 
 
+
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [
+        ("a=\x07", "unacceptable character #x0007: special characters are not allowed"),
+        ("a=[1, 2", "expected ',' or ']', but got '<stream end>'"),
+    ],
+)
+def test_a_value_that_is_not_yaml_is_a_one_line_error_naming_the_problem(text: str, problem: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_override(text)
+    message = str(info.value)
+    assert "\n" not in message
+    assert message == f"config error: a = {text[2:]!r}: not valid YAML: {problem}"
+
 def test_set_adds_or_replaces_a_key(raw: dict[str, object]) -> None:
     before = copy.deepcopy(raw)
     out = apply_overrides(raw, ["simulation.t_end=5", "simulation.bounds.x=0.5", "outputs.figure=false"])

@@ -452,3 +452,41 @@ def test_a_controller_is_built_once_for_variants_that_change_only_plant_numbers(
     fresh = engine.prepare(config.build(config.interpolate(copy.deepcopy(variants[2].experiment.raw)))).controllers[0]
     assert fresh is not heavier and np.array_equal(fresh.cp, heavier.cp) and fresh.step is heavier.step
     assert fresh.log_names == heavier.log_names and fresh.config == heavier.config
+
+
+def test_the_build_cache_keeps_the_most_recently_used_controllers() -> None:
+    """:class:`pid.BuiltControllers` holds at most ``size`` controllers, by the config object
+    they were built from (and the plant's signals and bias): a config equal to a kept one but
+    another object is another entry; the least recently used entry is dropped first."""
+    prep = build(CONST)
+    cfg, plant, controller = prep.experiment.controllers[0].config, prep.plant, prep.controllers[0]
+    cache = pid.BuiltControllers(size=2)
+    bias = np.zeros(1)
+    keys = [cache.key(label, cfg, plant, "controllers.c", 0.01, bias) for label in ("a", "b", "c")]
+    twin = cfg.model_copy()
+    assert twin == cfg and cache.key("a", twin, plant, "controllers.c", 0.01, bias) != keys[0]
+    for key in keys[:2]:
+        cache.put(key, cfg, controller)
+    assert cache.get(keys[0]) is controller  # "a" used last: "b" goes first
+    cache.put(keys[2], cfg, controller)
+    assert cache.get(keys[1]) is None and cache.get(keys[0]) is controller and cache.get(keys[2]) is controller
+
+
+def test_build_takes_a_config_whose_schedules_are_still_mappings() -> None:
+    """``config.build`` hands the PID its section with every schedule validated; a section
+    built by hand, its schedules plain mappings, is normalized by ``build`` and gives the same
+    controller."""
+    prep = build(CONST)
+    by_hand = pid.PIDConfig.model_validate(CONST)
+    assert isinstance(by_hand.loops["x"].schedule, dict)
+    c = pid.MultiLoopPID().build("c", by_hand, prep.plant, "controllers.c", dt=0.01)
+    assert np.array_equal(c.cp, prep.controllers[0].cp) and c.step is prep.controllers[0].step
+    assert c.config == prep.controllers[0].config
+
+
+def test_the_step_factory_gives_the_general_step_for_no_structure() -> None:
+    """``step_for(None)`` is :func:`pid_step` (the structure read from each row); a built
+    controller carries it as its general step beside its own."""
+    c = build(CONST).controllers[0]
+    assert pid.step_for(None) is pid_step and c.general_step is pid_step
+    assert pid.step_for(pid.structure_of(c.cp)) is c.step is not pid_step

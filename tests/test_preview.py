@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import itertools
+from types import SimpleNamespace
 
 import control
 import numpy as np
@@ -20,9 +21,9 @@ from nlcx.controllers.preview import (
     gamma_min,
     hinf_riccati,
     linear_model,
-    linearize,
 )
 from nlcx.errors import ConfigError
+from nlcx.plants.base import linearize
 from nlcx.plants.transfer_function import TransferFunction, TransferFunctionParams
 
 registry.controllers.register("preview", "nlcx.controllers.preview:Preview", replace=True)
@@ -158,10 +159,32 @@ def test_more_preview_does_not_worsen_hinf_bound(model) -> None:
 
 
 def test_numerical_linearisation_matches_canonical_form(plant) -> None:
-    A, B = linearize(plant, np.array([0.3, -0.2]), np.array([0.7]))
+    A, B, _ = linearize(plant, np.array([0.3, -0.2]), np.array([0.7]), relative=True)
     A0, B0 = companion_matrices(plant.p)
     np.testing.assert_allclose(A, A0, atol=1e-8)
     np.testing.assert_allclose(B, B0, atol=1e-8)
+
+
+@pytest.mark.parametrize("relative", [False, True])
+def test_linearize_steps_each_coordinate_by_h_or_h_times_its_size(relative: bool) -> None:
+    """Central differences about (x, u) = ((0.5, -200), (30,)): coordinate j moves by +-h, or
+    with ``relative`` by +-h max(1, |x_j|) (the preview design's linearisation), one at a time."""
+    x_op, u_op, h = np.array([0.5, -200.0]), np.array([30.0]), 1e-4
+    visited: list[tuple[float, ...]] = []
+
+    def f(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        visited.append((*x, *u))
+        return np.array([x[0] * x[1] + u[0], x[1] ** 2])
+
+    fake = SimpleNamespace(states=["a", "b"], inputs=["F"], features=SimpleNamespace(x_op=None), f=f, C=np.eye(2))
+    A, B, C = linearize(fake, x_op, u_op, h=h, relative=relative)
+    steps = [h * max(1.0, abs(v)) if relative else h for v in (*x_op, *u_op)]
+    point = np.array([*x_op, *u_op])
+    expected = [tuple(point + sign * step * np.eye(3)[j]) for j, step in enumerate(steps) for sign in (1, -1)]
+    assert visited == expected
+    np.testing.assert_allclose(A, [[x_op[1], x_op[0]], [0.0, 2 * x_op[1]]], rtol=1e-9)
+    np.testing.assert_allclose(B, [[1.0], [0.0]], rtol=1e-9)
+    assert np.array_equal(C, np.eye(2))
 
 
 # --------------------------------------------------------------------------- through the engine
@@ -212,6 +235,7 @@ def test_constant_input_disturbance_is_rejected() -> None:
             "d": {"kind": "disturbance", "amplitude": 0.5, "frequency": 0, "phase": 1.5707963, "states": ["x2"]}
         },
     )
+    assert [run.label for run in res.runs] == ["h2", "hinf"]
     for run in res.runs:
         y = run.x @ C_ROW
         assert abs(y[-1] - 1.0) < 1e-3, run.label
@@ -220,21 +244,23 @@ def test_constant_input_disturbance_is_rejected() -> None:
 
 def test_sample_time_must_be_a_multiple_of_dt(plant) -> None:
     assert check_sample_time(0.1, 0.01) == 10
-    with pytest.raises(ConfigError, match="sample_time"):
+    with pytest.raises(ConfigError, match=r"controllers\.p\.sample_time = 0\.1: .* dt = 0\.03"):
         check_sample_time(0.1, 0.03, "controllers.p")
-    with pytest.raises(ConfigError, match="whole multiple"):
+    with pytest.raises(ConfigError, match=r"controllers\.p\.sample_time = 0\.1: must be a whole multiple"):
         Preview().build("p", PreviewConfig(), plant, "controllers.p", dt=0.03)
     # the engine passes dt to build, so a run with such a step is a one-line config error
-    with pytest.raises(ConfigError, match=r"controllers\.p\.sample_time"):
+    with pytest.raises(ConfigError, match=r"controllers\.p\.sample_time = 0\.1: .* dt = 0\.03"):
         run_preview({"p": {"kind": "preview", "design": "h2"}}, t_end=0.9, dt=0.03)
 
 
 def test_config_errors(plant) -> None:
-    with pytest.raises(ConfigError, match="not an output"):
+    with pytest.raises(
+        ConfigError, match=r"controllers\.p\.signal = 'nope': not an output of transfer_function; allowed: y"
+    ):
         Preview().build("p", PreviewConfig(signal="nope"), plant, "controllers.p")
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match=r"controllers\.p\.design = 'h3': allowed values: 'h2' or 'hinf'"):
         run_preview({"p": {"kind": "preview", "design": "h3"}})
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match=r"controllers\.p\.preview = -1: must be greater than or equal to 0"):
         run_preview({"p": {"kind": "preview", "preview": -1}})
 
 

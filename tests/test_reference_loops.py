@@ -1,13 +1,15 @@
 """The benchmark's hand-written loops (benchmarks/reference.py) simulate nlcx's closed loop, so
-the speeds the benchmark compares are those of the same computation: the loop with nlcx's PID
-equals nlcx's kernel bit for bit; the limit, with libm's sin and cos where nlcx has its own
-(within 1 ulp, nlcx.kernel.trig), stops at the same samples and differs by rounding; the limit's
-loop stepped in lock step with nlcx's sin and cos equals nlcx's kernel bit for bit."""
+the speeds the benchmark compares are those of the same computation: the loop whose PID reads
+nlcx's packed rows equals nlcx's kernel bit for bit; the limit, with libm's sin and cos where
+nlcx has its own (within 1 ulp, nlcx.kernel.trig), stops at the same samples and differs by
+rounding; the limit's loop stepped in lock step with nlcx's sin and cos equals nlcx's kernel bit
+for bit. The reference's PID and plant are its own copies: an independent check of nlcx's."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -89,3 +91,32 @@ def _assert_same_bits(ours: list[engine.Run], X: np.ndarray, U: np.ndarray, n_va
         assert n_valid[b] == run.t.size, b
         assert np.array_equal(X[b, : n_valid[b]].view(np.int64), run.x.view(np.int64)), b
         assert np.array_equal(U[b, : n_valid[b]].view(np.int64), run.u[:, 0].view(np.int64)), b
+
+
+def test_the_reference_writes_its_pid_and_plant_out() -> None:
+    """Of nlcx's compiled functions the reference calls only the sine and cosine (by design: the
+    loops that compute nlcx's bits use them); what it takes from nlcx's PID are the layout
+    offsets and codes of the packed rows."""
+    taken = {name: value for name, value in vars(reference).items() if _from_nlcx(value)}
+    compiled = {name for name, value in taken.items() if hasattr(value, "py_func")}  # numba's compiled functions
+    assert compiled == {"sincos", "_sincos_reduced"}
+    assert {"H", "I", "L", "S", "EA"} <= set(taken)
+
+
+def _from_nlcx(value: Any) -> bool:
+    module = getattr(value, "__module__", None) or getattr(getattr(value, "py_func", None), "__module__", "")
+    return isinstance(module, str) and module.startswith("nlcx.")
+
+
+def test_the_reference_refuses_a_pid_it_is_not_written_for() -> None:
+    """Its PID is the error-AGS loop of benchmark (b): a conventional PID's rows are refused,
+    not simulated wrongly."""
+    raw = yaml.safe_load((ROOT / "configs" / "x_error_ags.yaml").read_text())
+    raw["simulation"]["t_end"] = 0.1
+    prepared = engine.prepare(config.build(config.interpolate(raw)))
+    by_label = {c.label: c for c in prepared.controllers}
+    proposed, conventional = by_label["proposed"], by_label["conventional"]
+    cp, cs = reference.packed_pid([proposed])
+    assert cp.shape == (1, proposed.cp.size) and cs.shape == (1, proposed.cs0.size)
+    with pytest.raises(ValueError, match="not written for"):
+        reference.packed_pid([conventional])

@@ -16,7 +16,7 @@ from playwright.sync_api import sync_playwright
 #: Chromium as root needs --no-sandbox; the others keep it off this machine's closed network.
 ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
         "--disable-sync", "--no-first-run"]  # fmt: skip
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]  # slow too: it needs a whole reproduction
 
 
 def chromium() -> str:
@@ -47,12 +47,12 @@ def test_the_reproduction_page_loads_clean_and_complete_in_chromium(reproduction
         browser.close()
     assert errors == []
     assert len(images) >= 95 and all(width > 0 for _, width in images), [s for s, w in images if w == 0][:5]
-    for url in links:
-        parsed = urlparse(url)
-        if parsed.scheme == "file":
-            assert Path(unquote(parsed.path)).exists(), url
-            if parsed.fragment and Path(unquote(parsed.path)) == page_file:
-                assert parsed.fragment in anchors, url
+    local = [urlparse(url) for url in links if urlparse(url).scheme == "file"]
+    assert len(local) >= 10, "the page links its runs, figures and tables"
+    for parsed in local:
+        assert Path(unquote(parsed.path)).exists(), parsed.geturl()
+    in_page = [p.fragment for p in local if p.fragment and Path(unquote(p.path)) == page_file]
+    assert in_page and set(in_page) <= anchors
     claims = pd.read_csv(reproduction / "claims.csv").reproduced.value_counts()
     assert shown == {v: int(claims.get(v, 0)) for v in ("yes", "partly", "no")}
     assert set(visible) == {"no"} and len(visible) == claims.get("no", 0)

@@ -109,7 +109,7 @@ def test_an_interrupted_write_leaves_the_old_directory_as_it_was(
         raise interruption("stopped")
 
     monkeypatch.setattr("nlcx.pages.render.write_report", fail)
-    with pytest.raises(interruption):
+    with pytest.raises(interruption, match="stopped"):
         rundir.save_run(result, out)
     assert snapshot(out) == before
     assert siblings(out) == {rundir.lock_path(out).name}
@@ -226,6 +226,7 @@ def _wait_for(path: Path, process: subprocess.Popen[bytes]) -> None:
         time.sleep(0.01)
 
 
+@pytest.mark.slow
 def test_a_second_writer_is_refused_while_the_first_writes(tmp_path: Path) -> None:
     """A sweep stops after its first batch, holding its directory; another sweep of the same
     directory with --force, and a run into it, exit 2 with one line naming the holder, and

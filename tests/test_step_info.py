@@ -231,7 +231,7 @@ def _batch() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 def test_batch_equals_single_exactly(monkeypatch: pytest.MonkeyPatch, chunk: int | None, kwargs: dict) -> None:
     t, y, reference, initial = _batch()
     if chunk is not None:  # force several row blocks
-        monkeypatch.setattr(metrics, "_CHUNK_ELEMENTS", chunk * t.size)
+        monkeypatch.setattr(metrics.rows, "_CHUNK_ELEMENTS", chunk * t.size)
     rows_of = {"reference": reference, "y_initial": initial}
     batch_kw = {k: rows_of[k] if v == "rows" else v for k, v in kwargs.items()}
     batched = step_info(t, y, **batch_kw)

@@ -20,6 +20,7 @@ from typer.testing import CliRunner
 from nlcx import config, engine, rundir
 from nlcx import sweeps as sweep
 from nlcx.cli import app
+from nlcx.sweeps import assembly
 
 ROOT = Path(__file__).resolve().parent.parent
 runner = CliRunner()
@@ -65,6 +66,7 @@ def test_expansion_grid_zip_random_and_seeds(tmp_path: Path) -> None:
     assert [v.seed for v in variants] == [int(s.generate_state(1)[0]) for s in seeds]
 
 
+@pytest.mark.slow
 def test_serial_pool_and_dask_give_identical_metrics(tmp_path: Path) -> None:
     path = write_sweep(tmp_path, SPEC)
     outputs = []
@@ -97,6 +99,7 @@ def test_batch_equals_single_runs_bit_for_bit(tmp_path: Path) -> None:
     assert len(batched) == 2 * len(variants)
     for k, p in enumerate(prepared):
         alone = engine.evaluate([p], measure=False)[0].runs
+        assert len(alone) == 2  # conventional and proposed
         for j, run in enumerate(alone):
             other = batched[2 * k + j]
             assert np.array_equal(run.x, other.x) and np.array_equal(run.u, other.u) and run.status == other.status
@@ -122,7 +125,7 @@ def test_batch_equals_single_runs_bit_for_bit(tmp_path: Path) -> None:
 def test_membership_by_set_lookups_equals_pandas_isin() -> None:
     hashes = pd.Series(["a1", "b2", None, "c3", "a1", "d4"], dtype="str")
     for wanted in ({"a1", "c3"}, {"zz"}, set(), {"a1": 0, "d4": 1, "b2": 2}):
-        assert list(sweep._member_of(hashes, wanted)) == list(hashes.isin(list(wanted)))
+        assert list(assembly._member_of(hashes, wanted)) == list(hashes.isin(list(wanted)))
 
 
 def test_failed_variant_is_recorded_the_rest_go_on(tmp_path: Path) -> None:
@@ -144,7 +147,7 @@ def test_metrics_joined_from_the_parts_equal_the_merged_ones(tmp_path: Path, mon
     grid = {"plant.params.M": [1.0, -1.0, 1.1], "plant.params.l": [0.3, 0.05]}
     path = write_sweep(tmp_path, {"grid": grid, "batch_size": 2})
     merged = []
-    monkeypatch.setattr(sweep, "_merged_metrics", lambda *a: merged.append(1) or _merged(*a))
+    monkeypatch.setattr(assembly, "_merged_metrics", lambda *a: merged.append(1) or _merged(*a))
     out = tmp_path / "out"
     assert runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)]).exit_code == 1
     assert merged == [], "a sweep computed in one go joins its parts"
@@ -161,9 +164,10 @@ def test_metrics_joined_from_the_parts_equal_the_merged_ones(tmp_path: Path, mon
     assert set(metrics.note) == {"", "did not settle within the run"}
 
 
-_merged = sweep._merged_metrics
+_merged = assembly._merged_metrics
 
 
+@pytest.mark.slow
 def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) -> None:
     spec = {"random": {"n": 24, "params": {"plant.params.M": {"dist": "uniform", "relative": 0.2}}}, "batch_size": 2}
     path = write_sweep(tmp_path, spec, t_end=8.0)
@@ -171,13 +175,18 @@ def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) 
     staged = rundir.partial_dir(out) / "parts"  # where an unfinished sweep keeps its parts
     cmd = [sys.executable, "-m", "nlcx.cli", "sweep", str(path), "--executor", "serial", "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    deadline = time.time() + 60
-    while time.time() < deadline and len(list(staged.glob("*.index.csv"))) < 2:
-        time.sleep(0.05)
-    os.killpg(proc.pid, signal.SIGKILL)
-    proc.wait()
+    hang_guard = time.monotonic() + 600  # the wait ends on the parts directory; this only stops a hang
+    try:
+        while len(list(staged.glob("*.index.csv"))) < 2:
+            assert proc.poll() is None, f"the sweep ended (exit {proc.returncode}) before its second part"
+            assert time.monotonic() < hang_guard, "no second part after 10 minutes: the sweep hangs"
+            time.sleep(0.05)  # the poll's period
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert proc.returncode == -signal.SIGKILL, "the kill found the sweep still running"
     parts = len(list(staged.glob("*.index.csv")))
-    assert 2 <= parts < 12, "the sweep must have been killed mid-way"
+    assert 2 <= parts < 12, "the sweep was killed mid-way, with parts still to compute"
     assert not out.exists(), "an unfinished sweep is not in its directory"
     result = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)])
     assert result.exit_code == 0, result.output
@@ -192,6 +201,7 @@ def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) 
     assert len(list((out / "parts").glob("*.index.csv"))) == 12 and not rundir.partial_dir(out).exists()
 
 
+@pytest.mark.slow
 def test_a_rerun_into_a_finished_sweep_resumes_from_its_parts_of_the_same_plan(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -220,7 +230,7 @@ def test_a_rerun_into_a_finished_sweep_resumes_from_its_parts_of_the_same_plan(
     def interrupt(*args: object) -> None:
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(sweep, "assemble", interrupt)
+    monkeypatch.setattr("nlcx.sweeps.runner.assemble", interrupt)
     interrupted = runner.invoke(app, ["sweep", str(three), "--executor", "serial", "--out", str(out), "--force"])
     assert interrupted.exit_code == 130
     assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == finished

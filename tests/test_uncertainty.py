@@ -62,6 +62,7 @@ def test_friction_only_dissipates(model: str) -> None:
     exp = config.load(CONFIGS / "thesis" / "ch2" / f"{figure}.yaml", ["simulation.t_end=10"])
     result = engine.run_experiment(exp)
     energy = XPendulum().energy(PendulumParams())
+    assert [run.label for run in result.runs] == ["conventional", "proposed"]
     for run in result.runs:
         V = energy(run.x)
         work = run.u[:-1, 0] * np.diff(run.x[:, 0])

@@ -2,17 +2,20 @@
 
 The commands live in :mod:`nlcx.cli.experiments` (run, sweep, validate, reproduce, report,
 calibrate, identify) and :mod:`nlcx.cli.inspecting` (diff, metrics, list); importing this
-package registers them on :data:`app`.
+package registers them on :data:`app`. What a command sets for its process (the garbage
+collector, warnings, matplotlib's backend) is set and restored by :func:`command_settings`.
 """
 
 from __future__ import annotations
 
+import atexit
+import functools
 import gc
 
 from nlcx.cli import experiments, inspecting
-from nlcx.cli._app import app, one_line_errors
+from nlcx.cli._app import app, command_settings, one_line_errors
 
-__all__ = ["app", "main", "one_line_errors"]
+__all__ = ["app", "command_settings", "main", "one_line_errors"]
 
 _COMMANDS = (experiments, inspecting)  # imported for the commands they register
 
@@ -20,12 +23,15 @@ _COMMANDS = (experiments, inspecting)  # imported for the commands they register
 def main() -> None:  # pragma: no cover - console entry point
     """The ``nlcx`` command.
 
-    The garbage collector is off while a command imports its libraries (the long commands
-    switch it back on, see :func:`_imported`), and at exit everything still alive is frozen,
-    so the interpreter's final collection does not walk the import graph of numba, pandas and
-    matplotlib (about half a second of a three-second run)."""
-    gc.disable()
-    try:
-        app()
-    finally:
-        gc.freeze()
+    When the interpreter exits, everything still alive is frozen first (:func:`_freeze_at_exit`),
+    so its final collections do not walk the import graph of numba, pandas and matplotlib, a
+    noticeable part of a short run."""
+    _freeze_at_exit()
+    app()
+
+
+@functools.cache
+def _freeze_at_exit() -> None:
+    """Freeze the heap when the interpreter exits: exit handlers run before its final garbage
+    collections. Until then nothing is frozen on the command's behalf."""
+    atexit.register(gc.freeze)

@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import gc
 import math
 import os
 import sys
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any, TextIO, TypeVar
 
 import typer
 
+from nlcx import _numba_compat, compiled_cache
 from nlcx.errors import NlcxError
 
 app = typer.Typer(
@@ -32,8 +35,14 @@ def _print_version(value: bool) -> None:
         raise typer.Exit()
 
 
+#: Commands that compare files and load no compiled code: numba's cache is not checked for them
+#: (:func:`nlcx.compiled_cache.ready` imports numba).
+FILE_COMMANDS = frozenset({"diff"})
+
+
 @app.callback()
 def _options(
+    ctx: typer.Context,
     version: Annotated[
         bool,
         typer.Option(
@@ -42,6 +51,66 @@ def _options(
     ] = False,
 ) -> None:
     """Reproducible experiments on the control of nonlinear systems."""
+    ctx.with_resource(command_settings())  # left when the command ends
+    if ctx.invoked_subcommand not in FILE_COMMANDS:
+        compiled_cache.ready()  # before the command imports any compiled function
+
+
+@contextlib.contextmanager
+def command_settings() -> Iterator[None]:
+    """What a command sets for its whole process, each restored when it ends.
+
+    - The garbage collector is off while the command imports its libraries (the long commands
+      switch it back on, see :func:`_imported`): collecting the object graphs of numba, pandas
+      and matplotlib over and over would slow the imports down. Afterwards it is on or off as
+      before, and what the command froze is unfrozen (unless something was frozen before).
+    - Warnings: numba's note that first-class function types are experimental (the kernel's
+      function tables) is not shown; nlcx's own warnings (an untested numba) print as one line.
+    - matplotlib's backend is Agg (``MPLBACKEND``, inherited by the processes the command
+      starts): every figure is written to a file."""
+    collecting, frozen = gc.isenabled(), gc.get_freeze_count()
+    backend = os.environ.get("MPLBACKEND")
+    gc.disable()
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", _numba_compat.FIRST_CLASS_FUNCTION_WARNING)
+            warnings.showwarning = _one_line_warnings(warnings.showwarning)
+            os.environ["MPLBACKEND"] = "Agg"
+            yield
+    finally:
+        _restore_variable("MPLBACKEND", backend)
+        if not frozen:
+            gc.unfreeze()
+        if collecting:
+            gc.enable()
+
+
+def _restore_variable(name: str, value: str | None) -> None:
+    """Set environment variable ``name`` back to ``value`` (``None``: it was not set)."""
+    if value is None:
+        os.environ.pop(name, None)
+    else:
+        os.environ[name] = value
+
+
+def _one_line_warnings(show: Callable[..., None]) -> Callable[..., None]:
+    """``warnings.showwarning`` that prints a warning of nlcx's own as ``warning: <message>`` on
+    stderr, and hands every other to ``show``."""
+
+    def show_warning(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        file: TextIO | None = None,
+        line: str | None = None,
+    ) -> None:
+        if category.__module__.split(".")[0] == "nlcx":
+            typer.echo(f"warning: {message}", err=True)
+        else:
+            show(message, category, filename, lineno, file, line)
+
+    return show_warning
 
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -86,14 +155,14 @@ def one_line_errors(func: F) -> F:
             typer.echo(f"error: {type(exc).__name__}: {exc} (set NLCX_DEBUG=1 for a traceback)", err=True)
             raise typer.Exit(1) from None
 
-    return wrapper  # type: ignore[return-value]
+    return wrapper  # type: ignore[return-value]  # functools.wraps keeps the signature Typer reads
 
 
 def _imported() -> None:
     """Collect garbage again from here on, leaving out what the imports built (frozen).
 
-    :func:`main` holds the collector off while a command imports numba, pandas and
-    matplotlib: collecting their object graphs over and over costs ~15 % of the imports."""
+    :func:`command_settings` holds the collector off while a command imports numba, pandas and
+    matplotlib; a long command calls this once they are imported."""
     gc.freeze()
     gc.enable()
 

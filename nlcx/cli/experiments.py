@@ -24,7 +24,8 @@ def _painter(raw: dict[str, Any]) -> Painter | None:
     from nlcx.config import OutputsSection
     from nlcx.drawing import Painter
 
-    outputs = raw.get("outputs") if isinstance(raw.get("outputs"), dict) else {}
+    section = raw.get("outputs")
+    outputs = section if isinstance(section, dict) else {}
     fields = OutputsSection.model_fields
     if all(outputs.get(key, fields[key].default) is False for key in ("figure", "gains_figure")):
         return None

@@ -22,17 +22,20 @@ clipped to the models' ranges (the data they were trained on). The compiled sche
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Any, Literal, TypeAlias
 
 import numpy as np
 from numba import njit
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from nlcx._numba_compat import hot_njit
 from nlcx.controllers.schedules import GainRange, ScheduleConfig, ScheduleModel
 from nlcx.layout import Layout
 from nlcx.tuning.anfis import CONSEQUENT, MODEL, N_INPUTS, AnfisModel
 
-GAINS: tuple[str, ...] = ("kp", "ki", "kd")
+#: A gain's name.
+GainName: TypeAlias = Literal["kp", "ki", "kd"]
+GAINS: tuple[GainName, ...] = ("kp", "ki", "kd")
 #: One gain's clipping: whether, and to [min, max] (the fuzzy teacher's range).
 CLIP = Layout("GainClip", ("clip", "min", "max"))
 #: Head of the schedule block: clip the inputs to the training ranges?, each gain's CLIP
@@ -101,7 +104,7 @@ class ANFISConfig(ScheduleConfig):
     ki: AnfisModelConfig = Field(description="the trained model of k_i")
     kd: AnfisModelConfig = Field(description="the trained model of k_d")
     clip_inputs: bool = Field(True, description="clip (e, de/dt) to each model's training ranges before evaluating it")
-    clip: dict[Literal["kp", "ki", "kd"], GainRange] = Field(
+    clip: dict[GainName, GainRange] = Field(
         default_factory=dict, description="optional clipping of gains to [min, max], by gain name"
     )
 
@@ -162,7 +165,7 @@ def _anfis_gain(p, o, which, e, edot, clip):  # pragma: no cover - compiled
     return g
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def anfis_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     """Eq. 5.12-5.14's gains from three TS models: p[row, o:] = an :data:`ANFIS_HEAD` (its
     model offsets relative to o), then the three packed models (:data:`MODEL` layout)."""
@@ -174,7 +177,7 @@ def anfis_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     return kp, ki, kd
 
 
-def models(cfg: ANFISConfig) -> dict[str, AnfisModel]:
+def models(cfg: ANFISConfig) -> dict[GainName, AnfisModel]:
     """The three configured models, by gain name."""
     return {name: AnfisModel.from_config(getattr(cfg, name)) for name in GAINS}
 

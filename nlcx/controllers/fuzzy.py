@@ -36,12 +36,13 @@ The compiled schedule reads the output membership functions from tables sampled 
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias
 
 import numpy as np
 from numba import njit
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator
 
+from nlcx._numba_compat import hot_njit
 from nlcx.controllers.schedules import GainRange, ScheduleConfig, ScheduleModel, gain_ranges
 from nlcx.layout import Layout
 
@@ -107,10 +108,13 @@ TABLE_SETS: dict[str, dict[str, tuple[float, float]]] = {
     "kd1": KD1_SETS,
 }
 
+#: A linguistic value (one of :data:`SET_NAMES`).
+SetName: TypeAlias = Literal["NB", "NS", "ZE", "PS", "PB"]
+
 #: Section 5.4.1, rules 1-25: the output set of k_p1, k_i1 and k_d1 (the same for all three)
 #: by e (row NB..PB) and de/dt (column NB..PB); rule n has e = SET_NAMES[(n - 1) % 5] and
 #: de/dt = SET_NAMES[(n - 1) // 5].
-RULES: tuple[tuple[str, ...], ...] = (
+RULES: tuple[tuple[SetName, ...], ...] = (
     ("NB", "NB", "NS", "NS", "ZE"),
     ("NB", "NS", "NS", "ZE", "PS"),
     ("NS", "NS", "ZE", "PS", "PS"),
@@ -121,7 +125,6 @@ RULES: tuple[tuple[str, ...], ...] = (
 #: Axis labels of Figures 5.4-5.8.
 LABELS = {"e": "e", "de_dt": "de/dt", "kp1": "$k_{p1}$", "ki1": "$k_{i1}$", "kd1": "$k_{d1}$"}
 
-SetName = Literal["NB", "NS", "ZE", "PS", "PB"]
 RuleRow = Annotated[list[SetName], Field(min_length=5, max_length=5)]
 
 # ---------------------------------------------------------------------------- configuration
@@ -158,11 +161,18 @@ def _sets_model(variable: str, table: dict[str, tuple[float, float]]) -> type[_V
     return create_model(f"FuzzySets_{variable}", __base__=_VariableSets, **fields)
 
 
-ESets = _sets_model("e", E_SETS)
-DeDtSets = _sets_model("de_dt", DE_DT_SETS)
-Kp1Sets = _sets_model("kp1", KP1_SETS)
-Ki1Sets = _sets_model("ki1", KI1_SETS)
-Kd1Sets = _sets_model("kd1", KD1_SETS)
+if TYPE_CHECKING:  # the fields of a model created at run time are unknown to a type checker: it sees the base
+    ESets: TypeAlias = _VariableSets
+    DeDtSets: TypeAlias = _VariableSets
+    Kp1Sets: TypeAlias = _VariableSets
+    Ki1Sets: TypeAlias = _VariableSets
+    Kd1Sets: TypeAlias = _VariableSets
+else:
+    ESets = _sets_model("e", E_SETS)
+    DeDtSets = _sets_model("de_dt", DE_DT_SETS)
+    Kp1Sets = _sets_model("kp1", KP1_SETS)
+    Ki1Sets = _sets_model("ki1", KI1_SETS)
+    Kd1Sets = _sets_model("kd1", KD1_SETS)
 
 
 class FuzzySets(BaseModel):
@@ -178,7 +188,7 @@ class FuzzySets(BaseModel):
     def ranges(self, variable: str) -> list[tuple[float, float]]:
         """The (lower, upper) ranges of ``variable`` in the order NB, NS, ZE, PS, PB."""
         sets = getattr(self, variable)
-        return [tuple(getattr(sets, name)) for name in SET_NAMES]  # type: ignore[misc]
+        return [tuple(getattr(sets, name)) for name in SET_NAMES]
 
 
 class FuzzyUniverses(BaseModel):
@@ -339,7 +349,7 @@ def universe(cfg: FuzzyConfig | dict[str, Any], variable: str) -> tuple[float, f
     """(min, max) of the universe of discourse of ``variable``."""
     cfg = as_config(cfg)
     if variable in INPUTS:
-        return tuple(getattr(cfg.universes, variable))  # type: ignore[return-value]
+        return tuple(getattr(cfg.universes, variable))
     if variable in OUTPUTS:
         return OUTPUT_UNIVERSE
     raise ValueError(f"unknown fuzzy variable {variable!r}; allowed: {', '.join(VARIABLES)}")
@@ -492,7 +502,7 @@ def _set_mu(x, sp, ranges, i, umin, umax):  # pragma: no cover - compiled
     return _mf(x, sp[at + R.lower], sp[at + R.upper], i, umin, umax)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def fuzzy_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     """Mamdani self-tuning PID, section 5.4.1: (e, de/dt) -> (k_p1, k_i1, k_d1) -> eqs. 5.12-5.14.
 

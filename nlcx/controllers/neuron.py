@@ -19,6 +19,7 @@ from typing import Literal
 from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
+from nlcx._numba_compat import hot_njit
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.errors import ConfigError
 from nlcx.layout import Layout
@@ -69,8 +70,11 @@ NEURON = Layout(
 )  # fmt: skip
 #: The state cs: step counter, e(k-1), e(k-2), u(k-1), the weights, whether it has started.
 NEURON_STATE = Layout("SingleNeuronState", ("step", "e1", "e2", "u1", "w1", "w2", "w3", "started"))
+#: The log row: the weights in use (normalised when ``normalize``) and the neuron's output u(k).
+NEURON_LOG = Layout("SingleNeuronLog", ("w1", "w2", "w3", "u"))
 N = NEURON.at
 S = NEURON_STATE.at
+G = NEURON_LOG.at
 
 
 @njit(cache=True, error_model="numpy")
@@ -105,19 +109,19 @@ def _neuron_row(t, dt, y, r, cp, cs, u, log):  # pragma: no cover - compiled
         cs[S.u1] = u1 + cp[N.gain] * (w1 * x1 + w2 * x2 + w3 * x3)  # eq. 5.18
         cs[S.e2] = e1
         cs[S.e1] = e
-        log[0] = w1
-        log[1] = w2
-        log[2] = w3
+        log[G.w1] = w1
+        log[G.w2] = w2
+        log[G.w3] = w3
     else:
-        log[0] = cs[S.w1]
-        log[1] = cs[S.w2]
-        log[2] = cs[S.w3]
+        log[G.w1] = cs[S.w1]
+        log[G.w2] = cs[S.w2]
+        log[G.w3] = cs[S.w3]
     cs[S.step] += 1.0
     u[ui] = cp[N.bias] + cs[S.u1]
-    log[3] = cs[S.u1]
+    log[G.u] = cs[S.u1]
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def neuron_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """The single-neuron adaptive PID (eqs. 5.15-5.19), every row."""
     for b in range(y.shape[0]):
@@ -160,7 +164,7 @@ class SingleNeuron(ControllerModel):
             cp=cp,
             cs0=cs0,
             reference_signals=tuple(outputs),
-            log_names=("neuron.w1", "neuron.w2", "neuron.w3", "neuron.u"),
+            log_names=tuple(f"neuron.{name}" for name in NEURON_LOG.fields),
             log_units=("", "", "", plant.unit_of(inputs[0])),
             config=cfg.model_dump(),
             records={

@@ -5,9 +5,9 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from numba import njit
 from pydantic import Field
 
+from nlcx._numba_compat import hot_njit
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
 from nlcx.plants.base import Plant
 
@@ -18,7 +18,7 @@ class OpenLoopConfig(ControllerConfig):
     )
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def open_loop_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """u_j(t) = r_j(t): the reference channels are the plant inputs (every row)."""
     for b in range(u.shape[0]):

@@ -46,10 +46,11 @@ import scipy.linalg
 from numba import njit
 from pydantic import Field
 
+from nlcx._numba_compat import hot_njit
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.errors import ConfigError
 from nlcx.layout import Layout
-from nlcx.plants.base import Plant, equilibrium_input
+from nlcx.plants.base import Plant, equilibrium_input, linearize
 from nlcx.validation import join
 
 #: Head of the parameter row cp: plant order n, inputs m, preview length h, integrator (0/1),
@@ -106,25 +107,6 @@ def companion_matrices(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return A, B
 
 
-def linearize(plant: Plant, x_eq: np.ndarray, u_eq: np.ndarray, rel_step: float = 1e-6) -> tuple[np.ndarray, ...]:
-    """(A, B) = (df/dx, df/du) at (x_eq, u_eq) by central differences of ``plant.rhs``."""
-    n, m = x_eq.size, u_eq.size
-    f = plant.f
-    A = np.zeros((n, n))
-    for j in range(n):
-        h = rel_step * max(1.0, abs(x_eq[j]))
-        e = np.zeros(n)
-        e[j] = h
-        A[:, j] = (f(x_eq + e, u_eq) - f(x_eq - e, u_eq)) / (2 * h)
-    B = np.zeros((n, m))
-    for j in range(m):
-        h = rel_step * max(1.0, abs(u_eq[j]))
-        e = np.zeros(m)
-        e[j] = h
-        B[:, j] = (f(x_eq, u_eq + e) - f(x_eq, u_eq - e)) / (2 * h)
-    return A, B
-
-
 def _is_transfer_function(plant: Plant) -> bool:
     from nlcx.plants.transfer_function import companion_rhs
 
@@ -157,7 +139,7 @@ def linear_model(plant: Plant, Ts: float, output: int = 0, path: str = "controll
                     plant.name,
                     "no input holds the plant at its initial or zero state: nothing to linearise about",
                 ) from None
-        Ac, Bc = linearize(plant, x_eq, u_eq)
+        Ac, Bc, _ = linearize(plant, x_eq, u_eq, relative=True)
     A, B = zoh(Ac, Bc, Ts)
     return DiscreteModel(A=A, B=B, c=c, Ts=Ts, x_eq=x_eq, u_eq=u_eq, y_eq=float(c @ x_eq))
 
@@ -223,7 +205,7 @@ def augment(
     Cz = np.zeros((rows, N))
     Cz[0, :n] = math.sqrt(q) * c
     Cz[0, o] = -math.sqrt(q)
-    if n_i:
+    if integral:
         Cz[1, n] = math.sqrt(integral)
     Dz = np.zeros((rows, m))
     Dz[1 + n_i :, :] = math.sqrt(r) * np.eye(m)
@@ -447,7 +429,7 @@ def _preview_row(t, dt, x, r, cp, cs, u, log):  # pragma: no cover - compiled
     log[LOG_SIZE * m] = cs[S.integral]
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def preview_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
     """The preview servo (eq. 5.21), every row (full state information: it reads x)."""
     for b in range(x.shape[0]):

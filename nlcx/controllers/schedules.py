@@ -24,6 +24,7 @@ from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
 from nlcx import registry
+from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
 from nlcx.kernel.abi import CALLBACK_SIG, CALLBACK_SLOTS, callback_slots, no_callback
 from nlcx.layout import Layout
@@ -135,13 +136,13 @@ def _decays(k_p, k_i, k_d, s):  # pragma: no cover - compiled
     return a_p, a_i, a_d
 
 
-@njit(CALLBACK_SIG, cache=True, error_model="numpy", _nrt=False)
+@hot_njit(CALLBACK_SIG, cache=True, error_model="numpy")
 def constant_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     """Conventional PID: fixed gains, a :data:`CONSTANT` block at p[row, o]."""
     return p[row, o + CG.kp], p[row, o + CG.ki], p[row, o + CG.kd]
 
 
-@njit(CALLBACK_SIG, cache=True, error_model="numpy", _nrt=False)
+@hot_njit(CALLBACK_SIG, cache=True, error_model="numpy")
 def time_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     """Eqs. 2.17-2.19 from a :data:`TIME_AGS` block at p[row, o].
 
@@ -163,7 +164,7 @@ def time_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     return kp, ki, kd
 
 
-@njit(CALLBACK_SIG, cache=True, error_model="numpy", _nrt=False)
+@hot_njit(CALLBACK_SIG, cache=True, error_model="numpy")
 def error_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
     """Eqs. 2.20-2.22 on s = |c e| (``on_abs_error`` = 1) or s = c e (0), c = ``error_scale``
     (1 as the loop sees e; 1/step size, or 180/pi for an angle in degrees), an

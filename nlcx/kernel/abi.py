@@ -37,8 +37,8 @@ trip); a function that calls a compiled-function value does so inside its loop o
 rows, so its own reference counting is paid once per call, not once per variant; a plant's
 loop over its columns reads and writes unit-stride memory only (a strided read, a branch or
 numba's integer power ``x**2`` in it keeps the loop scalar; write ``x * x``); and a function
-called every step that allocates nothing is compiled with ``_nrt=False``, numba's switch for
-its reference counting. A function counts every array it receives on entry and on exit, and
+called every step that allocates nothing is compiled with :func:`nlcx._numba_compat.hot_njit`,
+without numba's reference counting. A function counts every array it receives on entry and on exit, and
 an inlined helper at each of its call sites, which for one or two variants costs more than
 the PID step's arithmetic (``benchmarks/components.py`` times it). Such a function may slice
 and pass views on, but must not allocate, nor keep an array it did not get (nothing frees it);
@@ -47,16 +47,16 @@ and pass views on, but must not allocate, nor keep an array it did not get (noth
 
 from __future__ import annotations
 
-import warnings
+import importlib
+from collections.abc import Callable
+from typing import Any
 
-from numba import njit, types
-from numba.core.errors import NumbaExperimentalFeatureWarning
-from numba.core.typing.typeof import typeof_impl
+from numba import cfunc, njit, types
 
+from nlcx._numba_compat import register_typeof
 from nlcx.compiled_cache import serialize_cache_access
 from nlcx.layout import Layout
 
-warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
 # every compiled function of nlcx and its plugins is declared against this module, so its
 # processes read and write numba's cache one function's files at a time from here on
 serialize_cache_access()
@@ -87,29 +87,6 @@ ElementTuple = types.UniTuple(types.FunctionType(ELEMENT_SIG), ELEMENT_SLOTS)
 RhsFn = types.FunctionType(RHS_SIG)
 ControllerFn = types.FunctionType(CONTROLLER_SIG)
 
-#: Arrays of the batch the kernel and the friction path share (see
-#: :mod:`nlcx.kernel.integrator`): plant forces (disturbance terms, their map, friction axes),
-#: records (X, U, LOG, FRICTION), the friction modes (mode, direction, hold, stopped) and the
-#: one-variant work space of the friction path (:func:`nlcx.kernel.integrator._friction_scratch`).
-ForceArrays = types.Tuple((ARR4, MAT, ARR3))
-Records = types.UniTuple(ARR3, 4)
-FrictionState = types.Tuple((types.int64[:, ::1], MAT, MAT, types.boolean[::1]))
-OnePath = types.Tuple(
-    (types.UniTuple(VEC, 4), types.Tuple((MAT, VEC, VEC, VEC, VEC, MAT, VEC, VEC, VEC, types.UniTuple(MAT, 4))))
-)
-Tableau = types.Tuple((MAT, VEC))
-#: The friction path (Appendix A), called through two compiled-function values so that a
-#: batch without friction never compiles it: at sample k, the breakaway of the frictional
-#: variants ``frictional_sample(rhs, t, k, nb, n_free, vid, x, u, p, axes, state, forces,
-#: one_path, records)``; over the step, their integration ``frictional_step(rhs, t, dt, kd,
-#: nb, n_free, vid, x, x_new, u, p, axes, state, forces, one_path, tableau, c)``. Working slots
-#: n_free..nb-1 are the frictional ones; x, x_new and p by columns, u and axes by rows.
-FRICTION_SAMPLE_SIG = types.void(RhsFn, F64, I64, I64, I64, IVEC, MAT, MAT, MAT, ARR3, FrictionState, ForceArrays,
-                                 OnePath, Records)  # fmt: skip
-FRICTION_STEP_SIG = types.void(RhsFn, F64, F64, I64, I64, I64, IVEC, MAT, MAT, MAT, MAT, ARR3, FrictionState,
-                               ForceArrays, OnePath, Tableau, VEC)  # fmt: skip
-FrictionPath = types.Tuple((types.FunctionType(FRICTION_SAMPLE_SIG), types.FunctionType(FRICTION_STEP_SIG)))
-
 #: Hook points of the signal path where loop elements act.
 SENSOR = 0
 ACTUATOR = 1
@@ -134,16 +111,54 @@ def shared_row(axis_length: int, b: int) -> int:  # pragma: no cover - compiled
     return b if axis_length > 1 else 0
 
 
-@njit(CALLBACK_SIG, cache=True, error_model="numpy", _nrt=False)
-def no_callback(t, e, edot, p, row, offset):  # pragma: no cover - compiled
-    """Padding of an unused callback slot."""
+class Padding(types.WrapperAddressProtocol):
+    """A function slot the kernel never calls: the padding of a table, the friction path of a
+    batch without friction.
+
+    numba hands a compiled function value to the kernel by looking up the function's compiled
+    overload for the slot's signature, at every call; with a few dozen slots that lookup costs
+    more than the work of a short call. A slot that is never called is handed over by numba's
+    wrapper address protocol instead: the address of ``function`` compiled as a C callback
+    (:func:`numba.cfunc`, disk-cached), read once. Called anyway, it runs ``function``.
+    A padding pickles by reference, as the attribute ``name`` of the module ``module``."""
+
+    def __init__(self, signature: Any, function: Callable[..., Any], module: str, name: str) -> None:
+        self._signature = signature
+        self._compiled = cfunc(signature, cache=True)(function)
+        self._home = (module, name)
+
+    def __wrapper_address__(self) -> int:
+        address = self._compiled.address
+        assert address is not None  # a cfunc has its address once compiled, here in __init__
+        return int(address)
+
+    def signature(self) -> Any:
+        return self._signature
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return _padding, self._home
+
+    def __repr__(self) -> str:
+        return f"Padding({'.'.join(self._home)})"
+
+
+def _padding(module: str, name: str) -> Padding:
+    """The padding ``name`` of ``module`` (how a :class:`Padding` unpickles)."""
+    return getattr(importlib.import_module(module), name)
+
+
+def _no_callback(t, e, edot, p, row, offset):  # pragma: no cover - compiled
     return 0.0, 0.0, 0.0
 
 
-@njit(ELEMENT_SIG, cache=True, error_model="numpy", _nrt=False)
-def no_element(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
-    """Padding of an unused element slot."""
+def _no_element(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
     return
+
+
+#: Padding of an unused callback slot.
+no_callback = Padding(CALLBACK_SIG, _no_callback, __name__, "no_callback")
+#: Padding of an unused element slot.
+no_element = Padding(ELEMENT_SIG, _no_element, __name__, "no_element")
 
 
 class FunctionTable(tuple):
@@ -165,9 +180,11 @@ class FunctionTable(tuple):
         return FunctionTable, (tuple(self), self.numba_type)
 
 
-@typeof_impl.register(FunctionTable)
 def _typeof_function_table(table: FunctionTable, context: object) -> types.Type:
     return table.numba_type
+
+
+register_typeof(FunctionTable, _typeof_function_table)
 
 
 def _padded(

@@ -19,7 +19,8 @@ import math
 
 from numba import njit
 
-from nlcx.kernel.abi import FRICTION_SAMPLE_SIG, FRICTION_STEP_SIG, FrictionPath, FunctionTable, shared_row
+from nlcx.kernel.abi import Padding, shared_row
+from nlcx.kernel.structures import FRICTION_SAMPLE_SIG, FRICTION_STEP_SIG, FrictionPath
 from nlcx.layout import Layout
 
 #: Friction parameters of one input's axis: model (FRICTION_NONE, _SIMPLE, _EXPONENTIAL),
@@ -44,17 +45,16 @@ STUCK = 2
 @njit(cache=True, error_model="numpy")
 def _derivative(rhs, t, x, u, dist_row, dist_map, dx, one):  # pragma: no cover - compiled
     """dx = f(t, x, u; p) + dist_map @ d for one variant (eqs. 2.13/2.15: d enters the
-    state derivatives). ``one`` = (x, u, p, dx) scratch columns of shape (., 1), the variant as
-    a batch of one (:data:`nlcx.kernel.abi.RHS_SIG`); p is set."""
-    x1, u1, p1, dx1 = one
+    state derivatives). ``one``: the variant as a batch of one column
+    (:class:`~nlcx.kernel.structures.OneColumn`, :data:`nlcx.kernel.abi.RHS_SIG`); its p is set."""
     for i in range(x.shape[0]):
-        x1[i, 0] = x[i]
+        one.x[i, 0] = x[i]
     for j in range(u.shape[0]):
-        u1[j, 0] = u[j]
-    rhs(t, x1, u1, p1, dx1, 1)
+        one.u[j, 0] = u[j]
+    rhs(t, one.x, one.u, one.p, one.dx, 1)
     n_d = dist_row.shape[0]
     for i in range(dx.shape[0]):
-        dx[i] = dx1[i, 0]
+        dx[i] = one.dx[i, 0]
         if n_d > 0:
             acc = 0.0
             for j in range(n_d):
@@ -105,16 +105,16 @@ def _solve_small(A, b, n):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def friction_forces(
-    rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, f_out, work, A, rhs_s, dx, one
-):  # pragma: no cover - compiled
-    """Friction force on every input's axis at state x (written to f_out).
+def friction_forces(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, scratch):  # pragma: no cover - compiled
+    """Friction force on every input's axis at state x (written to ``scratch.f``; ``scratch``:
+    a :class:`~nlcx.kernel.structures.FrictionScratch`).
 
     Sliding axes get :func:`slip_friction`. Stuck axes get the force that keeps their
     acceleration exactly zero: accelerations are affine in the generalised forces, so with
     a0 the accelerations of the stuck axes under the other forces and B their response to
     unit forces on the stuck axes, f_S = -B^{-1} a0 (solved jointly when several stick).
     """
+    f_out, work, A, rhs_s, dx, one = scratch.f, scratch.work, scratch.A, scratch.rhs_s, scratch.dx, scratch.one
     n_u = u.shape[0]
     n_stuck = 0
     for j in range(n_u):
@@ -156,13 +156,12 @@ def friction_forces(
 
 
 @njit(cache=True, error_model="numpy")
-def update_friction_modes(
-    rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx, one
-):  # pragma: no cover - compiled
+def update_friction_modes(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, scratch):  # pragma: no cover
     """Breakaway at the start of a step: a stuck axis whose holding force would exceed
     mu_s F_N starts to slide in the direction of the net force (Appendix A's static case)."""
+    f_tmp = scratch.f
     for _ in range(u.shape[0]):
-        friction_forces(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, f_tmp, work, A, rhs_s, dx, one)
+        friction_forces(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, scratch)
         released = False
         for j in range(u.shape[0]):
             if mode[j] == STUCK and abs(f_tmp[j]) > fric_b[j, FA.mu_s] * fric_b[j, FA.normal_force]:
@@ -192,17 +191,18 @@ def _disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
 
 @njit(cache=True, error_model="numpy")
 def _rk_step_one(
-    rhs, t, h, frac0, h_frac, x_in, x_out, u, drow, c, dist_map, fb, mode, direction, rk_a, rk_b, scratch
+    rhs, t, h, frac0, h_frac, x_in, x_out, u, drow, c, dist_map, fb, mode, direction, integration, scratch
 ):  # pragma: no cover - compiled
     """One explicit Runge-Kutta step of one variant with friction, size h from x_in at t
-    (u held) into x_out.
+    (u held) into x_out, with the tableau of ``integration``.
 
     The step covers the fraction [frac0, frac0 + h_frac] of the sampling step; the
     disturbance is exact at the stage nodes of a full step and interpolated between them
     for a partial step (one that ends where a sliding axis stops). ``scratch`` is the
-    friction path's work space, see :func:`step_with_friction`.
+    friction path's work space (:class:`~nlcx.kernel.structures.FrictionScratch`).
     """
-    k_stage, xs, f, u_total, work, A, rhs_s, dx, d_tmp, one = scratch
+    rk_a, rk_b = integration.rk_a, integration.rk_b
+    k_stage, xs, f, u_total, d_tmp = scratch.k_stage, scratch.xs, scratch.f, scratch.u_total, scratch.d_tmp
     n = x_in.shape[0]
     n_stage = rk_b.shape[0]
     partial = frac0 != 0.0 or h_frac != 1.0
@@ -219,10 +219,10 @@ def _rk_step_one(
             d_s = d_tmp
         else:
             d_s = drow[s]
-        friction_forces(rhs, ts, xs, u, d_s, dist_map, fb, mode, direction, f, work, A, rhs_s, dx, one)
+        friction_forces(rhs, ts, xs, u, d_s, dist_map, fb, mode, direction, scratch)
         for j in range(u.shape[0]):
             u_total[j] = u[j] + f[j]
-        _derivative(rhs, ts, xs, u_total, d_s, dist_map, k_stage[s], one)
+        _derivative(rhs, ts, xs, u_total, d_s, dist_map, k_stage[s], scratch.one)
     for i in range(x_in.shape[0]):
         x_out[i] = x_in[i]
     for s in range(n_stage):
@@ -231,17 +231,16 @@ def _rk_step_one(
 
 
 @njit(cache=True, error_model="numpy")
-def step_with_friction(
-    rhs, t, dt, x, x_new, x_mid, u, drow, c, dist_map, fb, mode, direction, hold, rk_a, rk_b, scratch
-):  # pragma: no cover - compiled
-    """One sampling step of one variant with friction (Appendix A): a sliding axis whose
-    velocity reaches zero inside the step is stopped there (the step is split at that
-    instant); a stuck axis is held at its position until it breaks away.
-
-    ``scratch`` = (k_stage (s, n), xs (n,), f, u_total, work (n_u,), A (n_u, n_u), rhs_s (n_u,),
-    dx (n,), d_tmp (n_d,), one): work space allocated once per :func:`simulate` call."""
+def step_with_friction(rhs, t, work, drow, c, dist_map, fb, mode, direction, hold, integration):  # pragma: no cover
+    """One sampling step of one variant with friction (Appendix A), from ``work.x`` held
+    ``work.u`` into ``work.x_new`` (``work``: a :class:`~nlcx.kernel.structures.FrictionWork`,
+    allocated once per :func:`~nlcx.kernel.integrator.simulate` call): a sliding axis whose
+    velocity reaches zero inside the step is stopped there (the step is split at that instant,
+    ``work.x_mid``); a stuck axis is held at its position until it breaks away."""
+    x, x_new, x_mid, u, scratch = work.x, work.x_new, work.x_mid, work.u, work.scratch
+    dt = integration.dt
     n_u = u.shape[0]
-    _rk_step_one(rhs, t, dt, 0.0, 1.0, x, x_new, u, drow, c, dist_map, fb, mode, direction, rk_a, rk_b, scratch)
+    _rk_step_one(rhs, t, dt, 0.0, 1.0, x, x_new, u, drow, c, dist_map, fb, mode, direction, integration, scratch)
     frac = 1.0
     for j in range(n_u):
         vi = int(fb[j, FA.velocity_index])
@@ -249,35 +248,19 @@ def step_with_friction(
             frac = min(frac, x[vi] / (x[vi] - x_new[vi]))
     if frac < 1.0:
         h1 = frac * dt
-        _rk_step_one(rhs, t, h1, 0.0, frac, x, x_mid, u, drow, c, dist_map, fb, mode, direction, rk_a, rk_b, scratch)
+        _rk_step_one(rhs, t, h1, 0.0, frac, x, x_mid, u, drow, c, dist_map, fb, mode, direction, integration, scratch)
         for j in range(n_u):
             vi = int(fb[j, FA.velocity_index])
             if mode[j] == SLIP and x_new[vi] * direction[j] <= 0.0:
                 x_mid[vi] = 0.0
                 mode[j] = STUCK
                 hold[j] = x_mid[int(fb[j, FA.position_index])]
-        _, _, f, _, work, A, rhs_s, dx, d_tmp, one = scratch
-        _disturbance_at(drow, c, frac, d_tmp)
-        update_friction_modes(rhs, t + h1, x_mid, u, d_tmp, dist_map, fb, mode, direction, f, work, A, rhs_s, dx, one)
+        _disturbance_at(drow, c, frac, scratch.d_tmp)
+        update_friction_modes(rhs, t + h1, x_mid, u, scratch.d_tmp, dist_map, fb, mode, direction, scratch)
         _rk_step_one(
-            rhs,
-            t + h1,
-            dt - h1,
-            frac,
-            1.0 - frac,
-            x_mid,
-            x_new,
-            u,
-            drow,
-            c,
-            dist_map,
-            fb,
-            mode,
-            direction,
-            rk_a,
-            rk_b,
-            scratch,
-        )
+            rhs, t + h1, dt - h1, frac, 1.0 - frac, x_mid, x_new, u, drow, c, dist_map, fb, mode, direction,
+            integration, scratch,
+        )  # fmt: skip
     for j in range(n_u):
         vi = int(fb[j, FA.velocity_index])
         if mode[j] == SLIP and x_new[vi] * direction[j] <= 0.0:  # a second stop: rare
@@ -310,96 +293,77 @@ def initial_modes(axes, x, mode, direction, hold):  # pragma: no cover - compile
 
 
 # ----------------------------------------------------------------------------- the kernel's friction path
-# (:data:`nlcx.kernel.abi.FrictionPath`: compiled when a batch with friction first reaches the kernel)
+# (:class:`nlcx.kernel.structures.FrictionPath`: compiled when a batch with friction first reaches the kernel)
 
 
 @njit(cache=True, error_model="numpy")
-def frictional_sample(
-    rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records
-):  # pragma: no cover - compiled
+def frictional_sample(rhs, t, k, nb, n_free, slots, u, forces, work, records):  # pragma: no cover - compiled
     """Breakaway at t_k for the frictional variants (Appendix A's static case), and the friction
-    force on each axis at t_k when it is recorded (the step evaluates its own). x and pw by
-    columns, u by rows (:mod:`nlcx.kernel.integrator`)."""
-    mode, direction, _, stopped = state
-    dist, dist_map, _ = forces
-    FRICTION = records[3]
+    force on each axis at t_k when it is recorded (the step evaluates its own). ``slots``: the
+    working slots (:class:`~nlcx.kernel.structures.Slots`), u by rows."""
+    dist, dist_map, FRICTION = forces.dist, forces.dist_map, records.FRICTION
     record = FRICTION.shape[1] > 1
-    (xo, _, _, uo), scratch = one_path
-    _, _, f, _, work, A, rhs_s, dxo, _, one = scratch
+    scratch = work.scratch
     kd = shared_row(dist.shape[1], k)
     for b in range(nb):
-        if stopped[b]:
+        if slots.stopped[b]:
             continue
-        v = vid[b]
+        v = slots.vid[b]
         if b < n_free:
             if record:
                 for j in range(u.shape[1]):
                     FRICTION[v, k, j] = 0.0
             continue
-        _load_one(b, x, u, pw, xo, uo, one)
-        drow = dist[shared_row(dist.shape[0], v), kd]
-        update_friction_modes(
-            rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
-        )
+        _load_one(b, slots, u, work)
+        d_k = dist[shared_row(dist.shape[0], v), kd, 0]  # at t_k, the first stage's time
+        axes, mode, direction = slots.axes[b], slots.mode[b], slots.direction[b]
+        update_friction_modes(rhs, t, work.x, work.u, d_k, dist_map, axes, mode, direction, scratch)
         if record:
-            friction_forces(
-                rhs, t, xo, uo, drow[0], dist_map, fw[b], mode[b], direction[b], f, work, A, rhs_s, dxo, one
-            )
+            friction_forces(rhs, t, work.x, work.u, d_k, dist_map, axes, mode, direction, scratch)
             for j in range(u.shape[1]):
-                FRICTION[v, k, j] = f[j]
+                FRICTION[v, k, j] = scratch.f[j]
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _load_one(b, x, u, pw, xo, uo, one):  # pragma: no cover - compiled
-    """Copy working slot b's state and plant parameters (columns b of x and pw) and its input
-    (row b of u) into the one-variant work space."""
-    for i in range(x.shape[0]):
-        xo[i] = x[i, b]
+def _load_one(b, slots, u, work):  # pragma: no cover - compiled
+    """Copy working slot b's state and plant parameters (columns b of ``slots.x`` and
+    ``slots.p``) and its input (row b of u) into the one-variant work space."""
+    for i in range(slots.x.shape[0]):
+        work.x[i] = slots.x[i, b]
     for j in range(u.shape[1]):
-        uo[j] = u[b, j]
-    for i in range(pw.shape[0]):
-        one[2][i, 0] = pw[i, b]
+        work.u[j] = u[b, j]
+    for i in range(slots.p.shape[0]):
+        work.scratch.one.p[i, 0] = slots.p[i, b]
 
 
 @njit(cache=True, error_model="numpy")
-def frictional_step(
-    rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path, tableau, c
-):  # pragma: no cover - compiled
-    """One sampling step of each frictional variant, one at a time (x, x_new, pw by columns)."""
-    mode, direction, hold, stopped = state
-    dist, dist_map, _ = forces
-    (xo, xo_new, xo_mid, uo), scratch = one_path
-    one = scratch[9]
-    rk_a, rk_b = tableau
+def frictional_step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c):  # pragma: no cover
+    """One sampling step of each frictional variant, one at a time, into x_new (by columns)."""
+    dist, dist_map = forces.dist, forces.dist_map
     for b in range(n_free, nb):
-        if stopped[b]:
+        if slots.stopped[b]:
             continue
-        v = vid[b]
-        _load_one(b, x, u, pw, xo, uo, one)
+        v = slots.vid[b]
+        _load_one(b, slots, u, work)
         step_with_friction(
-            rhs, t, dt, xo, xo_new, xo_mid, uo, dist[shared_row(dist.shape[0], v), kd], c, dist_map,
-            fw[b], mode[b], direction[b], hold[b], rk_a, rk_b, scratch,
+            rhs, t, work, dist[shared_row(dist.shape[0], v), kd], c, dist_map,
+            slots.axes[b], slots.mode[b], slots.direction[b], slots.hold[b], integration,
         )  # fmt: skip
-        for i in range(x.shape[0]):
-            x_new[i, b] = xo_new[i]
+        for i in range(x_new.shape[0]):
+            x_new[i, b] = work.x_new[i]
 
 
-@njit(FRICTION_SAMPLE_SIG, cache=True, error_model="numpy")
-def no_frictional_sample(
-    rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records
-):  # pragma: no cover
-    """The friction path of a batch without friction: never called."""
+def _no_frictional_sample(rhs, t, k, nb, n_free, slots, u, forces, work, records):  # pragma: no cover - compiled
     return
 
 
-@njit(FRICTION_STEP_SIG, cache=True, error_model="numpy")
-def no_frictional_step(
-    rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path, tableau, c
-):  # pragma: no cover - compiled
-    """The friction path of a batch without friction: never called."""
+def _no_frictional_step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c):  # pragma: no cover
     return
 
 
+#: The friction path of a batch without friction: never called.
+no_frictional_sample = Padding(FRICTION_SAMPLE_SIG, _no_frictional_sample, __name__, "no_frictional_sample")
+no_frictional_step = Padding(FRICTION_STEP_SIG, _no_frictional_step, __name__, "no_frictional_step")
 #: The friction path handed to the kernel, with and without friction.
-FRICTIONAL = FunctionTable((frictional_sample, frictional_step), FrictionPath)
-FRICTIONLESS = FunctionTable((no_frictional_sample, no_frictional_step), FrictionPath)
+FRICTIONAL = FrictionPath(sample=frictional_sample, step=frictional_step)
+FRICTIONLESS = FrictionPath(sample=no_frictional_sample, step=no_frictional_step)

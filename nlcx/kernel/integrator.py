@@ -3,7 +3,9 @@
 Plants, controllers, controller callbacks and loop elements are numba-compiled functions
 with the signatures of :mod:`nlcx.kernel.abi`. They are passed to :func:`simulate` as
 first-class function values, so a single compiled (and disk-cached) kernel serves every
-plant, controller and element, including those registered by third-party packages.
+plant, controller and element, including those registered by third-party packages. The
+engine hands them over with the batch's arrays in the named structures of
+:mod:`nlcx.kernel.structures`.
 
 Every sampling instant, one call of the controller, one call of each loop element and one
 call of the right-hand side per Runge-Kutta stage serve every variant of the batch. A
@@ -20,65 +22,85 @@ loop elements see (y, r, u, a copy of x, the controller's parameters and state) 
 
 from __future__ import annotations
 
-import numpy as np
-from numba import njit, types
+from typing import NamedTuple
 
-from nlcx.kernel.abi import (
-    ACTUATOR,
-    ARR3,
-    ELEMENT_ENTRY,
-    F64,
-    IVEC,
-    MAT,
-    SENSOR,
-    STATUS_BOUND,
-    STATUS_NONFINITE,
-    STATUS_OK,
-    VEC,
-    CallbackTuple,
-    ControllerFn,
-    ElementTuple,
-    ForceArrays,
-    FrictionPath,
-    Records,
-    RhsFn,
-    shared_row,
-)
+import numpy as np
+from numba import njit
+
+from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, STATUS_OK, shared_row
 from nlcx.kernel.friction import FA, has_friction, initial_modes
+from nlcx.kernel.structures import (
+    CLASSIC_RK4,
+    SIMULATE_SIG,
+    FrictionScratch,
+    FrictionWork,
+    OneColumn,
+    Slots,
+)
 
 EE = ELEMENT_ENTRY.at
 
-#: The arrays of one batch, grouped by what they describe (rows are variants; an axis of
-#: length 1 is shared by every variant):
-#: plant (x0 (B, n), p (B|1, n_p), C (n_y, n), bounds (B|1, n): |x_i| > bounds[i] stops a run)
-PlantArrays = types.UniTuple(MAT, 4)
-#: control (cp (B, n_cp), cs0 (B, n_cs), ref (B|1, K+1|1, n_r) reference at the sampling instants)
-ControlArrays = types.Tuple((MAT, MAT, ARR3))
-#: elements (table (n_el, ELEMENT_ENTRY), ep (B, n_ep), es0 (B, n_es), data (B|1, K+1|1, n_data))
-ElementArrays = types.Tuple((MAT, MAT, MAT, ARR3))
-#: plant forces (:data:`~nlcx.kernel.abi.ForceArrays`: dist (B|1, K|1, s, n_d) derivative terms
-#: at the stage times, dist_map (n, n_d): dx += dist_map @ d, friction (B|1, n_u, FRICTION_AXIS)
-#: of each input's axis)
-#: records, written (:data:`~nlcx.kernel.abi.Records`: X (B, K+1, n), U (B, K+1, n_u), LOG
-#: (B, K+1|1, n_log), FRICTION (B, K+1|1, n_u)); a time length of 1 for LOG and FRICTION: not recorded
-#: outcome, written (status (B,), n_valid (B,), fail_index (B,): i < n state i, n + j input j, -1 none)
-Outcome = types.UniTuple(IVEC, 3)
 
-SIMULATE_SIG = types.void(
-    RhsFn,
-    ControllerFn,
-    CallbackTuple,
-    ElementTuple,
-    types.Tuple((MAT, VEC)),  # Butcher tableau (rk_a (s, s), rk_b (s,))
-    PlantArrays,
-    ControlArrays,
-    ElementArrays,
-    ForceArrays,
-    F64,  # dt
-    Records,
-    Outcome,
-    FrictionPath,
-)
+class WorkingRows(NamedTuple):
+    """The working copies of a batch's arrays, in the order of its working slots (slot b holds
+    variant vid[b]): the plant's state x, parameters p and bounds by columns; the controller's
+    copy of the state xrow, its parameters cp and state cs and the friction axes by rows."""
+
+    vid: np.ndarray
+    x: np.ndarray
+    xrow: np.ndarray
+    p: np.ndarray
+    cp: np.ndarray
+    cs: np.ndarray
+    axes: np.ndarray
+    bounds: np.ndarray
+
+
+class FrictionModes(NamedTuple):
+    """Each slot's friction axes (B, n_u): mode, slip direction and the position a stuck axis
+    holds; and whether the slot's variant stopped (B,)."""
+
+    mode: np.ndarray
+    direction: np.ndarray
+    hold: np.ndarray
+    stopped: np.ndarray
+
+
+class Signals(NamedTuple):
+    """The signals of a sample, written anew at every sample: by rows, the controller's copy
+    of the state xrow (B, n), the outputs y (B, n_y), the references r (B, n_r), the input u
+    (B, n_u) and the controller's log (B, n_log, NaN until written); by columns, the input held
+    over the step uc (n_u, B) (the plant's)."""
+
+    xrow: np.ndarray
+    y: np.ndarray
+    r: np.ndarray
+    u: np.ndarray
+    log: np.ndarray
+    uc: np.ndarray
+
+
+class StageColumns(NamedTuple):
+    """Work arrays (n, B) of a Runge-Kutta step: x_{k+1}, a stage's state xs and the stage
+    derivatives k (up to four; zero where no right-hand side writes them: the columns of
+    variants with friction)."""
+
+    x_new: np.ndarray
+    xs: np.ndarray
+    k: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+class FlatViews(NamedTuple):
+    """Flat views (n B,), made once, on the (n, B) arrays of a step (:func:`_flat_views`)."""
+
+    x: np.ndarray
+    xs: np.ndarray
+    x_new: np.ndarray
+    bounds: np.ndarray
+    k1: np.ndarray
+    k2: np.ndarray
+    k3: np.ndarray
+    k4: np.ndarray
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -123,18 +145,19 @@ def _rk_step_batch(
 
 
 @njit(cache=True, error_model="numpy")
-def _swap_variants(i, j, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode):  # pragma: no cover
+def _swap_variants(i, j, slots):  # pragma: no cover - compiled
     """Exchange the working slots i and j (two variants' state, parameters and bookkeeping):
-    columns of the plant's state and parameters, rows of the rest."""
+    columns of the plant's state, parameters and bounds, rows of the rest."""
     if i == j:
         return
+    vid, stopped, mode = slots.vid, slots.stopped, slots.mode
     vid[i], vid[j] = vid[j], vid[i]
     stopped[i], stopped[j] = stopped[j], stopped[i]
-    for a in (x, pw, bw):
+    for a in (slots.x, slots.p, slots.bounds):
         _swap_columns(a, i, j)
-    for a in (cpw, cs, log, direction, hold):
+    for a in (slots.cp, slots.cs, slots.log, slots.direction, slots.hold):
         _swap_rows(a, i, j)
-    _swap_rows3(fw, i, j)
+    _swap_rows3(slots.axes, i, j)
     for c in range(mode.shape[1]):
         mode[i, c], mode[j, c] = mode[j, c], mode[i, c]
 
@@ -173,17 +196,6 @@ def _stage_nodes(rk_a):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _is_classic_rk4(rk_a, rk_b):  # pragma: no cover - compiled
-    """Whether the tableau is the classic fourth-order Runge-Kutta method (stepped written out)."""
-    return (
-        rk_b.shape[0] == 4
-        and rk_a[1, 0] == 0.5 and rk_a[2, 1] == 0.5 and rk_a[3, 2] == 1.0
-        and rk_a[2, 0] == 0.0 and rk_a[3, 0] == 0.0 and rk_a[3, 1] == 0.0
-        and rk_b[0] == 1.0 / 6.0 and rk_b[1] == 2.0 / 6.0 and rk_b[2] == 2.0 / 6.0 and rk_b[3] == 1.0 / 6.0
-    )  # fmt: skip
-
-
-@njit(cache=True, error_model="numpy")
 def _output_picks(C):  # pragma: no cover - compiled
     """picked[i] = j where row i of C is the unit vector e_j (y_i = x_j exactly), else -1."""
     n_y, n = C.shape
@@ -219,13 +231,12 @@ def _row_order(friction, n_batch):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _working_rows(vid, plant, control, friction, n_u):  # pragma: no cover - compiled
-    """The working copies in the order of vid: the plant's state and parameters by columns
-    and the bounds (x (n, B), pw (n_p, B), bw (n, B)); x0's rows (the controller's copy of the
-    state), cp, cs and the friction axes by rows."""
-    x0, p, _, bounds = plant
-    cp, cs0, _ = control
+def _working_rows(plant, controller, friction, n_u):  # pragma: no cover - compiled
+    """(rows, n_free): the working copies (:class:`WorkingRows`), the variants without friction
+    first (the first n_free, stepped together), then those with friction (stepped one by one)."""
+    x0, p, bounds, cp, cs0 = plant.x0, plant.p, plant.bounds, controller.cp, controller.cs0
     n_batch, n = x0.shape
+    vid, n_free = _row_order(friction, n_batch)
     x = np.empty((n, n_batch))
     xrow = np.empty((n_batch, n))
     pw = np.empty((p.shape[1], n_batch))
@@ -250,7 +261,31 @@ def _working_rows(vid, plant, control, friction, n_u):  # pragma: no cover - com
         for j in range(n_u):
             for c in range(len(FA)):
                 fw[b, j, c] = friction[fr, j, c]
-    return x, xrow, pw, cpw, cs, fw, bw
+    return WorkingRows(vid=vid, x=x, xrow=xrow, p=pw, cp=cpw, cs=cs, axes=fw, bounds=bw), n_free
+
+
+@njit(cache=True, error_model="numpy")
+def _friction_modes(axes, xrow):  # pragma: no cover - compiled
+    """The friction modes of every slot's axes at t_0 (Appendix A) from the initial states by
+    rows, xrow; no slot stopped (:class:`FrictionModes`)."""
+    n_batch, n_u = axes.shape[0], axes.shape[1]
+    modes = FrictionModes(
+        mode=np.zeros((n_batch, n_u), dtype=np.int64), direction=np.zeros((n_batch, n_u)),
+        hold=np.zeros((n_batch, n_u)), stopped=np.zeros(n_batch, dtype=np.bool_),
+    )  # fmt: skip
+    for b in range(n_batch):
+        initial_modes(axes[b], xrow[b], modes.mode[b], modes.direction[b], modes.hold[b])
+    return modes
+
+
+@njit(cache=True, error_model="numpy")
+def _slots(rows, modes, log):  # pragma: no cover - compiled
+    """The working slots (:class:`~nlcx.kernel.structures.Slots`) of the working rows, the
+    friction modes and the controller's log."""
+    return Slots(
+        vid=rows.vid, stopped=modes.stopped, x=rows.x, p=rows.p, bounds=rows.bounds, cp=rows.cp, cs=rows.cs, log=log,
+        axes=rows.axes, mode=modes.mode, direction=modes.direction, hold=modes.hold,
+    )  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
@@ -261,23 +296,21 @@ def _copy_row(src, i, dst, j):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _friction_scratch(n, n_u, n_p, n_stage, n_d):  # pragma: no cover - compiled
-    """Work space of the one-variant friction path, allocated once per :func:`simulate` call:
-    (x, x_new, x_mid, u) of the variant and the scratch tuple of
-    :func:`nlcx.kernel.friction.step_with_friction` (its ``one``: the variant as the single
-    column the plant's right-hand side takes)."""
-    one = (np.empty((n, 1)), np.empty((n_u, 1)), np.empty((n_p, 1)), np.empty((n, 1)))
-    k_stage = np.empty((n_stage, n))
-    scratch = (
-        k_stage, np.empty(n), np.empty(n_u), np.empty(n_u), np.empty(n_u),
-        np.empty((n_u, n_u)), np.empty(n_u), np.empty(n), np.empty(n_d), one,
+def _friction_work(n, n_u, n_p, n_stage, n_d):  # pragma: no cover - compiled
+    """Work space of the one-variant friction path (:class:`~nlcx.kernel.structures.FrictionWork`),
+    allocated once per :func:`simulate` call."""
+    one = OneColumn(x=np.empty((n, 1)), u=np.empty((n_u, 1)), p=np.empty((n_p, 1)), dx=np.empty((n, 1)))
+    scratch = FrictionScratch(
+        k_stage=np.empty((n_stage, n)), xs=np.empty(n), f=np.empty(n_u), u_total=np.empty(n_u), work=np.empty(n_u),
+        A=np.empty((n_u, n_u)), rhs_s=np.empty(n_u), dx=np.empty(n), d_tmp=np.empty(n_d), one=one,
     )  # fmt: skip
-    return (np.empty(n), np.empty(n), np.empty(n), np.empty(n_u)), scratch
+    return FrictionWork(x=np.empty(n), x_new=np.empty(n), x_mid=np.empty(n), u=np.empty(n_u), scratch=scratch)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _apply_elements(hook, t, dt, k, signal, vid, fns, table, ep, es, data):  # pragma: no cover - compiled
-    """Every loop element at ``hook`` acts on ``signal`` (the active rows), in table order."""
+    """Every loop element at ``hook`` acts on ``signal`` (the active rows), in table order
+    (:class:`~nlcx.kernel.structures.LoopElements`; ``es``: the elements' state)."""
     for e in range(table.shape[0]):
         if int(table[e, EE.hook]) == hook:
             fn = fns[int(table[e, EE.slot])]
@@ -329,8 +362,8 @@ def _sample(k, nb, vid, x, xrow, C, picked, y, ref, r, u, X):  # pragma: no cove
 @njit(cache=True, inline="always", error_model="numpy")
 def _record_inputs(k, nb, n, vid, u, uc, log, stopped, U, LOG, status, n_valid, fail_index):  # pragma: no cover
     """Record the logs and the applied input u_k of every active row and hold it by columns
-    in uc (the plant's input over the step); a row whose input is not finite stops (status,
-    failing input). Returns the number of rows stopped."""
+    in uc (the plant's input over the step); a row whose input is not finite stops (its
+    outcome: status, failing input). Returns the number of rows stopped."""
     record = LOG.shape[1] > 1
     n_stop = 0
     for b in range(nb):
@@ -365,15 +398,16 @@ def _clear_columns(start, stop, arrays):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _accept_states(k, nb, vid, x, x_new, bw, flat, stopped, status, n_valid, fail_index):  # pragma: no cover
+def _accept_states(k, nb, vid, x, bw, xf, xnf, bwf, stopped, status, n_valid, fail_index):  # pragma: no cover
     """x_{k+1} for every active variant; one whose state is non-finite or past its bound
-    stops (status and the first failing state). Returns the number of variants stopped.
+    stops (its outcome: status and the first failing state). Returns the number of variants
+    stopped.
 
-    One loop over the flat views ``flat`` = (x, x_new, bw) takes the new states of every column
-    and counts the states not finite or past their bounds (vector code); only if there are any
-    are the active variants examined one by one. The columns from nb on hold zeros
-    (:func:`_clear_columns`), and a variant its input stopped is not read again."""
-    xf, xnf, bwf = flat
+    One loop over the flat views (:class:`FlatViews`) of x, x_new and the bounds, xf, xnf and
+    bwf, takes the new states of every column and counts the states not finite or past their
+    bounds (vector code); only if there are any are the active variants examined one by one.
+    The columns from nb on hold zeros (:func:`_clear_columns`), and a variant its input stopped
+    is not read again."""
     n_bad = 0
     for q in range(xf.shape[0]):
         v = xnf[q]
@@ -400,77 +434,63 @@ def _accept_states(k, nb, vid, x, x_new, bw, flat, stopped, status, n_valid, fai
 
 
 @njit(cache=True, error_model="numpy")
-def _compact(nb, n_free, vid, rows, fw, state):  # pragma: no cover - compiled
-    """Move the stopped variants behind the active ones, keeping the frictionless rows in
-    front: a stopped frictionless row trades places with the last frictionless row, which
-    then trades with the last active row. Returns the new (nb, n_free)."""
-    x, pw, cpw, cs, log, bw = rows
-    mode, direction, hold, stopped = state
+def _compact(nb, n_free, slots):  # pragma: no cover - compiled
+    """Move the stopped variants behind the active ones, keeping the frictionless slots in
+    front: a stopped frictionless slot trades places with the last frictionless one, which
+    then trades with the last active one. Returns the new (nb, n_free)."""
+    stopped = slots.stopped
     b = 0
     while b < nb:
         if not stopped[b]:
             b += 1
             continue
         if b < n_free:
-            _swap_variants(b, n_free - 1, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode)
-            _swap_variants(n_free - 1, nb - 1, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode)
+            _swap_variants(b, n_free - 1, slots)
+            _swap_variants(n_free - 1, nb - 1, slots)
             n_free -= 1
         else:
-            _swap_variants(b, nb - 1, vid, stopped, x, pw, cpw, cs, log, bw, direction, hold, fw, mode)
+            _swap_variants(b, nb - 1, slots)
         nb -= 1
     return nb, n_free
 
 
 @njit(cache=True, error_model="numpy")
-def _signal_rows(n_batch, n_y, n_r, n_u, n_log):  # pragma: no cover - compiled
-    """Work arrays of the signals: y, r, u and the controller log (NaN until written) by rows,
-    and u by columns (the plant's input)."""
-    return (
-        np.empty((n_batch, n_y)),
-        np.empty((n_batch, n_r)),
-        np.empty((n_batch, n_u)),
-        np.full((n_batch, n_log), np.nan),
-        np.empty((n_u, n_batch)),
-    )
+def _signal_rows(xrow, n_y, n_r, n_u, n_log):  # pragma: no cover - compiled
+    """The work arrays of the signals (:class:`Signals`) beside the controller's copy of the
+    state, xrow."""
+    n_batch = xrow.shape[0]
+    return Signals(
+        xrow=xrow, y=np.empty((n_batch, n_y)), r=np.empty((n_batch, n_r)), u=np.empty((n_batch, n_u)),
+        log=np.full((n_batch, n_log), np.nan), uc=np.empty((n_u, n_batch)),
+    )  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
 def _stage_columns(n_batch, n):  # pragma: no cover - compiled
-    """Work arrays (n, B) of a Runge-Kutta step: x_{k+1}, a stage's input and (up to) four
-    stage derivatives, the latter zero where no right-hand side writes them (the columns of
-    variants with friction)."""
-    stages = (np.zeros((n, n_batch)), np.zeros((n, n_batch)), np.zeros((n, n_batch)), np.zeros((n, n_batch)))
-    return np.empty((n, n_batch)), np.empty((n, n_batch)), stages
+    """The work arrays of a Runge-Kutta step (:class:`StageColumns`)."""
+    k = (np.zeros((n, n_batch)), np.zeros((n, n_batch)), np.zeros((n, n_batch)), np.zeros((n, n_batch)))
+    return StageColumns(x_new=np.empty((n, n_batch)), xs=np.empty((n, n_batch)), k=k)
 
 
 @njit(cache=True, error_model="numpy")
-def _friction_state(fw, x):  # pragma: no cover - compiled
-    """(mode, direction, hold, stopped) of every row's friction axes at t_0 (Appendix A);
-    x: the initial states by rows."""
-    n_batch, n_u = fw.shape[0], fw.shape[1]
-    state = (np.zeros((n_batch, n_u), dtype=np.int64), np.zeros((n_batch, n_u)), np.zeros((n_batch, n_u)),
-             np.zeros(n_batch, dtype=np.bool_))  # fmt: skip
-    for b in range(n_batch):
-        initial_modes(fw[b], x[b], state[0][b], state[1][b], state[2][b])
-    return state
-
-
-@njit(cache=True, error_model="numpy")
-def _flat_views(x, xs, x_new, bw, stages):  # pragma: no cover - compiled
+def _flat_views(slots, stages):  # pragma: no cover - compiled
     """Flat views, made once, on the (n, B) arrays of a step: x, a stage's input, x_{k+1}, the
     bounds and the stage derivatives. The RK4 sums and the acceptance of x_{k+1} are one loop
     over every column, the inactive ones included (their values are never read again): a loop
     per state costs more than its work in a batch of a few variants."""
-    size = x.size
-    k1, k2, k3, k4 = stages
-    return (x.reshape(size), xs.reshape(size), x_new.reshape(size), bw.reshape(size),
-            k1.reshape(size), k2.reshape(size), k3.reshape(size), k4.reshape(size))  # fmt: skip
+    size = slots.x.size
+    k1, k2, k3, k4 = stages.k
+    return FlatViews(
+        x=slots.x.reshape(size), xs=stages.xs.reshape(size), x_new=stages.x_new.reshape(size),
+        bounds=slots.bounds.reshape(size), k1=k1.reshape(size), k2=k2.reshape(size), k3=k3.reshape(size),
+        k4=k4.reshape(size),
+    )  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
 def _init_outcome(n_steps, outcome):  # pragma: no cover - compiled
     """Every variant ok until it stops."""
-    status, n_valid, fail_index = outcome
+    status, n_valid, fail_index = outcome.status, outcome.n_valid, outcome.fail_index
     for v in range(status.shape[0]):
         status[v] = STATUS_OK
         fail_index[v] = -1
@@ -487,49 +507,39 @@ def _no_friction_recorded(k, nb, vid, stopped, FRICTION):  # pragma: no cover - 
             FRICTION[vid[b], k, j] = 0.0
 
 
-@njit(SIMULATE_SIG, cache=True, error_model="numpy")
-def simulate(
-    rhs, controller, callbacks, element_fns, tableau, plant, control, elements, forces, dt, records, outcome, frictional
-):  # pragma: no cover - compiled
-    """Integrate a batch of closed loops in lock step (see the module docstring): at t_k = k dt
-    y_k = C x_k, SENSOR elements, controller -> u_k, ACTUATOR elements; u_k held while the
-    tableau (rk_a, rk_b) integrates to t_{k+1}, disturbances at the stage times, friction on
-    each input's axis. A variant that goes non-finite or out of bounds stops and leaves the
-    batch (active variants lead the working rows; ``vid`` maps a row to its variant)."""
-    rk_a, rk_b = tableau
-    x0, p, C, _ = plant
-    ref = control[2]
-    X, U, LOG, _ = records
-    dist, dist_map, friction = forces
-    n_batch, n = x0.shape
-    n_u, n_steps = U.shape[2], X.shape[1] - 1
-    c = _stage_nodes(rk_a)
-    classic = _is_classic_rk4(rk_a, rk_b)
-    picked = _output_picks(C)
-    vid, n_free = _row_order(friction, n_batch)
-    x, xrow, pw, cpw, cs, fw, bw = _working_rows(vid, plant, control, friction, n_u)
-    y, r, u, log, uc = _signal_rows(n_batch, C.shape[0], ref.shape[2], n_u, LOG.shape[2])
-    x_new, xs, (k1, k2, k3, k4) = _stage_columns(n_batch, n)
-    xf, xsf, xnf, bwf, k1f, k2f, k3f, k4f = _flat_views(x, xs, x_new, bw, (k1, k2, k3, k4))
-    m = n * n_batch
-    state = _friction_state(fw, xrow)
-    _init_outcome(n_steps, outcome)
-    one_path = _friction_scratch(n, n_u, p.shape[1], rk_b.shape[0], dist.shape[3])
-    table, ep, es, data = elements[0], elements[1], elements[2].copy(), elements[3]
+@njit(cache=True, error_model="numpy")
+def _step_batch(
+    integration, plant, controller, elements, forces, records, outcome, friction_path, slots, n_free, signals, stages,
+    work,
+):  # pragma: no cover - compiled  # fmt: skip
+    """The sampling steps of :func:`simulate` over its working slots, signals, stage columns and
+    friction work space, until every variant stopped or reached t_K."""
+    rhs, C, ref, step, callbacks = plant.rhs, plant.C, controller.ref, controller.step, controller.callbacks
+    X, U, LOG, FRICTION = records.X, records.U, records.LOG, records.FRICTION
+    dist, dist_map, dt = forces.dist, forces.dist_map, integration.dt
+    vid, stopped, x, pw, bw, cpw, cs = slots.vid, slots.stopped, slots.x, slots.p, slots.bounds, slots.cp, slots.cs
+    log, status, n_valid, fail_index = slots.log, outcome.status, outcome.n_valid, outcome.fail_index
+    xrow, y, r, u, uc = signals.xrow, signals.y, signals.r, signals.u, signals.uc
+    x_new, xs, (k1, k2, k3, k4) = stages.x_new, stages.xs, stages.k
+    flat = _flat_views(slots, stages)
+    xf, xsf, xnf, bwf, k1f, k2f, k3f, k4f = flat.x, flat.xs, flat.x_new, flat.bounds, flat.k1, flat.k2, flat.k3, flat.k4
+    rk_a, rk_b, classic = integration.rk_a, integration.rk_b, integration.method == CLASSIC_RK4
+    c, picked, stage_k = _stage_nodes(rk_a), _output_picks(C), stages.k
+    fns, table, ep, es, data = elements.functions, elements.table, elements.ep, elements.es0.copy(), elements.data
     n_sensor, n_actuator = _hook_counts(table)
-    (status, n_valid, fail_index), FRICTION, stopped, nb = outcome, records[3], state[3], n_batch
+    n_steps, nb, m = X.shape[1] - 1, x.shape[1], x.size
     yv, rv, uv, xv, cpv, csv, logv = y, r, u, xrow, cpw, cs, log
     for k in range(n_steps + 1):
         t = k * dt
         _sample(k, nb, vid, x, xrow, C, picked, y, ref, r, u, X)
         if n_sensor > 0:  # (a call handing over the function table costs even when it does nothing)
-            _apply_elements(SENSOR, t, dt, k, yv, vid, element_fns, table, ep, es, data)
-        controller(t, dt, xv, yv, rv, cpv, csv, uv, logv, callbacks)
+            _apply_elements(SENSOR, t, dt, k, yv, vid, fns, table, ep, es, data)
+        step(t, dt, xv, yv, rv, cpv, csv, uv, logv, callbacks)
         if n_actuator > 0:
-            _apply_elements(ACTUATOR, t, dt, k, uv, vid, element_fns, table, ep, es, data)
-        n_stop = _record_inputs(k, nb, n, vid, u, uc, log, stopped, U, LOG, status, n_valid, fail_index)
+            _apply_elements(ACTUATOR, t, dt, k, uv, vid, fns, table, ep, es, data)
+        n_stop = _record_inputs(k, nb, x.shape[0], vid, u, uc, log, stopped, U, LOG, status, n_valid, fail_index)
         if nb > n_free:
-            frictional[0](rhs, t, k, nb, n_free, vid, x, u, pw, fw, state, forces, one_path, records)
+            friction_path.sample(rhs, t, k, nb, n_free, slots, u, forces, work, records)
         elif FRICTION.shape[1] > 1:
             _no_friction_recorded(k, nb, vid, stopped, FRICTION)
         if k < n_steps and nb > n_stop:
@@ -552,16 +562,37 @@ def simulate(
                 for q in range(m):
                     xnf[q] = xf[q] + dt / 6.0 * (k1f[q] + 2.0 * (k2f[q] + k3f[q]) + k4f[q])
             elif n_free > 0:
-                _rk_step_batch(rhs, t, dt, n_free, x, x_new, uc, pw, dist, vid, kd, dist_map, rk_a, rk_b, c,
-                               (k1, k2, k3, k4), xs)  # fmt: skip
+                _rk_step_batch(
+                    rhs, t, dt, n_free, x, x_new, uc, pw, dist, vid, kd, dist_map, rk_a, rk_b, c, stage_k, xs
+                )
             if nb > n_free:
-                frictional[1](rhs, t, dt, kd, nb, n_free, vid, x, x_new, u, pw, fw, state, forces, one_path,
-                              tableau, c)  # fmt: skip
-            n_stop += _accept_states(k, nb, vid, x, x_new, bw, (xf, xnf, bwf), stopped, status, n_valid, fail_index)
+                friction_path.step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c)
+            n_stop += _accept_states(k, nb, vid, x, bw, xf, xnf, bwf, stopped, status, n_valid, fail_index)
         if n_stop > 0:
             nb_before = nb
-            nb, n_free = _compact(nb, n_free, vid, (x, pw, cpw, cs, log, bw), fw, state)
+            nb, n_free = _compact(nb, n_free, slots)
             _clear_columns(nb, nb_before, (x, x_new, k1, k2, k3, k4))
             if nb == 0:
                 break
             yv, rv, uv, xv, cpv, csv, logv = y[:nb], r[:nb], u[:nb], xrow[:nb], cpw[:nb], cs[:nb], log[:nb]
+
+
+@njit(SIMULATE_SIG, cache=True, error_model="numpy")
+def simulate(integration, plant, controller, elements, forces, records, outcome, friction_path):  # pragma: no cover
+    """Integrate a batch of closed loops in lock step (see the module docstring): at t_k = k dt
+    y_k = C x_k, SENSOR elements, controller -> u_k, ACTUATOR elements; u_k held while the
+    method of ``integration`` integrates to t_{k+1}, disturbances at the stage times, friction
+    on each input's axis. A variant that goes non-finite or out of bounds stops and leaves the
+    batch (active variants lead the working slots; ``slots.vid`` maps a slot to its variant).
+    The arguments are the structures of :mod:`nlcx.kernel.structures`; the kernel writes
+    ``records`` and ``outcome``."""
+    n_batch, n = plant.x0.shape
+    n_u = records.U.shape[2]
+    rows, n_free = _working_rows(plant, controller, forces.friction, n_u)
+    signals = _signal_rows(rows.xrow, plant.C.shape[0], controller.ref.shape[2], n_u, records.LOG.shape[2])
+    stages = _stage_columns(n_batch, n)
+    modes = _friction_modes(rows.axes, rows.xrow)
+    _init_outcome(records.X.shape[1] - 1, outcome)
+    work = _friction_work(n, n_u, plant.p.shape[1], integration.rk_b.shape[0], forces.dist.shape[3])
+    _step_batch(integration, plant, controller, elements, forces, records, outcome, friction_path,
+                _slots(rows, modes, signals.log), n_free, signals, stages, work)  # fmt: skip

@@ -25,6 +25,8 @@ import math
 
 from numba import njit
 
+from nlcx._numba_compat import hot_njit
+
 #: Batches of at least this many variants take :func:`sincos_column`; smaller ones call
 #: :func:`sincos` per variant. Below it the column's fixed costs (its work array, and no full
 #: AVX-512 vector of 8 angles) outweigh what vector code saves; both paths give the same bits.
@@ -107,7 +109,7 @@ def _sincos_reduced(x):  # pragma: no cover - compiled
     return _sincos_of(x, y0, y1, int(fn) & 3)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def sincos_column(angles, nb, sines, cosines):  # pragma: no cover - compiled
     """sines[b] = sin angles[b], cosines[b] = cos angles[b] for the first nb angles.
 

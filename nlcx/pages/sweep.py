@@ -57,21 +57,13 @@ def described(values: pd.Series, shown: int = 12) -> str:
     return f"{len(levels)} distinct values: " + ", ".join(levels[:shown]) + more
 
 
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _grid(plt: Any, n_panels: int) -> tuple[Any, np.ndarray]:
+def _grid(n_panels: int) -> tuple[Any, np.ndarray]:
     """A figure of ``n_panels`` small axes, four a row, spaced by fixed margins (tight_layout
-    measures every label of every axes: seconds for a sweep's ~50 panels)."""
+    measures every label of every axes, slow for a sweep's ~50 panels); drawn without pyplot
+    (:func:`nlcx.drawing.new_figure`)."""
     cols = 4
     rows = max(1, -(-n_panels // cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.4 * rows), squeeze=False)
+    fig, axes = drawing.new_figure(rows, cols, (3.2 * cols, 2.4 * rows))
     fig.subplots_adjust(left=0.05, right=0.98, bottom=0.6 / (2.4 * rows), top=1 - 0.6 / (2.4 * rows),
                         wspace=0.35, hspace=0.55)  # fmt: skip
     for ax in list(axes.flat)[n_panels:]:
@@ -81,11 +73,10 @@ def _grid(plt: Any, n_panels: int) -> tuple[Any, np.ndarray]:
 
 def distribution_figure(metrics: pd.DataFrame, path: Path) -> None:
     """One box plot per (signal, metric), a box per controller."""
-    plt = _pyplot()
     ok = metrics[metrics.status == "ok"]
     keys = list(dict.fromkeys(zip(ok.signal, ok.metric, strict=True)))
     controllers = list(dict.fromkeys(ok.controller))
-    fig, axes = _grid(plt, len(keys))
+    fig, axes = _grid(len(keys))
     for ax, (signal, metric) in zip(axes.flat, keys, strict=False):
         data = [
             ok[(ok.signal == signal) & (ok.metric == metric) & (ok.controller == c)].value.astype(float)
@@ -95,16 +86,14 @@ def distribution_figure(metrics: pd.DataFrame, path: Path) -> None:
         ax.set_title(f"{signal} {metric}", fontsize=9)
         ax.tick_params(labelsize=7)
     drawing.write_figure(path, fig)
-    plt.close(fig)
 
 
 def parameter_figure(metrics: pd.DataFrame, index: pd.DataFrame, column: str, path: Path) -> None:
     """Every (signal, metric) against one varied parameter, a colour per controller."""
-    plt = _pyplot()
     ok = metrics[metrics.status == "ok"].merge(index[["variant", column]], on="variant")
     keys = list(dict.fromkeys(zip(ok.signal, ok.metric, strict=True)))
     numeric = pd.api.types.is_numeric_dtype(index[column])
-    fig, axes = _grid(plt, len(keys))
+    fig, axes = _grid(len(keys))
     levels = {v: i for i, v in enumerate(dict.fromkeys(index[column].astype(str)))}
     for ax, (signal, metric) in zip(axes.flat, keys, strict=False):
         for k, (controller, rows_c) in enumerate(
@@ -119,7 +108,6 @@ def parameter_figure(metrics: pd.DataFrame, index: pd.DataFrame, column: str, pa
     axes.flat[0].legend(fontsize=7)
     fig.suptitle(column.removeprefix("value:"), fontsize=10)
     drawing.write_figure(path, fig)
-    plt.close(fig)
 
 
 def context(directory: Path) -> dict[str, Any]:

@@ -65,7 +65,7 @@ def _label(row: pd.Series, extra: str = "") -> str:
 
 def _number(value: object) -> float:
     try:
-        return float(value)  # type: ignore[arg-type]
+        return float(value)  # type: ignore[arg-type]  # any cell: what float() refuses is NaN
     except (TypeError, ValueError):
         return math.nan
 

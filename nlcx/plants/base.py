@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 from numba.core.errors import NumbaError
@@ -110,8 +110,15 @@ class Plant:
         raise KeyError(name)
 
 
-class PlantModel:
-    """A registered plant. Subclasses set the class attributes and :meth:`parameter_vector`."""
+#: A plant's parameter model: the type of the ``params`` its :class:`PlantModel` methods receive.
+ParamsT = TypeVar("ParamsT", bound=PlantParams)
+
+
+class PlantModel(Generic[ParamsT]):
+    """A registered plant. Subclasses set the class attributes and :meth:`parameter_vector`.
+
+    A subclass names its parameter model twice: as :attr:`Params` (validated at run time) and as
+    the type argument (``class PendulumModel(PlantModel[PendulumParams])``) its methods' ``params`` has."""
 
     Params: ClassVar[type[PlantParams]] = PlantParams
     states: ClassVar[tuple[Signal, ...]] = ()
@@ -148,36 +155,36 @@ class PlantModel:
             )
         cls.rhs = staticmethod(rhs)
 
-    def parameter_vector(self, params: PlantParams) -> np.ndarray:
+    def parameter_vector(self, params: ParamsT) -> np.ndarray:
         """The parameter vector p the right-hand side reads."""
         raise NotImplementedError
 
-    def select_rhs(self, params: PlantParams) -> Any:
+    def select_rhs(self, params: ParamsT) -> Any:
         """The compiled right-hand side for these parameters (e.g. a model variant)."""
         return self.rhs
 
-    def weight(self, params: PlantParams) -> float | None:
+    def weight(self, params: ParamsT) -> float | None:
         """Weight of the moving assembly (the normal force of friction), if defined."""
         return None
 
-    def operating_point(self, params: PlantParams) -> dict[str, float]:
+    def operating_point(self, params: ParamsT) -> dict[str, float]:
         """The equilibrium state the plant is operated about (default: every state 0).
 
         It is also the default initial state."""
         return {}
 
-    def energy(self, params: PlantParams) -> Callable[[np.ndarray], np.ndarray] | None:
+    def energy(self, params: ParamsT) -> Callable[[np.ndarray], np.ndarray] | None:
         """Total mechanical energy E(x) (vectorised over leading axes), if defined."""
         return None
 
-    def power(self, params: PlantParams) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+    def power(self, params: ParamsT) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
         """Power delivered by the inputs, P(x, u) = sum F_i v_i, if defined."""
         return None
 
     def build(
         self,
         name: str,
-        params: PlantParams,
+        params: ParamsT,
         x0: Mapping[str, float],
         bounds: Mapping[str, float],
         path: str = "plant",
@@ -267,21 +274,37 @@ def equilibrium_input(plant: Plant, x_eq: np.ndarray | None = None, tol: float =
 
 
 def linearize(
-    plant: Plant, x_op: np.ndarray | None = None, u_op: np.ndarray | None = None, h: float = 1e-6
+    plant: Plant,
+    x_op: np.ndarray | None = None,
+    u_op: np.ndarray | None = None,
+    h: float = 1e-6,
+    relative: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(A, B, C) of dx/dt = f(x, u) about (x_op, u_op) by central differences (y = C x).
+    """(A, B, C) of dx/dt = f(x, u) about (x_op, u_op) by central differences (y = C x): column
+    j of A is (f(x + h_j e_j, u) - f(x - h_j e_j, u)) / (2 h_j), and B's likewise in u.
 
     Defaults: the operating point and the input that holds it (:func:`equilibrium_input`).
+    The step h_j is ``h``, or with ``relative`` h max(1, |x_j|) (|u_j| for B): a step that
+    grows with a large coordinate (e.g. a temperature in K) stays above its rounding.
     """
-    n, m = len(plant.states), len(plant.inputs)
     op = plant.features.x_op
-    x0 = (op if op is not None else np.zeros(n)) if x_op is None else np.asarray(x_op, float)
+    x0 = (op if op is not None else np.zeros(len(plant.states))) if x_op is None else np.asarray(x_op, float)
     u0 = equilibrium_input(plant, x0) if u_op is None else np.asarray(u_op, float)
-
-    f = plant.f
-    A = np.column_stack([(f(x0 + h * e, u0) - f(x0 - h * e, u0)) / (2 * h) for e in np.eye(n)])
-    B = np.column_stack([(f(x0, u0 + h * e) - f(x0, u0 - h * e)) / (2 * h) for e in np.eye(m)])
+    A = _central_differences(lambda dx: plant.f(x0 + dx, u0), x0, h, relative)
+    B = _central_differences(lambda du: plant.f(x0, u0 + du), u0, h, relative)
     return A, B, plant.C.copy()
+
+
+def _central_differences(f: Callable[[np.ndarray], np.ndarray], at: np.ndarray, h: float, relative: bool) -> np.ndarray:
+    """The Jacobian of ``f(d)``, a function of a deviation d from ``at``, by central differences
+    (see :func:`linearize`): one column a coordinate of ``at``."""
+    steps = h * np.maximum(1.0, np.abs(at)) if relative else np.full(at.size, h)
+    columns = []
+    for j, step in enumerate(steps):
+        d = np.zeros(at.size)
+        d[j] = step
+        columns.append((f(d) - f(-d)) / (2 * step))
+    return np.column_stack(columns)
 
 
 def evaluate_rhs(rhs: Any, x: Any, u: Any, p: Any, t: float = 0.0) -> np.ndarray:

@@ -16,9 +16,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from pydantic import Field
 
+from nlcx._numba_compat import hot_njit
 from nlcx.layout import Layout
 from nlcx.plants.base import PlantModel, PlantParams, Signal
 
@@ -36,7 +36,7 @@ PARAMS = Layout("cstr", ("k1", "k2", "k3", "CAf"))
 K = PARAMS.at
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def cstr_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """Eqs. 5.1-5.2 for each of the first nb columns (variants) b: p[:, b] a :data:`PARAMS`
     block, u[:, b] = (F/V,)."""

@@ -100,7 +100,7 @@ def by_variant(equations, t, x, u, p, dx, nb):  # pragma: no cover - compiled
             dx[i, b] = dx_b[i]
 
 
-class PendulumModel(PlantModel):
+class PendulumModel(PlantModel[PendulumParams]):
     """Base of the pendulum plants: parameters p = (M, m, l, g), energy, power, weight.
 
     Subclasses set the metadata of :class:`~nlcx.plants.base.PlantModel` and three

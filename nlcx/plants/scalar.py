@@ -103,7 +103,7 @@ def compile_scalar(f: Callable[..., Any], declared: _Declared) -> tuple[Any, typ
     from numba import njit
 
     names = [name for name, *_ in declared.params]
-    params_type = NamedTuple(f"{declared.name}_p", [(name, float) for name in names])  # type: ignore[misc]
+    params_type = NamedTuple(f"{declared.name}_p", [(name, float) for name in names])  # type: ignore[misc]  # fields known at run time only
     scalar = f if hasattr(f, "py_func") else njit(error_model="numpy")(f)
     return scalar, params_type
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-from numba import njit
 from pydantic import Field, field_validator, model_validator
 
+from nlcx._numba_compat import hot_njit
 from nlcx.plants.base import (
     Plant,
     PlantModel,
@@ -46,7 +46,7 @@ class TransferFunctionParams(PlantParams):
         return self
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def companion_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """Controllable canonical form for each of the first nb columns (variants) b:
     x_i' = x_{i+1}, x_n' = -sum_j a_j x_{j+1} + u, p[:, b] = a_0..a_{n-1}."""

@@ -16,6 +16,7 @@ from types import MappingProxyType
 
 from numba import njit
 
+from nlcx._numba_compat import hot_njit
 from nlcx.kernel.trig import COLUMN_ROWS, sincos, sincos_column
 from nlcx.plants.generated.pendulums import x_derived_rhs, x_energy
 from nlcx.plants.pendulum import (
@@ -48,7 +49,7 @@ def _x_printed_column(b, x, u, p, dx, s, c):  # pragma: no cover - compiled
     dx[3, b] = (-m * l * c * s * theta_dot * theta_dot - c * F + (M + m) * g * s) / (l * den)  # eq. 2.11
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def x_pendulum_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """Eqs. 2.8-2.11 as printed, for each of the first nb columns (variants) of x.
 

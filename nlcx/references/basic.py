@@ -31,7 +31,7 @@ class StepConfig(ReferenceConfig):
 class FilteredStepConfig(StepConfig):
     kind: Literal["filtered_step"] = Field(
         "filtered_step", description="registered name of this reference; selects the model that validates this section"
-    )  # type: ignore[assignment]
+    )  # type: ignore[assignment]  # a subclass narrows the kind literal that selects its model
     time_constant: float = Field(
         gt=0,
         description="time constant T_f of the first-order prefilter 1 / (T_f s + 1) on the step",

@@ -120,6 +120,7 @@ class Objective:
         rows = table[table.controller == label]
         unstable = (rows.run_status != "ok").any()
         values = metric_lookup(rows)
+        cell: Any  # a row of the cells table: its signal, metric (str) and printed value (float)
         for k, cell in enumerate(self.cells.itertuples(index=False)):
             ours = lookup_value(values, label, cell.signal, cell.metric)
             scale = max(abs(cell.value), FLOORS.get(cell.metric, 0.05))
@@ -160,7 +161,8 @@ def calibrate(
     residuals = objective.residuals(table, "c0")
     fit = objective.cells.copy()
     values = metric_lookup(table)
-    fit["nlcx"] = [lookup_value(values, "c0", c.signal, c.metric) for c in objective.cells.itertuples()]
+    cells = objective.cells
+    fit["nlcx"] = [lookup_value(values, "c0", s, m) for s, m in zip(cells.signal, cells.metric, strict=True)]
     fit["residual"] = residuals
     fit = fit.rename(columns={"value": "thesis"})
     tuning = pd.DataFrame(

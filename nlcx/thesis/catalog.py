@@ -10,6 +10,7 @@ nominal or disturbed stabilisation figure it quantifies.
 from __future__ import annotations
 
 import csv
+import io
 import re
 from dataclasses import dataclass
 from functools import cache
@@ -118,50 +119,56 @@ def clean_title(title: str) -> str:
     return re.sub(r"_\{([^}]*)\}", r"\1", title)
 
 
+def _open(name: str) -> io.StringIO:
+    """The data file ``name`` as text, its line ends as written (what ``open(newline="")`` gives
+    the csv module)."""
+    return io.StringIO((DATA / name).read_bytes().decode("utf-8"), newline="")
+
+
 def _read(name: str) -> list[dict[str, str]]:
-    with (DATA / name).open(newline="", encoding="utf-8") as fh:
+    with _open(name) as fh:
         return list(csv.DictReader(fh))
 
 
 @cache
 def thesis_metrics() -> pd.DataFrame:
     """Tables 2.3-2.6, 3.2-3.5, 3.7-3.10, 4.2-4.5 in long form."""
-    with (DATA / "pendulum_metrics.csv").open(newline="", encoding="utf-8") as fh:
+    with _open("pendulum_metrics.csv") as fh:
         return pd.read_csv(fh, dtype={"table": str})
 
 
 @cache
 def cstr_table() -> pd.DataFrame:
     """Table 5.8 and the inverse-response magnitudes of sections 5.3-5.4."""
-    with (DATA / "cstr_table_5_8.csv").open(newline="", encoding="utf-8") as fh:
+    with _open("cstr_table_5_8.csv") as fh:
         return pd.read_csv(fh)
 
 
 @cache
 def fuzzy_sets() -> pd.DataFrame:
     """Tables 5.3-5.7."""
-    with (DATA / "cstr_fuzzy_sets.csv").open(newline="", encoding="utf-8") as fh:
+    with _open("cstr_fuzzy_sets.csv") as fh:
         return pd.read_csv(fh)
 
 
 @cache
 def fuzzy_universes() -> pd.DataFrame:
     """Table 5.2."""
-    with (DATA / "cstr_fuzzy_universes.csv").open(newline="", encoding="utf-8") as fh:
+    with _open("cstr_fuzzy_universes.csv") as fh:
         return pd.read_csv(fh)
 
 
 @cache
 def gain_ranges() -> pd.DataFrame:
     """Tables 2.2, 3.1, 3.6, 4.1: min and max of k_p, k_i, k_d of every AGS loop."""
-    with (DATA / "ags_gain_ranges.csv").open(newline="", encoding="utf-8") as fh:
+    with _open("ags_gain_ranges.csv") as fh:
         return pd.read_csv(fh, dtype={"table": str})
 
 
 @cache
 def ags_rates() -> pd.DataFrame:
     """Section 2.3: the rates k of the AGS schedules (blank where the thesis prints none)."""
-    with (DATA / "ags_rates.csv").open(newline="", encoding="utf-8") as fh:
+    with _open("ags_rates.csv") as fh:
         return pd.read_csv(fh)
 
 

@@ -356,6 +356,7 @@ def twins(cells: pd.DataFrame) -> list[list[int]]:
     """Groups of cells (row positions) the thesis prints alike for mirror signals: y.Mp with
     x.Mp when both print the same value, and so on; every other cell alone."""
     groups: dict[tuple[str, str, float], list[int]] = {}
+    row: Any  # a row of ``cells``: its signal, metric (str) and printed value (float)
     for i, row in enumerate(cells.itertuples(index=False)):
         groups.setdefault((MIRROR.get(row.signal, row.signal), row.metric, row.value), []).append(i)
     return list(groups.values())
@@ -396,7 +397,7 @@ class Evidence:
 
 
 def evidence(cells: pd.DataFrame, groups: list[list[int]], loops: pd.DataFrame, tolerance: float) -> Evidence:
-    scale = np.maximum(cells.value.abs(), cells.metric.map(FLOORS)).to_numpy()
+    scale = np.maximum(cells.value.abs().to_numpy(), cells.metric.map(FLOORS).to_numpy())
     miss = np.abs(loops[list(cells.cell)].to_numpy(float) - cells.value.to_numpy()) / scale
     return Evidence(loops, *group_hits(hits(loops, cells, tolerance), miss, groups))
 
@@ -467,8 +468,9 @@ def cell_table(
 ) -> list[dict[str, Any]]:
     """Per cell: printed, the value of the loop nearest the whole column (least loss), the
     range the loops reach, and how many hit it."""
-    nearest = loops.loc[loops.loss.idxmin()]
+    nearest = loops.iloc[int(loops.loss.argmin())]
     rows = []
+    cell: Any  # a row of ``cells``: its cell name (a column of ``loops``) and printed value
     for i, cell in enumerate(cells.itertuples(index=False)):
         values = loops[cell.cell].to_numpy(dtype=float)
         finite = values[np.isfinite(values)]
@@ -506,16 +508,12 @@ def subset_table(
 
 def figure(clouds: dict[str, pd.DataFrame], path: Path) -> None:
     """Per column: x rise time against x overshoot of every loop examined, and the printed pair."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from nlcx.drawing import atomic_write, new_figure
 
     n = len(clouds)
     cols = min(4, n)
-    fig, axes = plt.subplots(
-        (n + cols - 1) // cols, cols, figsize=(3.4 * cols, 3.0 * ((n + cols - 1) // cols)), squeeze=False
-    )
+    n_rows = (n + cols - 1) // cols
+    fig, axes = new_figure(n_rows, cols, (3.4 * cols, 3.0 * n_rows))
     for ax, (table, loops) in zip(axes.flat, clouds.items(), strict=False):
         cells = column_cells(table).set_index("cell").value
         for source, rows in loops.groupby("source"):
@@ -532,7 +530,4 @@ def figure(clouds: dict[str, pd.DataFrame], path: Path) -> None:
     for handle in legend.legend_handles:  # the same modest marker for the dots and the star
         handle.set_sizes([30.0])
     fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))

@@ -133,7 +133,9 @@ def cell_values(results: list[engine.Result], cells: pd.DataFrame, n_candidates:
     (candidate-major, tables in the order of ``cells``)."""
     tables = list(dict.fromkeys(cells.table))
     out = np.full((len(cells), n_candidates), np.nan)
-    of_table = {t: [(i, c) for i, c in enumerate(cells.itertuples(index=False)) if c.table == t] for t in tables}
+    of_table: dict[str, list[tuple[int, Any]]] = {  # a cell: a row of ``cells``, its columns by name
+        t: [(i, c) for i, c in enumerate(cells.itertuples(index=False)) if c.table == t] for t in tables
+    }
     for k in range(n_candidates):
         for t_index, table in enumerate(tables):
             result = results[k * len(tables) + t_index]
@@ -446,14 +448,12 @@ def write_profile(out_dir: Path, best: pd.Series) -> None:
 def ranking_figure(ranking: pd.DataFrame, path: Path, top: int = 8) -> None:
     """Train, validation and test median relative error of the top hypotheses beside the
     literal one, as horizontal bars (the hypotheses' names are long)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from nlcx.drawing import atomic_write, new_figure
 
     shown = pd.concat([ranking.head(top), ranking[ranking.hypothesis == "literal"]]).drop_duplicates("hypothesis")
     y = np.arange(len(shown))[::-1]
-    fig, ax = plt.subplots(figsize=(11.0, 1.0 + 0.55 * len(shown)))
+    fig, axes = new_figure(1, 1, (11.0, 1.0 + 0.55 * len(shown)))
+    ax = axes[0, 0]
     for i, part in enumerate(split.PARTS):
         ax.barh(y + (1 - i) * 0.27, shown[f"{part}_median_rel_error"], height=0.27, label=part)
     ax.set_yticks(y, [f"{r}. {h.replace('+', ' + ')}" for r, h in zip(shown["rank"], shown.hypothesis, strict=True)],
@@ -463,7 +463,4 @@ def ranking_figure(ranking: pd.DataFrame, path: Path, top: int = 8) -> None:
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.grid(True, axis="x", alpha=0.3)
     fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))

@@ -88,6 +88,7 @@ def measure(runs: MethodRuns, hyp: hypotheses.Hypothesis, candidates: list[dict[
             label = runs.files[method][1]
             if not any(run.label == label and run.status == "ok" for run in result.runs):
                 continue
+            cell: Any  # a row of ``cells``: its method, metric and printed value
             for i, cell in enumerate(cells.itertuples(index=False)):
                 if cell.method == method:
                     out[i, k] = _value(result.metrics, label, METRIC[cell.metric])

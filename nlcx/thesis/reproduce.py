@@ -232,9 +232,9 @@ def reproduce(
         if spec.kind in ("lyapunov", "membership"):
             _write_figure(spec, records, out_dir)
     written_tables = {}
-    for spec in tabs:
-        written_tables[spec.table] = _table(spec, records, root)
-        report.write_csv(out_dir / "tables" / spec.filename, written_tables[spec.table])
+    for table in tabs:
+        written_tables[table.table] = _table(table, records, root)
+        report.write_csv(out_dir / "tables" / table.filename, written_tables[table.table])
     summary: dict[str, Any] = {"figures": [f.figure for f in figs], "tables": sorted(written_tables)}
     if not only and 5 in {f.chapter for f in figs}:
         summary["zn_variants"] = cstr.zn_variants(root, out_dir)

@@ -94,9 +94,8 @@ class AnfisModel:
     def memberships(self, X: Any) -> tuple[np.ndarray, np.ndarray]:
         """mu_{1,i}(x1) and mu_{2,j}(x2), each (N, n)."""
         X = _as_inputs(X)
-        return tuple(  # type: ignore[return-value]
-            _mf(self.mf, X[:, d, None], self.centres[d], self.widths[d], self.slopes[d]) for d in range(2)
-        )
+        first, second = (_mf(self.mf, X[:, d, None], self.centres[d], self.widths[d], self.slopes[d]) for d in range(2))
+        return first, second
 
     def rule_outputs(self, X: Any) -> np.ndarray:
         """f_r = p_r x1 + q_r x2 + r_r, (N, n^2)."""
@@ -164,7 +163,10 @@ class AnfisModel:
     @classmethod
     def from_config(cls, cfg: Any) -> AnfisModel:
         """From :meth:`to_config`'s mapping (or a pydantic model with the same fields)."""
-        get = cfg.get if isinstance(cfg, dict) else lambda key: getattr(cfg, key)
+
+        def get(key: str) -> Any:
+            return cfg.get(key) if isinstance(cfg, dict) else getattr(cfg, key)
+
         n = int(get("n_mfs"))
         slopes = get("slopes")
         if slopes is None:

@@ -15,9 +15,9 @@ import math
 from typing import Literal
 
 import numpy as np
-from numba import njit
 from pydantic import Field
 
+from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
 from nlcx.layout import Layout
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
@@ -41,7 +41,7 @@ class ActuatorLagConfig(UncertaintyConfig):
     inputs: list[str] | None = Field(None, description="inputs that are lagged, by name; default: every input")
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def first_order_lag(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
     """v = v + alpha (u - v) on every lagged input of every row; u becomes v."""
     for b in range(signal.shape[0]):

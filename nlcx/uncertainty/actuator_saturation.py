@@ -1,8 +1,11 @@
-"""Actuator saturation |u_j| <= u_max on the applied inputs: an ACTUATOR loop element.
+"""Actuator saturation |u_j| <= u_max: the one clamp of nlcx, and the ACTUATOR loop element that applies it.
 
-Unlike the PID's own ``saturation`` (which also guards its integrators against windup), this
-element limits what any controller commands (a single neuron's, a preview controller's), as
-a physical actuator does: the controller does not see the clipped value.
+:func:`saturate` is the clamp; two things apply it:
+
+- this element, to what any controller commands (a single neuron's, a preview controller's),
+  as a physical actuator does: the controller does not see the clipped value;
+- the PID's own ``saturation`` (:mod:`nlcx.controllers.pid`), which also guards its
+  integrators against windup.
 
     u_j <- min(max(u_j, -u_max), u_max)   for every limited input j
 """
@@ -12,9 +15,9 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from numba import njit
 from pydantic import Field
 
+from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
 from nlcx.layout import Layout
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
@@ -34,14 +37,20 @@ class ActuatorSaturationConfig(UncertaintyConfig):
     inputs: list[str] | None = Field(None, description="inputs that are limited, by name; default: every input")
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, inline="always", error_model="numpy")
+def saturate(u, limit):  # pragma: no cover - compiled
+    """u clipped to [-limit, limit] (limit inf: u): the actuator's saturation, which this element
+    and the PID's ``saturation`` apply."""
+    return min(max(u, -limit), limit)
+
+
+@hot_njit(cache=True, error_model="numpy")
 def saturate_inputs(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
-    """Clip every limited input of every row to [-u_max, u_max]."""
+    """Clip every limited input of every row to [-u_max, u_max] (:func:`saturate`)."""
     for b in range(signal.shape[0]):
         v_id = vid[b]
         for j in range(signal.shape[1]):
-            u_max = ep[v_id, p_off + len(M) * j + M.u_max]
-            signal[b, j] = min(max(signal[b, j], -u_max), u_max)
+            signal[b, j] = saturate(signal[b, j], ep[v_id, p_off + len(M) * j + M.u_max])
 
 
 class ActuatorSaturation(UncertaintyModel):

@@ -13,9 +13,9 @@ import math
 from typing import Literal
 
 import numpy as np
-from numba import njit
 from pydantic import Field
 
+from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
@@ -65,6 +65,7 @@ class Noise(UncertaintyModel):
         dt = float(t[1] - t[0])
         hold = max(1, round(cfg.sample_time / dt))
         n_samples = -(-t.size // hold)
+        assert hooks.rng is not None  # set before each uncertainty's apply
         draws = hooks.rng.standard_normal((n_samples, len(chosen)))
         sigma = math.sqrt(cfg.power / (hold * dt))
         values = np.zeros((t.size, len(names)))
@@ -81,7 +82,7 @@ class Noise(UncertaintyModel):
         add_sequence(hooks, "sensor" if measured else "actuator", values)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def add_samples(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
     """signal[b, j] += data[variant of b, k, d_off + j]: a sampled sequence added to every
     channel of the signal (the noise sample of each output or input at t_k)."""

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
+from nlcx._numba_compat import hot_njit
 from nlcx.kernel.trig import COLUMN_ROWS, sincos, sincos_column
 
 
@@ -54,7 +55,7 @@ def _x_derived_column(b, x, u, p, dx, sin_theta, cos_theta):  # pragma: no cover
     dx[3, b] = a1
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def x_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """The x inverted pendulum derived from eqs. 2.1, 2.4-2.6 (Lagrange eqs. 2.2, 2.7).
 
@@ -145,7 +146,7 @@ def _xy_derived_column(b, x, u, p, dx, sin_theta, cos_theta, sin_phi, cos_phi): 
     dx[7, b] = a3
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def xy_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """The x-y inverted pendulum derived from eqs. 3.1, 3.4-3.6 (Lagrange eqs. 3.2, 3.7-3.10).
 
@@ -223,7 +224,7 @@ def _xz_derived_column(b, x, u, p, dx, sin_theta, cos_theta):  # pragma: no cove
     dx[5, b] = a2
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def xz_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """The x-z inverted pendulum derived from eqs. 3.36-3.38 (Lagrange eqs. 3.34, 3.39-3.41).
 
@@ -332,7 +333,7 @@ def _xyz_derived_column(
     dx[9, b] = a4
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@hot_njit(cache=True, error_model="numpy")
 def xyz_derived_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
     """The x-y-z inverted pendulum derived from eqs. 4.1, 4.4-4.5 (Lagrange eqs. 4.2, 4.8-4.12).
 

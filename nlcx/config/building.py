@@ -1,0 +1,192 @@
+"""Validation of a composed, overridden and interpolated config into an :class:`Experiment`.
+
+:func:`build` validates the generic sections by the models of :mod:`nlcx.config.sections`,
+then each plugin section (plant parameters, controllers and their tuners, uncertainties,
+references) by the model of the plugin its ``name``/``kind`` selects in :mod:`nlcx.registry`.
+Every problem is reported as one :class:`~nlcx.errors.ConfigError` line naming the key path,
+the value and what is allowed. ``build(raw, like=...)`` takes over the sections of an
+experiment validated before whose raw mapping is unchanged (a sweep's variants).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from nlcx import registry
+from nlcx.config.sections import ExperimentSection
+from nlcx.errors import MISSING, ConfigError
+from nlcx.validation import join, validate_model
+
+
+@dataclass(frozen=True)
+class PluginSection:
+    """A plugin section resolved to its registered model and validated configuration."""
+
+    label: str
+    kind: str
+    model: Any
+    config: Any
+    #: Tuners applied to a controller before it is built (``tune:``), in order.
+    tuners: tuple[PluginSection, ...] = ()
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A fully validated experiment configuration."""
+
+    raw: dict[str, Any]
+    section: ExperimentSection
+    plant_model: Any
+    plant_params: Any
+    controllers: tuple[PluginSection, ...]
+    uncertainties: tuple[PluginSection, ...]
+    references: dict[str, PluginSection]
+
+    @property
+    def name(self) -> str:
+        return self.section.name
+
+    def resolved(self) -> dict[str, Any]:
+        """The configuration with every default filled in, as written to config.yaml."""
+        sec = self.section
+        return {
+            "name": sec.name,
+            "title": sec.title,
+            "seed": sec.seed,
+            "plant": {
+                "name": sec.plant.name,
+                "params": self.plant_params.model_dump(),
+                "x0": dict(sec.plant.x0),
+            },
+            "controllers": {
+                c.label: {
+                    **c.config.model_dump(),
+                    **({"tune": [t.config.model_dump() for t in c.tuners]} if c.tuners else {}),
+                }
+                for c in self.controllers
+            },
+            "uncertainty": {u.label: u.config.model_dump() for u in self.uncertainties},
+            "reference": {k: r.config.model_dump() for k, r in self.references.items()},
+            "simulation": sec.simulation.model_dump(),
+            "metrics": {**sec.metrics.model_dump(), "rise_limits": list(sec.metrics.rise_limits)},
+            "outputs": sec.outputs.model_dump(),
+        }
+
+
+def _plugin(
+    reg: registry.Registry[Any], label: str, data: Any, path: str, default_kind: str | None = None
+) -> PluginSection:
+    """Resolve ``data['kind']`` in ``reg`` and validate ``data`` with that plugin's model."""
+    if not isinstance(data, dict):
+        raise ConfigError(path, data, "must be a mapping of keys to values")
+    kind = data.get("kind", default_kind)
+    if kind is None:
+        raise ConfigError(join(path, "kind"), MISSING, f"required; allowed: {', '.join(reg.names())}")
+    if not isinstance(kind, str):
+        raise ConfigError(join(path, "kind"), kind, f"must be a name; allowed: {', '.join(reg.names())}")
+    model = reg.get(kind, path=join(path, "kind"))
+    cfg = validate_model(model.Config, {**data, "kind": kind}, path)
+    return PluginSection(label=label, kind=kind, model=model, config=cfg)
+
+
+def controller_section(label: str, data: Any, path: str) -> PluginSection:
+    """A controller section validated by its registered model, with its tuners."""
+    if isinstance(data, dict) and "tune" in data:
+        data = dict(data)
+        tune = data.pop("tune")
+        tune = [tune] if isinstance(tune, dict) else tune
+        if not isinstance(tune, list):
+            raise ConfigError(join(path, "tune"), tune, "must be a tuner mapping or a list of them")
+        tuners = tuple(_plugin(registry.tuners, str(i), t, join(path, "tune", str(i))) for i, t in enumerate(tune))
+    else:
+        tuners = ()
+    c = _plugin(registry.controllers, label, data, path)
+    # a tuned controller's nested sections (e.g. its schedule) are completed by its tuners and
+    # validated after them (engine.prepare)
+    config = c.config if tuners else c.model.normalize(c.config, path)
+    return PluginSection(c.label, c.kind, c.model, config, tuners)
+
+
+def build(raw: dict[str, Any], like: Experiment | None = None) -> Experiment:
+    """Validate a raw config mapping (after overrides).
+
+    ``like`` is an experiment validated before, e.g. a sweep's base: its sections whose raw
+    mapping equals ``raw``'s (top-level sections; controllers, uncertainties and references one
+    by one) are taken over instead of validated again. Validation is deterministic, so the
+    result equals ``build(raw)``; a sweep variant that changes a few numbers re-validates only
+    the sections holding them.
+    """
+    same = _unchanged(raw, like)
+    section = validate_model(ExperimentSection, _with_validated_sections(raw, like, same), "")
+    plant_model = registry.plants.get(section.plant.name, path="plant.name")
+    if like is not None and "plant" in same:
+        plant_params = like.plant_params
+    else:
+        plant_params = validate_model(plant_model.Params, section.plant.params, "plant.params")
+    before = _plugins_by_key(like) if like is not None else {}
+    controllers = tuple(
+        _reused(before, raw, ("controllers", label)) or controller_section(label, data, join("controllers", label))
+        for label, data in section.controllers.items()
+    )
+    uncertainties = tuple(
+        _reused(before, raw, ("uncertainty", label))
+        or _plugin(registry.uncertainties, label, data, join("uncertainty", label), default_kind=label)
+        for label, data in section.uncertainty.items()
+    )
+    references = {
+        signal: _reused(before, raw, ("reference", signal))
+        or _plugin(registry.references, signal, data, join("reference", signal))
+        for signal, data in section.reference.items()
+    }
+    return Experiment(
+        raw=raw,
+        section=section,
+        plant_model=plant_model,
+        plant_params=plant_params,
+        controllers=controllers,
+        uncertainties=uncertainties,
+        references=references,
+    )
+
+
+#: Top-level sections validated as a model of their own, which ``build(like=...)`` takes over.
+_MODEL_SECTIONS = ("plant", "simulation", "metrics", "outputs")
+
+
+def _unchanged(raw: dict[str, Any], like: Experiment | None) -> set[str]:
+    """The top-level keys of ``raw`` whose value equals the one ``like`` was built from."""
+    if like is None:
+        return set()
+    return {key for key, value in raw.items() if key in like.raw and like.raw[key] == value}
+
+
+def _with_validated_sections(raw: dict[str, Any], like: Experiment | None, same: set[str]) -> dict[str, Any]:
+    """``raw`` with its unchanged model sections replaced by ``like``'s validated ones (pydantic
+    takes a validated instance as it is)."""
+    if like is None:
+        return raw
+    return {**raw, **{key: getattr(like.section, key) for key in _MODEL_SECTIONS if key in same}}
+
+
+def _plugins_by_key(exp: Experiment) -> dict[tuple[str, str], tuple[Any, PluginSection]]:
+    """(section, label) -> (the raw mapping it was validated from, the validated plugin)."""
+    found: dict[tuple[str, str], tuple[Any, PluginSection]] = {}
+    for key, plugins in (
+        ("controllers", exp.controllers),
+        ("uncertainty", exp.uncertainties),
+        ("reference", tuple(exp.references.values())),
+    ):
+        for plugin in plugins:
+            found[(key, plugin.label)] = (exp.raw.get(key, {}).get(plugin.label), plugin)
+    return found
+
+
+def _reused(
+    before: dict[tuple[str, str], tuple[Any, PluginSection]], raw: dict[str, Any], key: tuple[str, str]
+) -> PluginSection | None:
+    """The plugin validated before from a raw mapping equal to ``raw``'s at ``key``, if any."""
+    old = before.get(key)
+    if old is None or old[0] is None or raw[key[0]][key[1]] != old[0]:
+        return None
+    return old[1]

@@ -1,0 +1,75 @@
+"""Reading config files: YAML parsed by PyYAML, and the files named by ``extends`` merged under them.
+
+YAML is parsed by ``yaml.safe_load`` (its numbers are the ones the configs were written for)
+and the files named by ``extends:`` are merged under the file's own keys by :func:`deep_merge`.
+The merge is written out here rather than done by ``OmegaConf.merge`` because of its one rule
+OmegaConf has no place for: a plugin section whose ``kind`` changes is replaced whole, not
+merged key by key. Merging the plain mappings also costs a small fraction of converting each
+file to OmegaConf's containers and back.
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from nlcx.errors import ConfigError
+
+
+def deep_merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+    """``top`` over ``base``: mappings merge key by key, anything else replaces.
+
+    A plugin section whose ``kind`` changes (e.g. a step reference replaced by a sine) is
+    replaced whole, since the two kinds have different keys.
+    """
+    out = copy.deepcopy(base)
+    for key, value in top.items():
+        old = out.get(key)
+        changes_kind = (
+            isinstance(old, dict) and isinstance(value, dict) and value.get("kind", old.get("kind")) != old.get("kind")
+        )
+        if isinstance(value, dict) and isinstance(old, dict) and not changes_kind:
+            out[key] = deep_merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """Read a config file, first merging the files its ``extends`` key names.
+
+    ``extends`` is a path or a list of paths relative to the file; they are merged in order
+    and the file's own keys go on top (see :func:`deep_merge`).
+    """
+    path = Path(path).resolve()
+    if path in _seen:
+        raise ConfigError("extends", str(path), "circular extends")
+    data = read_yaml(path)
+    parents = data.pop("extends", [])
+    if isinstance(parents, str):
+        parents = [parents]
+    if not isinstance(parents, list) or not all(isinstance(p, str) for p in parents):
+        raise ConfigError("extends", parents, "must be a file path or a list of file paths")
+    merged: dict[str, Any] = {}
+    for parent in parents:
+        merged = deep_merge(merged, read_config(path.parent / parent, (*_seen, path)))
+    return deep_merge(merged, data)
+
+
+def read_yaml(path: str | Path) -> dict[str, Any]:
+    """Parse a YAML file with ``yaml.safe_load``; it must hold a mapping."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("", str(path), "config file not found")
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
+        raise ConfigError("", str(path), f"not valid YAML{where}: {getattr(exc, 'problem', exc)}") from None
+    if not isinstance(data, dict):
+        raise ConfigError("", str(path), "a config file must hold a mapping of sections")
+    return data

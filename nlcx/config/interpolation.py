@@ -1,0 +1,189 @@
+"""Interpolation of ``${...}`` references by OmegaConf's rules, and a config interpolated once for many variants.
+
+``"${a.b}"`` is replaced by a copy of that key's value (a number, a mapping, a list),
+``"gain_${a.b}"`` by a string, and references nest and chain; then the free ``vars`` section
+is dropped. The reference that takes a whole value and names an absolute key
+(``"${vars.gains}"``, the only kind the configs use) is resolved by a short walk here, to the
+same result; OmegaConf resolves every other kind, and reports every failure (a missing key, a
+circular reference). The walk exists for speed: a sweep interpolates its base once per batch
+of variants (:class:`Interpolated`), and a variant that sets a referenced key (one of
+``vars``, say) is interpolated in full, so this step runs thousands of times where converting
+to and from OmegaConf's containers would cost more than building the variant does.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, cast
+
+from nlcx.config.overrides import set_values
+from nlcx.errors import MISSING, ConfigError
+
+if TYPE_CHECKING:
+    from omegaconf.errors import OmegaConfBaseException
+
+
+#: A key part that OmegaConf's interpolation grammar and a plain mapping lookup read alike.
+_KEY = r"[A-Za-z_][A-Za-z0-9_\-]*"
+#: A reference to an absolute dotted key, ``${a.b.c}``.
+_REFERENCE = re.compile(rf"\$\{{({_KEY}(?:\.{_KEY})*)\}}")
+#: OmegaConf's marker of a missing value; a reference to it is an error.
+_MISSING_VALUE = "???"
+
+
+class _NotDirectError(Exception):
+    """The direct walk of :func:`interpolate` stops: OmegaConf resolves the config (or reports its error)."""
+
+
+def interpolate(raw: dict[str, Any]) -> dict[str, Any]:
+    """Resolve every ``${...}`` reference by OmegaConf's rules, then drop ``vars``.
+
+    ``"${dotted.key}"`` is replaced by a copy of that key's value, ``"x_${a}"`` by a string,
+    and references chain and nest. ``vars`` is a free section for named values that other
+    keys refer to, e.g. the conventional gains shared by the x and y loops of the thesis's
+    pendulums.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the key that holds the failing reference: it refers to a key that does
+        not exist, is part of a circular reference, or is not a valid interpolation.
+    """
+    try:
+        out = _resolved_directly(raw)
+    except _NotDirectError:
+        out = _resolved_by_omegaconf(raw)
+    out.pop("vars", None)
+    return out
+
+
+def _resolved_directly(raw: dict[str, Any]) -> dict[str, Any]:
+    """``raw`` with each whole-value reference to an absolute key (``"${a.b}"``) replaced by its
+    resolved value, as OmegaConf resolves it; :class:`_NotDirectError` for any other reference
+    and for any reference that does not resolve (OmegaConf then resolves it or reports it)."""
+
+    def lookup(path: str, trail: tuple[str, ...]) -> Any:
+        if path in trail:
+            raise _NotDirectError
+        node: Any = raw
+        for part in path.split("."):
+            if not isinstance(node, dict) or part not in node:
+                raise _NotDirectError
+            node = node[part]
+        if isinstance(node, str) and node == _MISSING_VALUE:
+            raise _NotDirectError
+        return resolve(node, (*trail, path))
+
+    def resolve(node: Any, trail: tuple[str, ...]) -> Any:
+        if isinstance(node, dict):
+            return {k: resolve(v, trail) for k, v in node.items()}
+        if isinstance(node, list):
+            return [resolve(v, trail) for v in node]
+        if isinstance(node, str) and "${" in node:
+            match = _REFERENCE.fullmatch(node)
+            if match is None:
+                raise _NotDirectError
+            return lookup(match.group(1), trail)
+        return node
+
+    return resolve(raw, ())
+
+
+def _resolved_by_omegaconf(raw: dict[str, Any]) -> dict[str, Any]:
+    """``raw`` resolved by ``OmegaConf.to_container(..., resolve=True)``: plain mappings and lists
+    again, every other value (PyYAML's numbers included) as it was."""
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        resolved = OmegaConf.to_container(OmegaConf.create(raw, flags={"allow_objects": True}), resolve=True)
+    except OmegaConfBaseException as exc:
+        raise _interpolation_error(raw, exc) from None
+    return cast(dict[str, Any], resolved)
+
+
+def _interpolation_error(raw: dict[str, Any], exc: OmegaConfBaseException) -> ConfigError:
+    """OmegaConf's error as one line: the key holding the reference, its value and the problem."""
+    where = getattr(exc, "full_key", None) or ""
+    parts = [index or key for index, key in re.findall(r"\[(\d+)\]|([^.\[\]]+)", where)]
+    value = _raw_value(raw, parts)
+    lines = str(getattr(exc, "msg", None) or exc).splitlines()
+    problem = lines[0] if lines else type(exc).__name__
+    if missing := re.fullmatch(r"Interpolation key '(.*)' not found", problem):
+        return ConfigError(".".join(parts), value, f"refers to {missing.group(1)}, a key that does not exist")
+    if problem in ("Recursive interpolation detected", "Interpolation to parent node detected"):
+        return ConfigError(".".join(parts), value, "circular reference: the value refers back to itself")
+    return ConfigError(".".join(parts), value, f"cannot be interpolated: {problem}")
+
+
+def _raw_value(raw: dict[str, Any], parts: list[str]) -> Any:
+    """The value at a key path whose list indices are digits, or MISSING."""
+    node: Any = raw
+    for part in parts:
+        if isinstance(node, dict) and part in node:
+            node = node[part]
+        elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        else:
+            return MISSING
+    return node
+
+
+def _reference_targets(node: Any) -> set[tuple[str, ...]]:
+    """The key paths that the ``${...}`` references anywhere in ``node`` refer to; the empty path
+    (every key) for a reference whose target is not an absolute dotted key (a relative or
+    nested reference, a resolver)."""
+    if isinstance(node, dict):
+        return set().union(*(_reference_targets(v) for v in node.values()))
+    if isinstance(node, list):
+        return set().union(*(_reference_targets(v) for v in node))
+    if isinstance(node, str) and "${" in node:
+        targets = {tuple(path.split(".")) for path in _REFERENCE.findall(node)}
+        return targets | {()} if "${" in _REFERENCE.sub("", node) else targets
+    return set()
+
+
+@dataclass(frozen=True)
+class Interpolated:
+    """A raw config interpolated once, for the many configs that set a few values on it (a
+    sweep's variants): :meth:`resolve` gives exactly ``interpolate(set_values(raw, values))``,
+    without interpolating the whole config again when no value can change what a reference
+    resolves to."""
+
+    raw: dict[str, Any]
+    resolved: dict[str, Any]
+    targets: frozenset[tuple[str, ...]]
+
+    @classmethod
+    def of(cls, raw: dict[str, Any]) -> Interpolated:
+        return cls(raw, interpolate(raw), frozenset(_reference_targets(raw)))
+
+    def resolve(self, values: list[tuple[list[str], Any]]) -> dict[str, Any]:
+        """``interpolate(set_values(raw, values))``: the values set on the interpolated config
+        when each is independent of interpolation (:meth:`_independent`), else the full path.
+        Both share unchanged parts with ``raw`` or ``resolved`` (treat them as read-only)."""
+        if all(self._independent(parts, value) for parts, value in values):
+            return set_values(self.resolved, values)
+        return interpolate(set_values(self.raw, values))
+
+    def _independent(self, parts: list[str], value: Any) -> bool:
+        """Whether setting ``value`` at ``parts`` commutes with interpolation: the value holds
+        no reference; no reference points at, into or above the key (one whose target is not
+        an absolute dotted key, a relative or nested reference, points above every key); the
+        key is not in ``vars`` (which interpolation drops); and the raw config holds a mapping
+        (or nothing) at every key above it, as :func:`set_values` requires (else the full path
+        reports it)."""
+        key = tuple(parts)
+        if key[0] == "vars" or _reference_targets(value):
+            return False
+        if any(target[: len(key)] == key or key[: len(target)] == target for target in self.targets):
+            return False
+        node: Any = self.raw
+        for part in key[:-1]:
+            node = node.get(part)
+            if node is None:
+                return True
+            if not isinstance(node, dict):
+                return False
+        return True

@@ -1,0 +1,229 @@
+"""Simulating closed loops: the kernel's arguments assembled from the items, the kernel called,
+its records turned into runs.
+
+:func:`simulate_items` takes the items of any number of experiments on one time grid through
+the kernel (:func:`nlcx.kernel.integrator.simulate`), batched and de-duplicated by
+:mod:`nlcx.engine.batching`; the kernel's arguments are the named structures of
+:mod:`nlcx.kernel.structures`, built here item by item.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from nlcx.engine.batching import distinct_groups, first_of_same_loop, group_key, kernel_calls, with_repeats
+from nlcx.engine.memory import RecordArena
+from nlcx.engine.prepared import TABLEAUS, Item, Prepared, TimeGrid, items_of
+from nlcx.engine.results import Run
+from nlcx.kernel.abi import ELEMENT_ENTRY, HOOKS, STATUS_BOUND, STATUS_NONFINITE, callback_slots, element_slots
+from nlcx.kernel.friction import FA, FRICTION_AXIS, FRICTION_NONE, FRICTIONAL, FRICTIONLESS
+from nlcx.kernel.structures import (
+    ControllerCall,
+    FrictionPath,
+    Integration,
+    LoopElements,
+    Outcome,
+    PlantCall,
+    PlantForces,
+    Records,
+    method_of,
+)
+from nlcx.plants.base import Plant, check_rows
+
+
+def simulate_experiments(
+    prepared: list[Prepared], record_logs: bool, arena: RecordArena | None, timings: list[dict[str, float]]
+) -> list[list[Run]]:
+    """The runs of every prepared experiment: the closed loops of the experiments on the same
+    time grid (dt, number of steps, integrator) go through one :func:`simulate_items` call, whose
+    time is split evenly between them (``timings[e]["simulate"]``)."""
+    runs: list[list[Run]] = [[] for _ in prepared]
+    grids: dict[tuple[Any, ...], list[int]] = {}
+    for e, p in enumerate(prepared):
+        sim = p.experiment.section.simulation
+        grids.setdefault((sim.dt, p.grid.n_steps, sim.integrator), []).append(e)
+    for members in grids.values():
+        start = time.perf_counter()
+        items = [(e, item) for e in members for item in items_of(prepared[e])]
+        grid, integrator = prepared[members[0]].grid, prepared[members[0]].experiment.section.simulation.integrator
+        done = simulate_items([item for _, item in items], grid, integrator, record_logs, arena)
+        for (e, _), run in zip(items, done, strict=True):
+            runs[e].append(run)
+        for e in members:
+            timings[e]["simulate"] = (time.perf_counter() - start) / len(members)
+    return runs
+
+
+def simulate_items(
+    items: list[Item], grid: TimeGrid, integrator: str, record_logs: bool = True, arena: RecordArena | None = None
+) -> list[Run]:
+    """Integrate every item; items sharing plant equations and controller kind go through one
+    batched kernel call (per-item parameters, states, references and perturbations), and an
+    item whose closed loop equals an earlier one's shares that one's trajectory
+    (:func:`~nlcx.engine.batching.first_of_same_loop`; the trajectories are read-only).
+
+    ``record_logs=False`` skips the controller logs and friction forces (``Run.log`` and
+    ``Run.friction`` are None): a sweep that keeps only metrics does not need them. With an
+    ``arena`` the records are its arrays (see :class:`~nlcx.engine.memory.RecordArena`)."""
+    from nlcx.kernel.integrator import simulate  # loaded (or compiled) on first use: see load_kernel
+
+    tableau = TABLEAUS[integrator]
+    integration = Integration(method=method_of(integrator), rk_a=tableau.a, rk_b=tableau.b, dt=grid.dt)
+    empty = np.empty if arena is None else arena.take
+    keys = [group_key(item) for item in items]
+    first = first_of_same_loop(items, keys)
+    runs: list[Run | None] = [None] * len(items)
+    for call in kernel_calls(distinct_groups(keys, first), items):
+        group = [items[i] for i in call.indices]
+        check_rows(group[0].plant)
+        records = _records(group, grid.t.size, grid.t.size if record_logs else 1, empty)
+        outcome = Outcome(
+            status=np.zeros(len(group), dtype=np.int64), n_valid=np.zeros(len(group), dtype=np.int64),
+            fail_index=np.zeros(len(group), dtype=np.int64),
+        )  # fmt: skip
+        simulate(
+            integration, _plant_call(group), _controller_call(group, call.step), _loop_elements(group),
+            _plant_forces(group), records, outcome, _friction_path(group),
+        )  # fmt: skip
+        for array in records:  # runs of identical loops share them
+            array.flags.writeable = False
+        for j, i in enumerate(call.indices):
+            runs[i] = _run(group[j], j, records, outcome, grid, record_logs)
+    return with_repeats(runs, items, first)
+
+
+def _plant_call(group: list[Item]) -> PlantCall:
+    """The plant of a kernel call: the first item's equations, every item's arrays."""
+    plant, plants = group[0].plant, [g.plant for g in group]
+    return PlantCall(
+        rhs=plant.rhs,
+        x0=np.ascontiguousarray(np.stack([q.x0 for q in plants])),
+        p=_stack([q.p for q in plants], plant.p.shape),
+        C=np.ascontiguousarray(plant.C),
+        bounds=_stack([q.bounds for q in plants], plant.bounds.shape),
+    )
+
+
+def _controller_call(group: list[Item], step: Any) -> ControllerCall:
+    """The controller of a kernel call: ``step``, the first item's callbacks, every item's arrays."""
+    return ControllerCall(
+        step=step,
+        callbacks=callback_slots(group[0].controller.callbacks),
+        cp=_pad_rows([g.controller.cp for g in group]),
+        cs0=_pad_rows([g.controller.cs0 for g in group]),
+        ref=_stack([g.ref for g in group], group[0].ref.shape),
+    )
+
+
+def _loop_elements(group: list[Item]) -> LoopElements:
+    """The loop elements of a group of items that share their element structure (hooks,
+    functions and block sizes); rows are the items."""
+    elements = group[0].elements
+    functions = tuple(dict.fromkeys(e.function for e in elements))
+    table = np.zeros((len(elements), ELEMENT_ENTRY.size))
+    p_off = s_off = d_off = 0
+    for i, e in enumerate(elements):
+        table[i] = ELEMENT_ENTRY.pack(
+            hook=HOOKS[e.hook], slot=functions.index(e.function),
+            param_offset=p_off, state_offset=s_off, data_offset=d_off,
+        )  # fmt: skip
+        p_off += e.params.size
+        s_off += e.state.size
+        d_off += 0 if e.data is None else e.data.shape[1]
+    return LoopElements(
+        functions=element_slots(functions),
+        table=table,
+        ep=_pad_rows([np.concatenate([np.zeros(0), *(e.params for e in g.elements)]) for g in group]),
+        es0=_pad_rows([np.concatenate([np.zeros(0), *(e.state for e in g.elements)]) for g in group]),
+        data=_stack([g.element_data for g in group], (1, d_off)),
+    )
+
+
+def _plant_forces(group: list[Item]) -> PlantForces:
+    """The disturbances and friction axes of a kernel call's items."""
+    return PlantForces(
+        dist=_stack([g.dist for g in group], group[0].dist.shape),
+        dist_map=np.ascontiguousarray(group[0].dist_map),
+        friction=_stack([g.friction for g in group], (len(group[0].plant.inputs), FRICTION_AXIS.size)),
+    )
+
+
+def _friction_path(group: list[Item]) -> FrictionPath:
+    """The friction path of a kernel call: compiled only for a call with friction."""
+    return FRICTIONAL if any(_has_friction(g.friction) for g in group) else FRICTIONLESS
+
+
+def _records(group: list[Item], n_k: int, n_rec: int, empty: Callable[[tuple[int, ...]], np.ndarray]) -> Records:
+    """The records of a group of items: states and inputs at the n_k samples, controller logs
+    and friction forces at n_rec (1: not recorded). The kernel writes every sample up to where
+    a run stops; the rest is never read."""
+    plant, n_b = group[0].plant, len(group)
+    n_u = len(plant.inputs)
+    return Records(
+        X=empty((n_b, n_k, len(plant.states))), U=empty((n_b, n_k, n_u)),
+        LOG=empty((n_b, n_rec, len(group[0].controller.log_names))), FRICTION=empty((n_b, n_rec, n_u)),
+    )  # fmt: skip
+
+
+def _run(item: Item, j: int, records: Records, outcome: Outcome, grid: TimeGrid, record_logs: bool) -> Run:
+    """The run of ``item``, row j of a kernel call's records, truncated where it stopped."""
+    k = int(outcome.n_valid[j])
+    status = int(outcome.status[j])
+    t_fail = float(grid.t[k - 1] + grid.dt) if status else math.nan
+    return Run(
+        controller=item.controller,
+        status="unstable" if status else "ok",
+        reason=_failure_reason(item.plant, status, int(outcome.fail_index[j]), t_fail),
+        t=grid.t[:k],
+        x=records.X[j, :k],
+        u=records.U[j, :k],
+        r=item.ref[:k],
+        log=records.LOG[j, :k] if record_logs else None,
+        friction=records.FRICTION[j, :k] if record_logs else None,
+        t_fail=t_fail,
+    )
+
+
+def _failure_reason(plant: Plant, status: int, index: int, t_fail: float) -> str:
+    """Why a run stopped (``status``: the kernel's, ``index``: its failing state or input), or ''."""
+    n = len(plant.states)
+    if status == STATUS_BOUND:
+        name = plant.state_names[index]
+        bound = plant.bounds[index]
+        return f"diverged at t = {t_fail:.4g} s: |{name}| > {bound:.6g} (simulation.bounds)"
+    if status == STATUS_NONFINITE:
+        what = plant.state_names[index] if index < n else plant.input_names[index - n]
+        return f"diverged at t = {t_fail:.4g} s: {what} became non-finite"
+    return ""
+
+
+def _pad_rows(rows: list[np.ndarray]) -> np.ndarray:
+    """Rows of different lengths as one array, zero-padded to the longest."""
+    width = max(r.size for r in rows)
+    out = np.zeros((len(rows), width))
+    for i, r in enumerate(rows):
+        out[i, : r.size] = r
+    return out
+
+
+def _stack(arrays: list[np.ndarray | None], empty_shape: tuple[int, ...]) -> np.ndarray:
+    """Stack per-item arrays on a leading batch axis; one shared (or absent) array is broadcast."""
+    first = arrays[0]
+    if all(a is first for a in arrays):
+        base = np.zeros(empty_shape) if first is None else first
+        return np.ascontiguousarray(base[None])
+    filled = [np.zeros(empty_shape) if a is None else a for a in arrays]
+    # an axis of length 1 (e.g. no noise: one zero row for every sample) meets the others' length
+    shape = tuple(max(sizes) for sizes in zip(*(a.shape for a in filled), strict=True))
+    return np.ascontiguousarray(np.stack([np.broadcast_to(a, shape) for a in filled]))
+
+
+def _has_friction(axes: np.ndarray | None) -> bool:
+    """Whether an item's friction axes (FRICTION_AXIS rows) hold a friction model (as the kernel's
+    :func:`nlcx.kernel.friction.has_friction` decides which rows take the friction path)."""
+    return axes is not None and bool(np.any(axes[:, FA.model].astype(np.int64) != FRICTION_NONE))

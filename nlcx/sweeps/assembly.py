@@ -1,0 +1,178 @@
+"""A sweep's outputs from its part files: sweep.csv, metrics.csv, config.yaml, manifest.json and the report.
+
+:func:`assemble` reads the part files in variant order (deterministic): per variant its first
+complete result, else its last failure. A sweep computed in one go, its parts exactly the
+plan's variants in order, gets metrics.csv by joining the parts' files; otherwise they are
+read, merged and written, the same bytes.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Collection, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from nlcx import config as cfg
+from nlcx.sweeps.planning import SweepSection, Variant
+
+
+def write_report(directory: Path) -> Path:
+    """``directory``'s report.html and report.md (:func:`nlcx.pages.render.write_report`); the page."""
+    from nlcx.pages.render import write_report
+
+    return write_report(directory)[0]
+
+
+def write_manifest(
+    out_dir: Path,
+    index: pd.DataFrame,
+    spec: SweepSection,
+    timings: dict[str, float],
+    *,
+    name: str,
+    variants: int,
+    computed: int,
+    executor: str,
+    jobs: int,
+    overrides: Sequence[str] = (),
+    started: float | None = None,
+) -> None:
+    """manifest.json: the run (name, kind ``nlcx_output``: sweep, command line, ``overrides``,
+    start and duration from ``started``, variants computed and skipped, statuses, seed,
+    executor), the wall time of each phase (reading, planning and loading the kernel; the
+    batches; assembling sweep.csv and metrics.csv), the host, the platform, the package
+    versions and the git commit (:func:`nlcx.report.provenance`, :func:`nlcx.report.environment`)."""
+    from nlcx import report
+
+    info = {
+        "name": name,
+        "nlcx_output": "sweep",
+        **report.provenance(overrides, started),
+        "variants": variants,
+        "computed": computed,
+        "skipped": variants - computed,
+        "status": index.status.value_counts().to_dict(),
+        "seed": spec.seed,
+        "executor": executor,
+        "jobs": jobs,
+        "wall_s": round(timings["wall"], 3),
+        "timings_s": {phase: round(seconds, 3) for phase, seconds in timings.items()},
+        **report.environment(),
+    }
+    report.write_text(out_dir / "manifest.json", json.dumps(info, indent=2, default=str) + "\n")
+
+
+def _in_plan_order(rows: pd.DataFrame, want: dict[str, int]) -> bool:
+    """Whether the part files' rows (concatenated in file order) are each a variant of the plan
+    once, under its own index, in ascending order: then metrics.csv is the parts' rows as they
+    stand (no retry to supersede, nothing to renumber or reorder)."""
+    plan_index = rows.config_hash.map(want)
+    return bool(
+        plan_index.notna().all()
+        and (plan_index.to_numpy() == rows.variant.to_numpy()).all()
+        and (np.diff(rows.variant.to_numpy()) > 0).all()
+    )
+
+
+def _joined_metrics(parts_dir: Path, parts: list[str]) -> bytes | None:
+    """metrics.csv as the parts' metrics files joined: one header, then each file's rows.
+
+    Only for parts in plan order (:func:`_in_plan_order`) written by this run, whose rows are
+    metrics.csv's rows (:func:`nlcx.sweeps.run_batch` writes an empty text as a missing value); None when
+    the files' headers differ or no file has a row (then the merge decides the columns)."""
+    texts = [(parts_dir / f"{part}.metrics.csv").read_bytes() for part in parts]
+    header = texts[0].partition(b"\n")[0] + b"\n"
+    if not all(text.startswith(header) and text.endswith(b"\n") for text in texts):
+        return None
+    body = b"".join(text[len(header) :] for text in texts)
+    return header + body if body else None
+
+
+def _missing_as_null(frame: pd.DataFrame) -> pd.DataFrame:
+    """Part tables concatenated, a missing text as a missing value again: a part whose column
+    is all empty reads it as numbers (NaN), another as text, and their concatenation holds
+    both, which :func:`nlcx.report.write_csv` would write as the text "nan" (a note or
+    message of a variant without one)."""
+    mixed = [c for c in frame.columns if frame[c].dtype == object]
+    return frame.assign(**{c: frame[c].where(frame[c].notna(), None) for c in mixed}) if mixed else frame
+
+
+def _merged_metrics(parts_dir: Path, parts: list[str], chosen: pd.DataFrame) -> pd.DataFrame:
+    """The metrics of the ``chosen`` part rows, read from the part files, renumbered to the
+    plan's variant indices and in variant order (a retried variant's last result)."""
+    metrics = _missing_as_null(
+        pd.concat(
+            [
+                pd.read_csv(parts_dir / f"{part}.metrics.csv", keep_default_na=False, na_values=[""]).assign(
+                    _part=part_no
+                )
+                for part_no, part in enumerate(parts)
+            ],
+            ignore_index=True,
+        )
+    )
+    if metrics.empty:
+        return metrics.drop(columns="_part")
+    link = chosen[["_part", "variant", "new_variant"]]
+    metrics = metrics.merge(link, on=["_part", "variant"], how="inner", sort=False)
+    metrics = metrics.assign(variant=metrics.new_variant).drop(columns=["_part", "new_variant"])
+    metrics = metrics.drop_duplicates(subset=["variant", "controller", "signal", "metric"], keep="last")
+    return metrics.sort_values("variant", kind="stable").reset_index(drop=True)
+
+
+def _member_of(hashes: pd.Series, wanted: Collection[str]) -> np.ndarray:
+    """``hashes.isin(wanted)`` by set lookups: pandas' ``isin`` on Arrow-backed strings loops
+    in Python, a noticeable part of assembling a large sweep."""
+    return np.fromiter((h in wanted for h in hashes.to_numpy(dtype=object)), dtype=bool, count=len(hashes))
+
+
+def assemble(
+    out_dir: Path,
+    variants: list[Variant],
+    hashes: list[str],
+    base_raw: dict[str, Any],
+    spec: SweepSection,
+    written: Collection[str] = (),
+) -> pd.DataFrame:
+    """sweep.csv and metrics.csv from the part files, in variant order (deterministic).
+
+    ``written`` names the parts this process's run wrote (:func:`nlcx.sweeps.run`): when they are all
+    the parts and hold exactly the plan's variants, in order, metrics.csv is their files
+    joined (:func:`_joined_metrics`), the same bytes as reading, merging and writing them."""
+    import yaml
+
+    from nlcx import report
+
+    want = {h: v.index for v, h in zip(variants, hashes, strict=True)}
+    parts = [path.name.removesuffix(".index.csv") for path in sorted((out_dir / "parts").glob("*.index.csv"))]
+    indexes = [
+        pd.read_csv(out_dir / "parts" / f"{part}.index.csv", dtype={"config_hash": str}).assign(_part=part_no)
+        for part_no, part in enumerate(parts)
+    ]
+    if not indexes:
+        report.write_csv(out_dir / "sweep.csv", pd.DataFrame())
+        report.write_csv(out_dir / "metrics.csv", pd.DataFrame())
+        return pd.DataFrame()
+    rows = _missing_as_null(pd.concat(indexes, ignore_index=True))
+    in_plan_order = set(parts) <= set(written) and _in_plan_order(rows, want)
+    rows = rows[_member_of(rows.config_hash, want)]
+    # per variant: its first complete result, else its last failure (a retry supersedes a failure)
+    complete = rows[rows.status != "failed"].drop_duplicates("config_hash", keep="first")
+    failed = rows[(rows.status == "failed") & ~_member_of(rows.config_hash, set(complete.config_hash))]
+    chosen = pd.concat([complete, failed.drop_duplicates("config_hash", keep="last")])
+    chosen = chosen.assign(new_variant=chosen.config_hash.map(want))
+    index = chosen.assign(variant=chosen.new_variant).drop(columns=["_part", "new_variant"])
+    index = index.sort_values("variant", kind="stable").reset_index(drop=True)
+    report.write_csv(out_dir / "sweep.csv", index)
+    joined = _joined_metrics(out_dir / "parts", parts) if in_plan_order else None
+    if joined is not None:
+        report.write_bytes(out_dir / "metrics.csv", joined)
+    else:
+        report.write_csv(out_dir / "metrics.csv", _merged_metrics(out_dir / "parts", parts, chosen))
+    resolved = {**cfg.interpolate(base_raw), "sweep": spec.model_dump()}
+    report.write_text(out_dir / "config.yaml", yaml.safe_dump(resolved, sort_keys=False, allow_unicode=True))
+    return index

@@ -1,0 +1,148 @@
+"""A sweep's batches: the variants simulated together in one task, in a worker or in the sweep's process.
+
+:func:`run_batch` is what a process pool's worker runs (pickled by its module path): it builds
+and prepares each variant, simulates them in one pipeline call and writes the batch's part
+files, the metrics first and the index last (which marks the batch complete).
+"""
+
+from __future__ import annotations
+
+import functools
+import gc
+import hashlib
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+
+from nlcx import config as cfg
+from nlcx.sweeps.planning import Variant
+
+if TYPE_CHECKING:
+    from nlcx import engine
+
+#: The thread-count variables of BLAS, OpenMP and numba: one thread per worker.
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+@dataclass
+class Batch:
+    """Variants simulated together in one task."""
+
+    base_raw: dict[str, Any]
+    variants: list[Variant]
+    hashes: list[str]
+    out_dir: Path
+    timeseries: bool
+
+
+@dataclass
+class BatchResult:
+    """What a batch reports: its rows of sweep.csv, its metrics (unless left out) and its part's name."""
+
+    index: list[dict[str, Any]] = field(default_factory=list)
+    metrics: pd.DataFrame | None = None
+    part: str = ""
+
+
+def set_threads() -> None:
+    """One BLAS, OpenMP and numba thread in this process (a worker's, one of many)."""
+    for name in THREAD_VARIABLES:
+        os.environ[name] = "1"
+
+
+@functools.cache
+def _records() -> engine.RecordArena:
+    """This process's :class:`~nlcx.engine.RecordArena`: a worker's batches write their
+    trajectories into the same memory, one batch after the other."""
+    from nlcx import engine
+
+    return engine.RecordArena()
+
+
+def forget_records() -> None:
+    """Let go of this process's :class:`~nlcx.engine.RecordArena` (the records of the batches
+    the sweep's own process ran, with the serial executor)."""
+    _records.cache_clear()
+
+
+def _settle_heap() -> None:
+    """Collect, then freeze what survives (imported modules, loaded kernels, caches).
+
+    A worker's later collections then scan only the objects of the batch in hand instead of
+    numba's and pandas' object graphs again and again (about 15 % of a batch's time)."""
+    gc.collect()
+    gc.freeze()
+
+
+def _cell(value: Any) -> Any:
+    """A varied value as a sweep.csv cell: a mapping or list (e.g. a whole section) as JSON."""
+    return json.dumps(value, sort_keys=True) if isinstance(value, dict | list) else value
+
+
+def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
+    """Simulate a batch of variants and write its part files (the metrics, then the index).
+
+    ``return_metrics=False`` leaves the metrics out of the result (a pool worker's result
+    travels back pickled; the sweep reads the metrics from the part files). The garbage
+    collector waits for the end of the batch (:func:`_settle_heap`): its collections while the
+    batch built its configs showed in a sweep's profile under ``perf``."""
+    set_threads()
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        return _run_batch(batch, return_metrics)
+    finally:
+        _records().release()  # no run of this batch is read again: the next batch writes into its records
+        _settle_heap()
+        if collecting:
+            gc.enable()
+
+
+def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
+    from nlcx import engine, report
+
+    rows: list[dict[str, Any]] = []
+    prepared_of: dict[int, Any] = {}
+    interpolated = cfg.Interpolated.of(batch.base_raw)
+    base = cfg.build(interpolated.resolved)  # valid: sweep.load built it
+    for pos, (variant, digest) in enumerate(zip(batch.variants, batch.hashes, strict=True)):
+        start = time.perf_counter()
+        row: dict[str, Any] = {"variant": variant.index, "seed": variant.seed, "config_hash": digest}
+        row.update({f"value:{k}": _cell(v) for k, v in variant.values.items()})
+        try:
+            prepared_of[pos] = engine.prepare(cfg.build(variant.resolve(interpolated), like=base))
+            row.update(status="ok", message="")
+        except Exception as exc:  # a bad variant is recorded; the others go on
+            row.update(status="failed", message=str(exc).splitlines()[0])
+        row["wall_s"] = time.perf_counter() - start
+        rows.append(row)
+    # one pipeline call: variants on the same time grid go through the kernel together
+    members = list(prepared_of)
+    results = engine.evaluate([prepared_of[pos] for pos in members], record_logs=batch.timeseries, arena=_records())
+    for pos, result in zip(members, results, strict=True):
+        row = rows[pos]
+        row["wall_s"] += result.timings["simulate"] + result.timings["metrics"]
+        unstable = [run for run in result.runs if run.status != "ok"]
+        if unstable:
+            row.update(status="unstable", message=f"{unstable[0].label}: {unstable[0].reason}")
+        if batch.timeseries:
+            stem = batch.out_dir / "timeseries" / f"variant_{batch.variants[pos].index:06d}"
+            fmt = result.prepared.experiment.section.outputs.timeseries_format
+            report.write_timeseries(stem, report.timeseries_columns(result), fmt)
+    metrics = engine.shared_metrics(results)
+    index_of = np.array([batch.variants[pos].index for pos in members], dtype=int)
+    metrics.insert(0, "variant", index_of[metrics.pop("experiment").to_numpy(dtype=int)])
+    digest = hashlib.sha256("".join(batch.hashes).encode()).hexdigest()[:10]
+    part = f"{batch.variants[0].index:06d}-{digest}"
+    # an empty text (a metric's note when it has none) as a missing value, which is how
+    # assemble reads it back: the file's rows are then metrics.csv's rows, byte for byte, and
+    # assemble can join the files of a sweep computed in one go (nlcx.sweeps.assembly)
+    report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", metrics, empty_as_missing=True)
+    report.write_csv(batch.out_dir / "parts" / f"{part}.index.csv", pd.DataFrame(rows))  # last: marks it complete
+    return BatchResult(index=rows, metrics=metrics if return_metrics else None, part=part)

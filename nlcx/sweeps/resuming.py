@@ -1,0 +1,62 @@
+"""Resuming a sweep: the variants that have a complete result, and the staging directory to resume in.
+
+The staging directory (:func:`open_staging`) starts from the finished batches of an
+interrupted run, and of a finished sweep of the same plan in the target directory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import pandas as pd
+
+from nlcx.sweeps.planning import Variant
+
+
+def completed(out_dir: Path) -> set[str]:
+    """Config hashes of every variant with a complete result (status ok or unstable)."""
+    done: set[str] = set()
+    for path in sorted((out_dir / "parts").glob("*.index.csv")):
+        index = pd.read_csv(path, dtype={"config_hash": str})
+        done.update(index.config_hash[index.status.isin(["ok", "unstable"])])
+    return done
+
+
+def _carry_parts(finished: Path, staging: Path, want: Mapping[str, int]) -> None:
+    """Link into ``staging`` the part files of the finished sweep ``finished`` that hold a
+    variant of this plan (``want``: config hash -> variant index) and are not there yet, each
+    part's metrics before its index (which marks it complete); and the time series of those
+    variants whose index in this plan is the one they were written under."""
+    from nlcx import rundir
+
+    series: dict[str, list[Path]] = {}
+    if (finished / "timeseries").is_dir():
+        for path in (finished / "timeseries").iterdir():
+            series.setdefault(path.name.partition(".")[0], []).append(path)
+    for path in sorted((finished / "parts").glob("*.index.csv")):
+        part = path.name.removesuffix(".index.csv")
+        if (staging / "parts" / path.name).exists():
+            continue
+        index = pd.read_csv(path, dtype={"config_hash": str})
+        planned = index.config_hash.map(want)
+        if planned.isna().all():
+            continue
+        rundir.link_or_copy(finished / "parts" / f"{part}.metrics.csv", staging / "parts" / f"{part}.metrics.csv")
+        rundir.link_or_copy(path, staging / "parts" / path.name)
+        for variant in index.variant[planned.to_numpy() == index.variant.to_numpy()]:
+            for source in series.get(f"variant_{int(variant):06d}", []):
+                if not (staging / "timeseries" / source.name).exists():
+                    rundir.link_or_copy(source, staging / "timeseries" / source.name)
+
+
+def open_staging(out_dir: Path, variants: list[Variant], hashes: list[str], force: bool) -> Path:
+    """The staging directory of a sweep into ``out_dir`` (:func:`nlcx.rundir.open_partial`) with
+    the finished batches it resumes from: an interrupted run's, already there, and the finished
+    sweep's in ``out_dir`` of this plan's variants (:func:`_carry_parts`); ``force``: none."""
+    from nlcx import rundir
+
+    staging = rundir.open_partial(out_dir, keep=("parts", "timeseries"), fresh=force)
+    if not force and (out_dir / "parts").is_dir():
+        _carry_parts(out_dir, staging, {h: v.index for v, h in zip(variants, hashes, strict=True)})
+    return staging
