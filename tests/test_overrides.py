@@ -48,7 +48,6 @@ def test_malformed_overrides_are_one_line_errors(text: str) -> None:
     assert str(info.value) == f"config error: <config> = {text!r}: {OVERRIDE_FORMS}"
 
 
-
 @pytest.mark.parametrize(
     ("text", "problem"),
     [
@@ -62,6 +61,7 @@ def test_a_value_that_is_not_yaml_is_a_one_line_error_naming_the_problem(text: s
     message = str(info.value)
     assert "\n" not in message
     assert message == f"config error: a = {text[2:]!r}: not valid YAML: {problem}"
+
 
 def test_set_adds_or_replaces_a_key(raw: dict[str, object]) -> None:
     before = copy.deepcopy(raw)
