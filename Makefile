@@ -103,6 +103,9 @@ identify: install
 	$(BIN)/nlcx reproduce --profile literal --jobs $(JOBS) --out results/identify/reproduce_literal
 	$(BIN)/nlcx reproduce --profile selected --jobs $(JOBS) --out results/identify/reproduce_selected
 	$(BIN)/nlcx identify configs/identify/consistency.yaml --jobs $(JOBS) --out results/identify/consistency
+	$(BIN)/nlcx linearize configs/x_error_ags.yaml --controller conventional --out results/identify/frozen_conventional
+	$(BIN)/nlcx linearize configs/x_error_ags.yaml --controller proposed --along e --out results/identify/frozen_error_ags
+	$(BIN)/nlcx linearize configs/x_time_ags.yaml --controller proposed --along t --out results/identify/frozen_time_ags
 	$(BIN)/python scripts/fidelity_report.py doc results/identify > results/identify/fidelity.md
 	cp results/identify/fidelity.md docs/fidelity.md
 	cp results/identify/consistency/consistency.png docs/img/consistency.png

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 from nlcx._version import __version__
 
 if TYPE_CHECKING:
+    from nlcx.analysis import linearize
     from nlcx.api import experiment, run, sweep
     from nlcx.comparison import compare, improvement
     from nlcx.errors import ConfigError, NlcxError
@@ -35,6 +36,7 @@ __all__ = [
     "compare",
     "experiment",
     "improvement",
+    "linearize",
     "load_run",
     "plant",
     "run",
@@ -56,6 +58,7 @@ _HOMES = {
     "NlcxError": "nlcx.errors",
     "step_info": "nlcx.metrics",
     "plant": "nlcx.plants.scalar",
+    "linearize": "nlcx.analysis",
 }
 
 

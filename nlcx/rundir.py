@@ -52,7 +52,7 @@ if TYPE_CHECKING:
     from nlcx.engine import Result
 
 #: The kinds of output directory nlcx writes whole, as its manifest names them under :data:`MARKER`.
-KINDS = ("run", "sweep", "reproduction")
+KINDS = ("run", "sweep", "reproduction", "linearize")
 #: The manifest.json key that marks a directory nlcx wrote; its value is one of :data:`KINDS`.
 MARKER = "nlcx_output"
 #: What an output directory may be.

@@ -5,8 +5,8 @@
 
 `make identify` runs the studies, the two reproductions (literal and selected profiles) and
 the consistency study, then this. Every number on the page comes from those outputs (the
-ranking CSVs, the fits' JSON files, study.json, claims.csv and the tables of each
-reproduction, the consistency study); the narrative is the template
+ranking CSVs, the pendulum study's screening.csv, the fits' JSON files, study.json, claims.csv
+and the tables of each reproduction, the consistency study); the narrative is the template
 scripts/templates/fidelity.md.j2.
 """
 
@@ -97,6 +97,16 @@ def families_rows(families: dict[str, dict[str, hypotheses.OptionValue]]) -> lis
     ]
 
 
+def screening_rows(study: Path) -> list[dict[str, Any]]:
+    """The screening table of a study (its screening.csv: family, best value, train loss, gain,
+    forwarded), best gain first; none for a study without a screen."""
+    path = study / "screening.csv"
+    if not path.is_file():
+        return []
+    table = pd.read_csv(path, dtype={"family": str, "best_value": str, "forwarded": str})
+    return table.to_dict("records")
+
+
 def targets(literal: dict[str, Any], selected: dict[str, Any]) -> list[dict[str, Any]]:
     """The study's targets with the literal and selected profiles' values (reproductions)."""
 
@@ -118,13 +128,19 @@ def context(results: Path) -> dict[str, Any]:
     pend = pd.read_csv(results / "pendulum_all" / "ranking.csv")
     cstr = pd.read_csv(results / "cstr" / "ranking.csv")
     best = pend.iloc[0]
+    pendulum_spec = yaml.safe_load(PENDULUM_SPEC.read_text())
+    examined = pendulum_spec.get("families", list(hypotheses.FAMILIES))
+    screened = screening_rows(results / "pendulum_all")
     literal_rep = reproduction(results / "reproduce_literal", spec_split)
     selected_rep = reproduction(results / "reproduce_selected", spec_split)
     return {
         "split": spec_split,
-        "pendulum_spec": yaml.safe_load(PENDULUM_SPEC.read_text()),
+        "pendulum_spec": pendulum_spec,
         "cstr_spec": yaml.safe_load(CSTR_SPEC.read_text()),
-        "families": families_rows(hypotheses.FAMILIES),
+        "families": families_rows({f: hypotheses.FAMILIES[f] for f in examined}),
+        "screening": screened,
+        "screening_singles": len(hypotheses.family(examined, 1)) - 1,
+        "forwarded": [r["family"] for r in screened if r["forwarded"] == "yes"],
         "cstr_families": families_rows(hypotheses.CSTR_FAMILIES),
         "pend": pend,
         "pend_study": json.loads((results / "pendulum_all" / "study.json").read_text()),
@@ -143,39 +159,87 @@ def context(results: Path) -> dict[str, Any]:
         "selected": selected_rep,
         "targets": targets(literal_rep, selected_rep),
         **consistency(results / "consistency"),
+        "frozen": frozen_rows(results),
     }
 
 
+#: The frozen-gain analyses `make identify` writes (`nlcx linearize`): directory -> (what, axis).
+FROZEN = {
+    "frozen_conventional": ("conventional PID, x_error_ags.yaml", None),
+    "frozen_error_ags": ("error-AGS PID, x_error_ags.yaml, frozen at e", "e"),
+    "frozen_time_ags": ("time-AGS PID, x_time_ags.yaml, frozen at t", "t"),
+}
+
+
+def frozen_rows(results: Path) -> list[dict[str, Any]]:
+    """Per frozen point: the least damped pole pair (zeta, omega_n), the slowest pole, and the
+    margins of the loop broken at F_x (with the loop transfer's unstable poles)."""
+    rows = []
+    for name, (what, axis) in FROZEN.items():
+        directory = results / name
+        if not directory.is_dir():
+            continue
+        poles = pd.read_csv(directory / ("poles_along.csv" if axis else "poles.csv"))
+        margins = pd.read_csv(directory / ("margins_along.csv" if axis else "margins.csv"))
+        points = sorted(poles[axis].unique()) if axis else [None]
+        picks = sorted({points[round(q * (len(points) - 1))] for q in (0, 0.1, 0.25, 0.5, 1)}) if axis else [None]
+        for point in picks:
+            here = poles if point is None else poles[poles[axis] == point]
+            slow = here[here.real > -100]  # the derivative's realisation poles are near -2/dt
+            pair = slow[slow.imag.abs() > 1e-9].sort_values("zeta")
+            cut = margins if point is None else margins[margins[axis] == point]
+            at_input = cut[cut.opening == "input"].iloc[0]
+            rows.append({
+                "what": what,
+                "point": "—" if point is None else f"{axis} = {point:g}",
+                "zeta": float(pair.zeta.iloc[0]) if len(pair) else math.nan,
+                "omega_n": float(pair.omega_n.iloc[0]) if len(pair) else math.nan,
+                "slowest": float(slow.real[slow.real < -1e-9].max()),
+                "gm": float(at_input.gain_margin),
+                "pm": float(at_input.phase_margin),
+                "rhp": int(at_input.rhp_poles),
+            })  # fmt: skip
+    return rows
+
+
 def consistency(study: Path) -> dict[str, Any]:
-    """What the page shows of the consistency study (nlcx/thesis/consistency.py)."""
+    """What the page shows of the consistency study (nlcx/thesis/consistency.py): one row per
+    printed column (table, controller), the families each was examined under (summary.json)."""
     spec = yaml.safe_load(CONSISTENCY_SPEC.read_text())
     definitions = spec.get("definitions") or list(DEFINITIONS)
+    summary = json.loads((study / "summary.json").read_text())
     columns = pd.read_csv(study / "columns.csv", dtype={"table": str, "also_printed_in": str}).fillna(
         {"also_printed_in": ""}
     )
     rows = []
-    for _, group in columns.groupby("table", sort=False):
+    for _, group in columns.groupby(["table", "controller"], sort=False):
         first = group.iloc[0].to_dict()
         others = group.iloc[1:]
         rows.append({**first, "others": " / ".join(str(v) for v in others.most_cells_hit) or "—",
                      "reproduced_any": bool(group.reproduced.any())})  # fmt: skip
-    cells = pd.read_csv(study / "cells.csv", dtype={"table": str})
+    cells = pd.read_csv(study / "cells.csv", dtype={"table": str, "text": str})
     train = split.load(SPLIT).pendulum.train
     train_cells = cells[cells.table.isin(train) & (cells.definition == definitions[0])]
     subsets = pd.read_csv(study / "subsets.csv", dtype={"table": str})
+    keys = list(dict.fromkeys(zip(columns.table, columns.controller, strict=True)))
+
+    def of(table: str, controller: str) -> pd.DataFrame:
+        return subsets[(subsets.table == table) & (subsets.controller == controller)]
+
     return {
         "consistency_spec": {**spec, "definitions": definitions, "cloud": spec.get("cloud", {"n": 1500})},
+        "consistency_summary": summary,
         "consistency_study": json.loads((study / "study.json").read_text()),
-        "consistency_hypotheses": len(hypotheses.family(spec["families"], spec["max_options"])),
+        "consistency_hypotheses": sum(c["hypotheses"] for c in summary["columns"]),
         "consistency_columns": rows,
-        "consistency_reproduced": [r["table"] for r in rows if r["reproduced_any"]],
+        "consistency_reproduced": [f"{r['table']} {r['controller']}" for r in rows if r["reproduced_any"]],
         "consistency_train_cells": train_cells.to_dict("records"),
         "consistency_sets_total": len(subsets),
         "consistency_robust": subsets[subsets.least_miss >= ROBUST_MISS].to_dict("records"),
         "consistency_weak": [
-            {"table": t, "least": float(subsets[subsets.table == t].least_miss.max())}
-            for t in columns.table.unique()
-            if not (subsets[subsets.table == t].least_miss >= ROBUST_MISS).any()
+            {"table": f"{t} {c}", "least": float(of(t, c).least_miss.max())}
+            for t, c in keys
+            if len(of(t, c)) and not (of(t, c).least_miss >= ROBUST_MISS).any()
         ],
         "consistency_train_sets": subsets[subsets.table.isin(train)].to_dict("records"),
     }

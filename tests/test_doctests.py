@@ -11,7 +11,15 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 
 #: The modules of the public API (``nlcx.__all__``) whose docstrings carry examples.
-MODULES = ("nlcx", "nlcx.api", "nlcx.results", "nlcx.comparison", "nlcx.metrics.step", "nlcx.plants.scalar")
+MODULES = (
+    "nlcx",
+    "nlcx.api",
+    "nlcx.results",
+    "nlcx.comparison",
+    "nlcx.metrics.step",
+    "nlcx.plants.scalar",
+    "nlcx.analysis.linearization",
+)
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -515,3 +515,40 @@ def test_reference_cache_shares_an_array_per_key_and_drops_the_least_recently_us
     assert Ramp.calls == 4
     again = cache.array(prepared, ("r0",))
     assert again is not first and np.array_equal(again, first) and Ramp.calls == 5
+
+
+_BOUNDS_SCRIPT = """
+import copy, itertools, yaml
+from nlcx import config, engine
+raw0 = yaml.safe_load(open("configs/x_error_ags.yaml"))
+models = ["none", "simple", "exponential"]
+for integrator, model, noise, dist in itertools.product(["rk4", "euler"], models, [0, 1], [0, 1]):
+    raw = copy.deepcopy(raw0)
+    raw["simulation"].update(t_end=0.02, integrator=integrator)
+    u = {}
+    if model != "none":
+        u["friction"] = {"kind": "friction", "model": model, "mu_s": 0.2, "mu_c": 0.15, "viscous": 0.1}
+    if noise:
+        u["noise"] = {"kind": "noise", "power": 1e-7, "sample_time": 0.01}
+    if dist:
+        u["disturbance"] = {"kind": "disturbance", "amplitude": 2.0, "frequency": 10.0}
+    raw["uncertainty"] = u
+    prepared = engine.prepare(config.build(raw))
+    engine.simulate_items(engine.items_of(prepared), prepared.grid, integrator)
+print("in bounds")
+"""
+
+
+def test_the_kernel_reads_and_writes_only_inside_its_arrays() -> None:
+    """The kernel run as Python (``NUMBA_DISABLE_JIT=1``), where every index is checked, over
+    each combination of friction model, noise and disturbance: no index leaves its array
+    (compiled, an index past the end reads or writes whatever memory follows)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    env = {**os.environ, "NUMBA_DISABLE_JIT": "1"}
+    done = subprocess.run([sys.executable, "-c", _BOUNDS_SCRIPT], cwd=root, env=env, capture_output=True, text=True)
+    assert done.returncode == 0 and "in bounds" in done.stdout, done.stderr[-2000:]

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -14,8 +16,9 @@ from typer.testing import CliRunner
 
 from nlcx import config, engine
 from nlcx.cli import app
-from nlcx.thesis import hypotheses, profiles
-from nlcx.thesis.identify import TableRuns, direction_agreement, train_loss
+from nlcx.thesis import catalog, hypotheses, profiles, split
+from nlcx.thesis import identify as identify_module
+from nlcx.thesis.identify import IdentifySpec, Screen, TableRuns, direction_agreement, load_spec, screening, train_loss
 from nlcx.thesis.tables import ANGLE_METRICS, POSITION_METRICS, lookup_value, metric_lookup
 from nlcx.uncertainty.actuator_lag import first_order_lag
 
@@ -36,12 +39,69 @@ def built(hyp: hypotheses.Hypothesis, table: str = "2.5", **values: float) -> en
 
 
 def test_the_family_is_every_combination_of_up_to_three_options() -> None:
-    spec = yaml.safe_load((ROOT / "configs" / "identify" / "pendulum_all.yaml").read_text())
-    family = hypotheses.family(spec["families"], spec["max_options"])
+    family = hypotheses.family(list(hypotheses.FAMILIES)[:11], 3)
     names = [h.name for h in family]
     assert names[0] == "literal" and len(names) == len(set(names)) == 508  # 1 + 15 + 100 + 392
     assert all(len(h.options) <= 3 for h in family)
     assert all(len({f for f, _ in h.options}) == len(h.options) for h in family)  # one value per family
+
+
+def test_the_study_screens_every_family_within_the_former_studys_fits() -> None:
+    """Whichever families the screen forwards, the study fits no more hypotheses than the
+    former study of every combination of up to three of the first 11 families (508)."""
+    spec = load_spec(ROOT / "configs" / "identify" / "pendulum_all.yaml")
+    assert spec.families == list(hypotheses.FAMILIES) and len(spec.families) == 20
+    assert spec.screen is not None and spec.screen.keep <= 8 and spec.screen.min_gain == 0.05
+    screened = {h.name for h in hypotheses.family(spec.families, 1)}
+    assert len(screened) == 31  # the literal loop and the 30 single values
+    # the largest combination: the ``keep`` families with the most values (any tie gives the same count)
+    widest = sorted(spec.families, key=lambda f: len(hypotheses.FAMILIES[f]), reverse=True)[: spec.screen.keep]
+    combined = {h.name for h in hypotheses.family(widest, spec.max_options)}
+    counts = [len(hypotheses.FAMILIES[f]) - 1 for f in widest]
+    pairs = sum(a * b for a, b in itertools.combinations(counts, 2))
+    triples = sum(a * b * c for a, b, c in itertools.combinations(counts, 3))
+    assert len(combined) == 1 + sum(counts) + pairs + triples
+    assert len(screened | combined) <= 508
+
+
+def test_the_screen_forwards_the_largest_gains_above_the_least_at_most_keep() -> None:
+    def fit(loss: float, **options: str) -> dict[str, Any]:
+        return {"options": options, "train_loss": loss}
+
+    summaries = [
+        fit(2.0),
+        fit(1.5, derivative="filtered"), fit(1.0, derivative="measurement"),  # best 1.0: gain 0.5
+        fit(1.96, integral="inside"),  # gain 0.02 < 0.05
+        fit(1.0, form="ideal"), fit(1.2, form="series"),  # 0.5, tied with derivative: family order
+        fit(2.5, lag="first_order"),  # worse than the literal fit
+        fit(1.9, units="degrees"),  # 0.05: passes, but beyond keep
+    ]  # fmt: skip
+    table = screening(summaries, Screen(keep=2, min_gain=0.05))
+    assert list(table.family) == ["derivative", "form", "units", "integral", "lag"]
+    assert list(table.best_value) == ["measurement", "ideal", "degrees", "inside", "first_order"]
+    assert np.allclose(table.gain, [0.5, 0.5, 0.05, 0.02, -0.25]) and list(table.train_loss)[:2] == [1.0, 1.0]
+    assert list(table.forwarded) == ["yes", "yes", "no", "no", "no"]
+    assert list(screening(summaries, Screen(keep=5, min_gain=0.05)).forwarded) == ["yes"] * 3 + ["no"] * 2
+    assert set(screening(summaries, Screen(keep=5, min_gain=0.6)).forwarded) == {"no"}
+    assert list(screening([fit(0.0), fit(0.0, lag="first_order")], Screen(keep=1, min_gain=0.0)).gain) == [0.0]
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"screen": {"keep": 0, "min_gain": 0.05}}, "screen.keep = 0"),
+        ({"screen": {"keep": 2}}, "screen.min_gain"),
+        ({"screen": {"keep": 2, "min_gain": 0.05}, "only": ["literal"]}, "only and screen exclude each other"),
+    ],
+)
+def test_a_bad_screen_is_refused_in_one_line(tmp_path: Path, change: dict, message: str) -> None:
+    raw = yaml.safe_load(_spec(tmp_path, SPLIT).read_text())
+    del raw["only"]
+    raw |= change
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    result = runner.invoke(app, ["identify", str(path), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and message in result.output and len(result.output.strip().splitlines()) == 1
 
 
 def test_literal_is_the_experiment_as_configured() -> None:
@@ -148,6 +208,105 @@ def test_identify_fits_on_train_only_ranks_on_validation_and_resumes(tmp_path: P
     assert second["values"] == first["values"] and second["train_loss"] == first["train_loss"]
     moved_fit = pd.read_csv(out2 / "fits" / "literal.fit.csv", dtype={"table": str})
     assert set(moved_fit[moved_fit.table == "2.4"].part) == {"test"}  # scored, as test, not fitted
+
+
+def _screened_spec(tmp_path: Path, families: list[str], keep: int, max_options: int) -> Path:
+    """The tiny spec, its families screened (every gain >= 0 passes; at most ``keep``), the
+    literal loop fitted first and every GA started from it."""
+    raw = yaml.safe_load(_spec(tmp_path, SPLIT).read_text())
+    del raw["only"]
+    raw |= {"families": families, "max_options": max_options, "screen": {"keep": keep, "min_gain": 0.0}}
+    raw |= {"warm_start": {"kind": "ga", "pop_size": 4, "generations": 1, "seed": 2}}
+    path = tmp_path / "screened.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+def _counting_fits(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The hypotheses fitted from now on, in order (the study fits in this process: one job)."""
+    fitted: list[str] = []
+    real = identify_module.fit_hypothesis
+
+    def counted(
+        spec: IdentifySpec, root: Path, hyp: hypotheses.Hypothesis, *args: Any, **kwargs: Any
+    ) -> tuple[dict[str, Any], pd.DataFrame]:
+        fitted.append(hyp.name)
+        return real(spec, root, hyp, *args, **kwargs)
+
+    monkeypatch.setattr(identify_module, "fit_hypothesis", counted)
+    return fitted
+
+
+@pytest.mark.slow
+def test_the_screen_forwards_by_train_loss_reuses_its_fits_and_resumes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    spec = _screened_spec(tmp_path, ["derivative", "integral", "prefilter", "sampling"], keep=2, max_options=2)
+    fitted = _counting_fits(monkeypatch)
+    out = tmp_path / "out"
+    identify_module.identify(spec, out, root=THESIS)
+    fits = {p.stem: json.loads(p.read_text()) for p in (out / "fits").glob("*.json")}
+    # the screening table, recomputed from the single fits: best value per family (ties: the
+    # first of its values), its gain, the rule
+    literal = fits["literal"]["train_loss"]
+    best: dict[str, tuple[float, str]] = {}
+    for hyp in hypotheses.family(["derivative", "integral", "prefilter", "sampling"], 1)[1:]:
+        ((family, value),) = hyp.options
+        if fits[hyp.name]["train_loss"] < best.get(family, (math.inf, ""))[0]:
+            best[family] = (fits[hyp.name]["train_loss"], value)
+    table = pd.read_csv(out / "screening.csv")
+    assert set(table.family) == {"derivative", "integral", "prefilter", "sampling"}
+    for row in table.itertuples():
+        assert (row.train_loss, row.best_value) == best[row.family]
+        assert math.isclose(row.gain, 1 - row.train_loss / literal)
+    assert list(table.gain) == sorted(table.gain, reverse=True)
+    forwarded = [f for f, g in zip(table.family, table.gain, strict=True) if g >= 0.0][:2]
+    assert list(table.family[table.forwarded == "yes"]) == forwarded
+    assert set(table.forwarded) == {"yes", "no"}  # the screen dropped a family
+    # the forwarded families' combinations are ranked; every hypothesis was fitted once
+    family = [h.name for h in hypotheses.family(forwarded, 2)]
+    assert sorted(pd.read_csv(out / "ranking.csv").hypothesis) == sorted(family)
+    singles = [h.name for h in hypotheses.family(table.family.tolist(), 1)]
+    assert sorted(fitted) == sorted(set(singles) | set(family)) == sorted(fits)
+    assert json.loads((out / "study.json").read_text())["hypotheses"] == len(fits)
+    # a study killed before its last fit resumes: that fit only, the same ranking
+    ranking = pd.read_csv(out / "ranking.csv").drop(columns="wall_s")
+    (out / "fits" / f"{family[-1]}.json").unlink()
+    fitted.clear()
+    identify_module.identify(spec, out, root=THESIS)
+    assert fitted == [family[-1]]
+    assert pd.read_csv(out / "ranking.csv").drop(columns="wall_s").equals(ranking)  # but the time it took
+
+
+@pytest.mark.slow
+def test_the_test_tables_change_no_fit_no_screen_no_ranking_and_no_profile(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every printed value of the test tables doubled: the fits, the screening, the ranking and
+    the selected profile are those of the thesis's values; only the test scores move."""
+    spec = _screened_spec(tmp_path, ["derivative", "prefilter"], keep=1, max_options=1)
+    test_tables = split.load(SPLIT).pendulum.test
+    printed = catalog.thesis_metrics()
+    doubled = printed.assign(value=printed.value.where(~printed.table.isin(test_tables), 2 * printed.value))
+    changed = doubled.value != printed.value
+    assert changed.equals(printed.table.isin(test_tables) & (printed.value != 0)) and changed.sum() > 100
+    runs = {}
+    for name, table in (("printed", printed), ("doubled", doubled)):
+        monkeypatch.setattr(catalog, "thesis_metrics", lambda table=table: table)
+        out = tmp_path / name / "out"
+        runs[name] = identify_module.identify(spec, out, root=THESIS)
+    a, b = (tmp_path / name / "out" for name in runs)
+    for path in (a / "fits").glob("*.json"):
+        ours, theirs = json.loads(path.read_text()), json.loads((b / "fits" / path.name).read_text())
+        assert (ours["values"], ours["train_loss"]) == (theirs["values"], theirs["train_loss"]), path.stem
+    assert sorted(p.name for p in (a / "fits").glob("*.json")) == sorted(p.name for p in (b / "fits").glob("*.json"))
+    assert (a / "screening.csv").read_bytes() == (b / "screening.csv").read_bytes()
+    assert (a / "profile.yaml").read_bytes() == (b / "profile.yaml").read_bytes()
+    first, second = runs["printed"], runs["doubled"]
+    assert list(first.hypothesis) == list(second.hypothesis)
+    for column in [c for c in first.columns if c.startswith(("train_", "validation_"))]:
+        assert first[column].equals(second[column]), column
+    assert not first.test_median_rel_error.equals(second.test_median_rel_error)  # the doubling was seen
 
 
 def test_a_diverged_cell_counts_as_a_failure_not_as_missing() -> None:

@@ -109,3 +109,31 @@ def test_both_controllers_see_the_same_noise() -> None:
     result = noise_runs(5)
     items = engine.items_of(result.prepared)
     assert len(items) == 2 and items[0].element_data is items[1].element_data  # one sequence, broadcast
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "heun"])
+def test_the_friction_recorded_at_the_final_sample_sees_the_disturbance_at_that_instant(integrator: str) -> None:
+    """A base held by stiction under a sine disturbance: the holding force recorded at the
+    final sample t_K (which begins no step, so no stage of the disturbance table sits at it)
+    equals the force recorded at the same instant by a run that goes on past it."""
+
+    def held(t_end: float) -> np.ndarray:
+        raw = {
+            "name": "held_under_disturbance",
+            "plant": {"name": "x_pendulum", "x0": {}},
+            "controllers": {"open": {"kind": "open_loop"}},
+            "reference": {"F_x": {"kind": "constant", "value": 0.2 * WEIGHT}},
+            "uncertainty": {
+                "friction": {"kind": "friction", "model": "simple", "mu_s": 0.5, "mu_c": 0.25},
+                "disturbance": {"kind": "disturbance", "amplitude": 0.5, "frequency": 3.0, "states": ["x_dot"]},
+            },
+            "simulation": {"t_end": t_end, "dt": 1e-3, "integrator": integrator, "bounds": {"theta": 1e9}},
+        }
+        (run,) = run_raw(raw).runs
+        assert np.all(run.x[:, 1] == 0.0)  # held throughout
+        return run.friction[:, 0]
+
+    short, long = held(0.5), held(0.6)
+    assert np.isclose(short[-1], long[short.size - 1], rtol=1e-12, atol=0)
+    assert np.array_equal(short[:-1], long[: short.size - 1])
+    assert not np.isclose(short[-1], short[-2], rtol=1e-6)  # the disturbance moves the force between samples

@@ -1,9 +1,10 @@
 """The ``nlcx`` command line: the Typer application (:data:`app`) and its entry point (:func:`main`).
 
 The commands live in :mod:`nlcx.cli.experiments` (run, sweep, validate, reproduce, report,
-calibrate, identify) and :mod:`nlcx.cli.inspecting` (diff, metrics, list); importing this
-package registers them on :data:`app`. What a command sets for its process (the garbage
-collector, warnings, matplotlib's backend) is set and restored by :func:`command_settings`.
+calibrate, identify), :mod:`nlcx.cli.inspecting` (diff, metrics, list) and
+:mod:`nlcx.cli.analysis` (linearize); importing this package registers them on :data:`app`.
+What a command sets for its process (the garbage collector, warnings, matplotlib's backend)
+is set and restored by :func:`command_settings`.
 """
 
 from __future__ import annotations
@@ -12,12 +13,12 @@ import atexit
 import functools
 import gc
 
-from nlcx.cli import experiments, inspecting
+from nlcx.cli import analysis, experiments, inspecting
 from nlcx.cli._app import app, command_settings, one_line_errors
 
 __all__ = ["app", "command_settings", "main", "one_line_errors"]
 
-_COMMANDS = (experiments, inspecting)  # imported for the commands they register
+_COMMANDS = (experiments, inspecting, analysis)  # imported for the commands they register
 
 
 def main() -> None:  # pragma: no cover - console entry point

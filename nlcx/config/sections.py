@@ -76,7 +76,8 @@ class MetricsSection(Section):
     """Definitions of the step-response metrics, see docs/metrics.md.
 
     The settling band and the rise limits are fractions of the step (step signals) or of the
-    peak deviation (regulated signals); the steady-state window is in seconds.
+    peak deviation (regulated signals); the steady-state window is in seconds; the event times
+    of a step response are measured from its step or from the start of the run (``time_origin``).
     """
 
     settling_band: float = Field(
@@ -98,6 +99,16 @@ class MetricsSection(Section):
     )
     regulation_abs_tol: float = Field(
         0.0, ge=0, description="Absolute floor of the settling band of a regulated signal, in the signal's units."
+    )
+    time_origin: Literal["start", "step"] = Field(
+        "step",
+        description=(
+            "Origin of the event times, s (settling_time and peak_time) of a signal measured as a step response: "
+            "step: the time of the step it responds to (its step or filtered_step reference's time; for an output "
+            "measured after an open-loop input step, that step's time); start: t = 0, the start of the run, so each "
+            "is the step's time later than under step. rise_time, a duration, is the same under both; regulated "
+            "signals are measured from t = 0 under both."
+        ),
     )
 
     @field_validator("rise_limits")

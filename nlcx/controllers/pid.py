@@ -211,6 +211,7 @@ class MultiLoopPID(ControllerModel):
             direct_schedule=_DIRECT.get(registry.schedules.get(kind).gains, VIA_SLOT),
             form=FORMS[cfg.form],
             scale=loop.scale,
+            integral_limit=math.inf if loop.integral_limit is None else loop.integral_limit,
         )
 
     @staticmethod

@@ -42,7 +42,8 @@ class DerivativeConfig(BaseModel):
 
 
 class LoopConfig(BaseModel):
-    """One loop: which output it regulates, which input it drives, with which schedule."""
+    """One loop: which output it regulates, which input it drives, with which schedule, and the
+    limits of its integrator."""
 
     model_config = ConfigDict(extra="forbid")
     signal: str | None = Field(None, description="plant output regulated by this loop (default: the loop's key)")
@@ -68,6 +69,15 @@ class LoopConfig(BaseModel):
             "factor on y and r: the units the loop sees its output and reference in (the error, the schedule's "
             "argument and the gains' units follow); 1 as the plant gives them, 57.29577951308232 (180/pi) for an angle"
             " in degrees"
+        ),
+    )
+    integral_limit: float | None = Field(
+        None,
+        gt=0,
+        description=(
+            "limit L > 0 of the loop's integrator state, held within [-L, L] after each update as a Simulink "
+            "Integrator block's output limits hold it: the integral of e (integral: outside; in the loop's error "
+            "unit times s) or of k_i e (integral: inside; in the input's unit); null: unlimited"
         ),
     )
 

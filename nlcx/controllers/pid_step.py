@@ -7,9 +7,10 @@ kernel calls the step over the rows of a batch (:data:`nlcx.kernel.abi.CONTROLLE
     u_j = bias_j + sum_{loops i -> j} sign_i * [k_p e_i + k_i I_i + k_d D_i],   e_i = r_i - y_i
 
 with (k_p, k_i, k_d) from the loop's gain schedule (constant, time-AGS eqs. 2.17-2.19,
-error-AGS eqs. 2.20-2.22), I_i the backward-Euler integral of e_i and D_i its derivative (of
-e_i or of -y_i), a backward difference or filtered by N/(s + N); the saturation is the
-actuator's clamp (:func:`nlcx.uncertainty.actuator_saturation.saturate`) with the anti-windup.
+error-AGS eqs. 2.20-2.22), I_i the backward-Euler integral of e_i, held within the loop's
+integral limits [-L_i, L_i] where it has them, and D_i its derivative (of e_i or of -y_i), a
+backward difference or filtered by N/(s + N); the saturation is the actuator's clamp
+(:func:`nlcx.uncertainty.actuator_saturation.saturate`) with the anti-windup.
 
 One body, two steps. The step is written once, :func:`_pid_rows`, over a loop structure
 (:class:`Structure`: the loop count, each loop's indices, schedule, derivative, integral and
@@ -28,6 +29,7 @@ once (a sweep's workers compiling different structures) from overwriting each ot
 from __future__ import annotations
 
 import functools
+import math
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -50,14 +52,15 @@ I = INPUT.at
 #: uses, the sign of its contribution, its schedule (slot in the callback table, offset and
 #: length of the schedule's parameters, built-in schedule called directly), the derivative
 #: (filtered or backward, N, on the measurement or the error), the integral gain inside the
-#: integral, the set-point weight b of the proportional term, the PID form (:data:`FORMS`)
-#: and the scale of the units the loop sees y and r in (e.g. 180/pi: an angle in degrees).
+#: integral, the set-point weight b of the proportional term, the PID form (:data:`FORMS`),
+#: the scale of the units the loop sees y and r in (e.g. 180/pi: an angle in degrees) and the
+#: limit L of its integrator state, |I| <= L (inf: unlimited).
 LOOP = Layout(
     "PIDLoop",
     (
         "y_index", "r_index", "u_index", "sign", "schedule_slot", "filtered", "N", "on_measurement",
         "gain_inside", "schedule_offset", "schedule_length", "setpoint_weight", "direct_schedule",
-        "form", "scale",
+        "form", "scale", "integral_limit",
     ),
 )  # fmt: skip
 L = LOOP.at
@@ -85,12 +88,24 @@ FORMS = {"parallel": 0, "ideal": 1, "series": 2}
 ANTI_WINDUP = {"off": -1, "none": 0, "clamping": 1, "back_calculation": 2}
 
 
+@hot_njit(cache=True, inline="always", error_model="numpy")
+def _within(value, limit):  # pragma: no cover - compiled
+    """``value`` held within [-limit, limit], as a Simulink Integrator block's output limits hold
+    its state: unchanged inside them and where it is NaN, so a limit of inf changes no bit."""
+    if value > limit:
+        return limit
+    if value < -limit:
+        return -limit
+    return value
+
+
 @hot_njit(cache=True, error_model="numpy")
 def _saturate(row, cp, cs, u, log):  # pragma: no cover - compiled
     """Clip each limited input to [-limit, limit] (:func:`~nlcx.uncertainty.actuator_saturation.saturate`)
     and correct the integrators of the loops on it that updated at this step (clamping: undo
     this sample's increment if it pushes further into the limit; back-calculation:
-    I += K_b (u_sat - u) T through the loop's sign and integral gain, T the loop's update period)."""
+    I += K_b (u_sat - u) T through the loop's sign and integral gain, T the loop's update period,
+    then held within the loop's integral limits)."""
     n_u = int(cp[row, H.n_inputs])
     base = len(H) + len(I) * n_u
     mode = int(cp[row, H.anti_windup])
@@ -110,7 +125,8 @@ def _saturate(row, cp, cs, u, log):  # pragma: no cover - compiled
         if mode == 1 and excess * sign * cs[row, c + S.increment] * (1.0 if inside else ki) > 0.0:
             cs[row, c + S.integral] -= cs[row, c + S.increment]
         elif mode == 2 and (inside or ki != 0.0):
-            cs[row, c + S.integral] -= sign * cp[row, H.kb] * excess * period / (1.0 if inside else ki)
+            corrected = cs[row, c + S.integral] - sign * cp[row, H.kb] * excess * period / (1.0 if inside else ki)
+            cs[row, c + S.integral] = _within(corrected, cp[row, h + L.integral_limit])
     for j in range(n_u):
         u[row, j] = saturate(u[row, j], cp[row, len(H) + len(I) * j + I.limit])
 
@@ -149,18 +165,21 @@ def _loop_signals(structure, cp, row, h, i):  # pragma: no cover - compiled
 
 @hot_njit(cache=True, inline="always", error_model="numpy")
 def _loop_options(structure, cp, row, h, i):  # pragma: no cover - compiled
-    """(direct schedule, slot, schedule offset, filtered, on the measurement, gain inside, form)
-    of loop i: read from its :data:`LOOP` block at h (``structure`` None) or the constants of
-    a :class:`Structure`, where the compiler drops the branches the loop does not take."""
+    """(direct schedule, slot, schedule offset, filtered, on the measurement, gain inside, form,
+    limited integral) of loop i: read from its :data:`LOOP` block at h (``structure`` None) or
+    the constants of a :class:`Structure`, where the compiler drops the branches the loop does
+    not take. The step for any structure holds every integral within its limits (inf where
+    none is set, which changes no bit)."""
     if structure is None:
         return (
             int(cp[row, h + L.direct_schedule]), int(cp[row, h + L.schedule_slot]),
             int(cp[row, h + L.schedule_offset]), cp[row, h + L.filtered] != 0.0,
             cp[row, h + L.on_measurement] != 0.0, cp[row, h + L.gain_inside] != 0.0, int(cp[row, h + L.form]),
+            True,
         )  # fmt: skip
     return (
         structure.direct[i], structure.slot[i], structure.offset[i], structure.filtered[i] != 0,
-        structure.on_measurement[i] != 0, structure.inside[i] != 0, structure.form[i],
+        structure.on_measurement[i] != 0, structure.inside[i] != 0, structure.form[i], structure.limited[i] != 0,
     )  # fmt: skip
 
 
@@ -168,7 +187,7 @@ def _loop_options(structure, cp, row, h, i):  # pragma: no cover - compiled
 def _loop_update(structure, i, t, period, y_i, r_i, cp, cs, log, row, h, c, callbacks):  # pragma: no cover - compiled
     """Loop i's sample (see :func:`pid_step`), its options by :func:`_loop_options`: its state
     updated, its gains logged; returns its signed contribution to its input."""
-    direct, slot, off, filtered, on_measurement, inside, form = _loop_options(structure, cp, row, h, i)
+    direct, slot, off, filtered, on_measurement, inside, form, limited = _loop_options(structure, cp, row, h, i)
     e = r_i - y_i
     if cs[row, c + S.started] == 0.0:
         cs[row, c + S.e_prev] = e
@@ -192,7 +211,14 @@ def _loop_update(structure, i, t, period, y_i, r_i, cp, cs, log, row, h, c, call
     if form != 0:  # ideal: k_p (1, k_i, k_d); series: k_p (1 + k_i k_d, k_i, k_d)
         kp, ki, kd = (kp * (1.0 + ki * kd) if form == 2 else kp), kp * ki, kp * kd
     step = ki * e * period if inside else e * period
-    cs[row, c + S.integral] += step
+    integral = cs[row, c + S.integral] + step
+    if limited:
+        limit = cp[row, h + L.integral_limit]
+        if integral > limit or integral < -limit:  # held at the limit: the increment is what I moved
+            bounded = _within(integral, limit)
+            step = bounded - cs[row, c + S.integral]
+            integral = bounded
+    cs[row, c + S.integral] = integral
     cs[row, c + S.increment] = step
     integral_term = cs[row, c + S.integral] * (1.0 if inside else ki)
     out = cp[row, h + L.sign] * (kp * (cp[row, h + L.setpoint_weight] * r_i - y_i) + integral_term + kd * d)
@@ -237,8 +263,9 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
     """The PID controller, every row; u[row, j] = bias_j + sum of its loops' outputs, clipped
     to the input's limit when saturated.
 
-    Per loop i: e = r - y, I += e T (or k_i e T with the gain inside), D = de/dt by a
-    backward difference or filtered by N/(s + N), (k_p, k_i, k_d) from the loop's schedule,
+    Per loop i: e = r - y, I += e T (or k_i e T with the gain inside), then I held within the
+    loop's integral limits [-L, L] (none: L = inf), D = de/dt by a backward difference or
+    filtered by N/(s + N), (k_p, k_i, k_d) from the loop's schedule,
     u += sign (k_p (b r - y) + k_i I + k_d D), with y and r in the loop's units (scale) and
     (k_p, k_i, k_d) turned into parallel gains for the ideal or series form. T = dt, or the
     sampling period T_s of a discrete PID, which holds its output between samples.
@@ -254,8 +281,9 @@ def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - c
 class Structure(NamedTuple):
     """What a PID's parameter row fixes beyond its numbers: the head's sizes and modes, and per
     loop (tuples, one entry a loop) its output, reference and input indices, schedule (built-in
-    called directly, or its slot) and where its parameters start, and its derivative, integral
-    and PID-form options (0/1 flags, :data:`FORMS` code)."""
+    called directly, or its slot) and where its parameters start, its derivative, integral
+    and PID-form options (0/1 flags, :data:`FORMS` code) and whether its integral is limited
+    (a finite ``integral_limit``)."""
 
     n_inputs: int
     n_loops: int
@@ -271,6 +299,7 @@ class Structure(NamedTuple):
     on_measurement: tuple[int, ...]
     inside: tuple[int, ...]
     form: tuple[int, ...]
+    limited: tuple[int, ...]
 
 
 def structure_of(cp: np.ndarray) -> Structure:
@@ -289,6 +318,7 @@ def structure_of(cp: np.ndarray) -> Structure:
         u_index=column("u_index"), direct=column("direct_schedule"), slot=column("schedule_slot"),
         offset=column("schedule_offset"), filtered=column("filtered"), on_measurement=column("on_measurement"),
         inside=column("gain_inside"), form=column("form"),
+        limited=tuple(int(math.isfinite(loop["integral_limit"])) for loop in loops),
     )  # fmt: skip
 
 

@@ -26,22 +26,27 @@ def _unit(template: str, signal_unit: str) -> str:
     return template.replace("signal", signal_unit or "1").replace("input", signal_unit or "1")
 
 
+def _time_origin(t_step: float, cfg: MetricsSection) -> float:
+    """The time the event times of a step at ``t_step`` are measured from (``metrics.time_origin``):
+    the step itself, or the start of the run."""
+    return 0.0 if cfg.time_origin == "start" else t_step
+
+
 def _signal_metrics(
     t: np.ndarray, y: np.ndarray, r: np.ndarray, plan: MetricPlan, cfg: MetricsSection
 ) -> dict[str, Any]:
     values: dict[str, Any] = {}
     if plan.kind == "step":
-        values.update(
-            m.step_response_metrics(
-                t,
-                y,
-                t_step=plan.t_step,
-                final=plan.final,
-                band=cfg.settling_band,
-                rise_limits=cfg.rise_limits,
-                ss_window=cfg.ss_window,
-            )
+        step = m.step_response_metrics(
+            t,
+            y,
+            t_step=plan.t_step,
+            final=plan.final,
+            band=cfg.settling_band,
+            rise_limits=cfg.rise_limits,
+            ss_window=cfg.ss_window,
         )
+        values.update(m.measured_from(step, plan.t_step, _time_origin(plan.t_step, cfg)))
     elif plan.kind == "regulation":
         values.update(
             m.regulation_metrics(
@@ -150,7 +155,8 @@ def _open_loop_values(
             info = m.step_info(
                 runs[members[0]].t, y, t_step=t_step, settling_band=cfg.settling_band, rise_limits=cfg.rise_limits
             )
-            values.update(_per_run(cast(m.MetricDict, info), members, s))  # y is (B, T): (B,) arrays
+            moved = m.measured_from(cast(m.MetricDict, info), t_step, _time_origin(t_step, cfg))  # (B,) arrays
+            values.update(_per_run(moved, members, s))
     return values
 
 
@@ -182,9 +188,11 @@ def measure_runs(
     Outputs that follow a reference get the step / regulation / tracking metrics of their
     plan; with a step on an input the controller applies (``open_loop``), every other output
     gets its step characteristics against its own final value; every input gets its effort.
-    The metrics of runs that completed are computed together, vectorised over the runs that
-    share a plan (a sweep measures thousands of runs in a few calls). A row is the position
-    of its run in ``runs``, then the values of :data:`METRIC_COLUMNS`.
+    The event times of a step response are measured from its step or from t = 0
+    (``cfg.time_origin``). The metrics of runs that completed are computed together,
+    vectorised over the runs that share a plan (a sweep measures thousands of runs in a few
+    calls). A row is the position of its run in ``runs``, then the values of
+    :data:`METRIC_COLUMNS`.
     """
     ok = [i for i, r in enumerate(runs) if r.status == "ok"]
     values = {

@@ -17,7 +17,8 @@ piecewise linear), so they are not quantised to the grid.  Peaks are sample valu
 Integrals use the trapezoidal rule on the given grid.
 
 The functions live by what they measure: a step response in :mod:`nlcx.metrics.step`
-(:func:`step_response_metrics`, :func:`step_info`), a regulated signal, an error and a
+(:func:`step_response_metrics`, :func:`step_info`, their event times moved to another
+origin by :func:`measured_from`), a regulated signal, an error and a
 control input in :mod:`nlcx.metrics.regulation` (:func:`regulation_metrics`,
 :func:`error_integrals`, :func:`input_metrics`); their names and units in
 :mod:`nlcx.metrics.names`.
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 from nlcx.metrics.names import (
     ERROR_METRICS,
+    EVENT_TIMES,
     INPUT_METRICS,
     METRIC_UNITS,
     REGULATION_METRICS,
@@ -39,10 +41,11 @@ from nlcx.metrics.names import (
 )
 from nlcx.metrics.regulation import error_integrals, input_metrics, regulation_metrics
 from nlcx.metrics.rows import FloatArray, MetricDict, rows_per_block
-from nlcx.metrics.step import StepInfo, step_info, step_response_metrics
+from nlcx.metrics.step import StepInfo, measured_from, step_info, step_response_metrics
 
 __all__ = [
     "ERROR_METRICS",
+    "EVENT_TIMES",
     "INPUT_METRICS",
     "METRIC_UNITS",
     "REGULATION_METRICS",
@@ -54,6 +57,7 @@ __all__ = [
     "StepInfo",
     "error_integrals",
     "input_metrics",
+    "measured_from",
     "regulation_metrics",
     "rows_per_block",
     "step_info",

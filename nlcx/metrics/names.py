@@ -65,5 +65,8 @@ STEP_INFO_UNITS: dict[str, str] = {
     "settling_min": "signal",
     "settling_max": "signal",
 }
+#: The metrics that are times of events, measured from an origin (the step, or the start of the
+#: run: :func:`nlcx.metrics.measured_from`); ``rise_time`` is a duration, the same from any origin.
+EVENT_TIMES: tuple[str, ...] = ("settling_time", "peak_time")
 ERROR_METRICS: tuple[str, ...] = ("ise", "iae", "itae", "max_abs_error", "rms_error")
 INPUT_METRICS: tuple[str, ...] = ("control_effort", "peak_input", "total_variation")

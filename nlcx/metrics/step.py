@@ -2,9 +2,9 @@
 
 :func:`step_response_metrics` measures a response against the step of its reference,
 :func:`step_info` against the response's own final value, as MATLAB's ``stepinfo`` and
-python-control's ``step_info`` do. Times are measured from the step; rise and settling times
-are crossings interpolated linearly between samples, peaks are sample values. See
-``docs/metrics.md``.
+python-control's ``step_info`` do. Times are measured from the step (:func:`measured_from`
+moves them to another origin); rise and settling times are crossings interpolated linearly
+between samples, peaks are sample values. See ``docs/metrics.md``.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from nlcx.metrics.names import STEP_INFO_METRICS, STEP_METRICS
+from nlcx.metrics.names import EVENT_TIMES, STEP_INFO_METRICS, STEP_METRICS
 from nlcx.metrics.rows import (
     FloatArray,
     MetricDict,
@@ -299,3 +299,41 @@ def step_info(
         params["initial"] = per_row(y_initial, n_rows, "y_initial")
     result = run_batched(functools.partial(_step_info_rows, g, limits, b), y2, STEP_INFO_METRICS, squeeze, params)
     return {k: float(v) for k, v in result.items()} if squeeze else result
+
+
+def measured_from(values: MetricDict, t_step: float, origin: float) -> MetricDict:
+    """Step metrics measured from their step at ``t_step`` with the event times measured from ``origin``.
+
+    :func:`step_response_metrics` and :func:`step_info` measure every time from the step. With
+    ``origin`` another time, e.g. 0 for the start of a run, each event time
+    (:data:`~nlcx.metrics.names.EVENT_TIMES`: ``settling_time``, ``peak_time``) becomes
+    tau + (t_step - origin); NaN stays NaN. ``rise_time`` is a duration and every other value is
+    not a time: they are unchanged.
+
+    Parameters
+    ----------
+    values : dict
+        Metrics by name, as a step function returns them (arrays of shape ``()`` or ``(B,)``).
+    t_step : float
+        The time of the step they were measured from [s].
+    origin : float
+        The time the event times are to be measured from [s].
+
+    Returns
+    -------
+    dict
+        The metrics with their event times moved; ``values`` itself (not copied) when
+        ``origin == t_step``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> values = {"settling_time": np.array(2.5), "rise_time": np.array(1.0)}
+    >>> moved = measured_from(values, t_step=1.0, origin=0.0)
+    >>> float(moved["settling_time"]), float(moved["rise_time"])
+    (3.5, 1.0)
+    """
+    shift = float(t_step) - float(origin)
+    if shift == 0.0:
+        return values
+    return {name: value + shift if name in EVENT_TIMES else value for name, value in values.items()}

@@ -3,9 +3,13 @@
 Every option is a setting a user can put in any config (nothing here is a special case of
 the kernel): the PID's derivative, integral form, PID form, sampling and actuator saturation with
 anti-windup, the units its loops see, the error-AGS argument, the reading of the printed gain
-ranges, an actuator lag and a reference prefilter. A hypothesis picks at
-most one non-default value per family; :func:`apply` writes it into an experiment's
-(interpolated) raw config, with the continuous parameters it frees (e.g. F_max).
+ranges, an actuator lag, a reference prefilter and the integrators' limits; and the experiment
+as Simulink may have run it: the steps' amplitude and time and the origin of the measured
+times, the settling band of a regulated angle, the initial angle, the z loop of the x-z and
+x-y-z pendulums, the disturbance's phase, start and entry. A hypothesis picks at most one
+non-default value per family; :func:`apply` writes it into an experiment's (interpolated) raw
+config, with the continuous parameters it frees (e.g. F_max). A value changes only what the
+experiment has: a disturbance option leaves an experiment without a disturbance as it is.
 
 The literal hypothesis (no option) is the default loop, every experiment as its config has it.
 """
@@ -18,6 +22,8 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+from nlcx import registry
 
 Raw = dict[str, Any]
 
@@ -97,9 +103,26 @@ def _ags_angle_degrees(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
             loop["schedule"]["error_scale"] = 180.0 / math.pi
 
 
+def _forces_before_input_disturbances(raw: Raw) -> None:
+    """Loop elements act in config order: an actuator lag filters the controller's forces
+    only, so it goes before any disturbance that enters at the inputs."""
+    elements = raw.get("uncertainty") or {}
+    lag = elements.get("actuator_lag")
+    names = list(elements)
+    at_input = [k for k, e in elements.items() if isinstance(e, dict) and e.get("kind") == "disturbance"
+                and e.get("entry") == "input"]  # fmt: skip
+    if lag is None or not at_input or names.index("actuator_lag") < names.index(at_input[0]):
+        return
+    rest = [(k, e) for k, e in elements.items() if k != "actuator_lag"]
+    first = [k for k, _ in rest].index(at_input[0])
+    raw["uncertainty"] = dict([*rest[:first], ("actuator_lag", lag), *rest[first:]])
+
+
 def _actuator_lag(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
-    """A first-order lag tau on every force (the actuator_lag loop element)."""
+    """A first-order lag tau on every force (the actuator_lag loop element), after every other
+    element except a disturbance entering at the inputs (:func:`_forces_before_input_disturbances`)."""
     raw.setdefault("uncertainty", {})["actuator_lag"] = {"kind": "actuator_lag", "tau": params["tau"]}
+    _forces_before_input_disturbances(raw)
 
 
 def _prefilter(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
@@ -114,11 +137,114 @@ def _sampled(pid: Raw, params: Mapping[str, float], _: list[str]) -> None:
     pid["sample_time"] = params["T_s"]
 
 
+def _step_references(raw: Raw) -> list[Raw]:
+    """The experiment's step references (a prefiltered step is one)."""
+    return [r for r in (raw.get("reference") or {}).values() if r.get("kind") in STEPS]
+
+
+def _set_metrics(raw: Raw, **settings: Any) -> None:
+    raw["metrics"] = {**(raw.get("metrics") or {}), **settings}
+
+
+def _plant_states(raw: Raw) -> list[str]:
+    """The state names of the experiment's plant (from the plant registry)."""
+    plant = registry.plants.get(raw["plant"]["name"], path="plant.name")
+    return [s.name for s in plant.states]
+
+
+def _absolute_settling(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """A regulated signal (theta, phi) settles inside a band of at least tol (the free
+    parameter): the larger of tol and the settling band's fraction of its peak deviation."""
+    _set_metrics(raw, regulation_abs_tol=params["tol"])
+
+
+def _step_amplitude(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """Every step reference ends at A (the free parameter) instead of its configured final value."""
+    for reference in _step_references(raw):
+        reference["final"] = params["A"]
+
+
+def _step_at_one_second(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """The reference steps at t = 1 s (Simulink's Step block default), not at t = 0."""
+    for reference in _step_references(raw):
+        reference["time"] = 1.0
+
+
+def _step_at_one_second_timed_from(origin: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """The reference steps at t = 1 s; a step response's times are measured from ``origin``
+    (``metrics.time_origin``: ``start``, t = 0, or ``step``, its step)."""
+
+    def change(raw: Raw, params: Mapping[str, float], inputs: list[str]) -> None:
+        _step_at_one_second(raw, params, inputs)
+        _set_metrics(raw, time_origin=origin)
+
+    return change
+
+
+def _initial_angle(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """The pendulum starts tilted: theta(0) = theta0 (the free parameter), and phi(0) alike
+    on the pendulums that have it."""
+    angles = [state for state in _plant_states(raw) if state in ANGLES]
+    plant = raw["plant"]
+    plant["x0"] = {**(plant.get("x0") or {}), **dict.fromkeys(angles, params["theta0"])}
+
+
+def _z_loop(feedforward: bool, printed: bool) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """On a plant with a z axis only: without the equilibrium feed-forward on every PID (the z
+    loop holds the weight by its integrator) and/or with the printed state equations."""
+
+    def change(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        if "z" not in _plant_states(raw):
+            return
+        if not feedforward:
+            for controller in (raw.get("controllers") or {}).values():
+                if controller.get("kind") == "pid":
+                    controller["feedforward"] = "none"
+        if printed:
+            raw["plant"]["params"] = {**(raw["plant"].get("params") or {}), "equations": "printed"}
+
+    return change
+
+
+def _disturbance(**settings: Any) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """``settings`` on every ``kind: disturbance`` element of the experiment (none: no change)."""
+
+    def change(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        for element in (raw.get("uncertainty") or {}).values():
+            if isinstance(element, dict) and element.get("kind") == "disturbance":
+                element.update(settings)
+        _forces_before_input_disturbances(raw)
+
+    return change
+
+
+def _integral_limit(signals: tuple[str, ...] | None) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """The integrator of each loop on ``signals`` (None: every loop) held inside [-L, L] (the
+    free parameter), as the output limits of Simulink's Integrator block hold it."""
+
+    def change(pid: Raw, params: Mapping[str, float], _: list[str]) -> None:
+        for key, loop in pid["loops"].items():
+            if signals is None or (loop.get("signal") or key) in signals:
+                loop["integral_limit"] = params["L"]
+
+    return change
+
+
 ANGLES = ("theta", "phi")
+#: The position loops (an integrator limit on them leaves the angle and z loops unlimited).
+POSITIONS = ("x", "y")
+#: Reference kinds that step (a step, and a step through a prefilter).
+STEPS = ("step", "filtered_step")
 F_MAX = {"F_max": (2.0, 100.0)}
 #: The free parameters' values nearest the default loop: the widest limit, the shortest lag,
-#: prefilter and sampling period.
-NEUTRAL = {"F_max": 100.0, "tau": 0.001, "T_f": 0.01, "T_s": 0.001, "u_max": 20.0}
+#: prefilter and sampling period, the narrowest absolute band, the unit step, the upright
+#: start, the widest integrator limit.
+NEUTRAL = {
+    "F_max": 100.0, "tau": 0.001, "T_f": 0.01, "T_s": 0.001, "u_max": 20.0,
+    "tol": 0.002, "A": 1.0, "theta0": 0.0, "L": 2.0,
+}  # fmt: skip
+#: The integrators' limit L.
+L_MAX = {"L": (0.01, 2.0)}
 
 #: family -> value -> option; the first value of each family is the default.
 FAMILIES: dict[str, dict[str, OptionValue]] = {
@@ -180,6 +306,93 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
             "|F| <= F_max, back-calculation anti-windup", _saturation("back_calculation"), F_MAX
         ),
     },
+    "theta_settling": {
+        "relative": OptionValue("a regulated angle settles inside 2 % of its peak deviation (default)", _unchanged),
+        "absolute": OptionValue(
+            "a regulated angle settles inside max(2 % of its peak deviation, tol) (metrics.regulation_abs_tol)",
+            _absolute_settling,
+            {"tol": (0.002, 0.05)},
+            "experiment",
+        ),
+    },
+    "reference_amplitude": {
+        "unit": OptionValue("unit steps, as printed (default)", _unchanged),
+        "free": OptionValue(
+            "every step reference ends at A (the AGS error normalisation untouched)",
+            _step_amplitude,
+            {"A": (0.2, 2.0)},
+            "experiment",
+        ),
+    },
+    "step_time": {
+        "zero": OptionValue("reference step at t = 0 (default)", _unchanged),
+        "one_second": OptionValue(
+            "reference step at t = 1 s (Simulink's default), times measured from t = 0 (metrics.time_origin: start)",
+            _step_at_one_second_timed_from("start"),
+            scope="experiment",
+        ),
+        "one_second_from_step": OptionValue(
+            "reference step at t = 1 s (Simulink's default), times measured from the step (metrics.time_origin: step)",
+            _step_at_one_second_timed_from("step"),
+            scope="experiment",
+        ),
+    },
+    "initial_angle": {
+        "zero": OptionValue("the pendulum starts upright (default)", _unchanged),
+        "free": OptionValue(
+            "theta(0) = theta0, and phi(0) alike where the pendulum has phi",
+            _initial_angle,
+            {"theta0": (0.0, 0.2)},
+            "experiment",
+        ),
+    },
+    "z_loop": {
+        "as_configured": OptionValue(
+            "x-z, x-y-z: equilibrium feed-forward F_z = (M + m) g, derived equations (default)", _unchanged
+        ),
+        "no_feedforward": OptionValue(
+            "x-z, x-y-z: no feed-forward (the z loop's integrator holds the weight)",
+            _z_loop(feedforward=False, printed=False),
+            scope="experiment",
+        ),
+        "no_feedforward_printed": OptionValue(
+            "x-z, x-y-z: no feed-forward, the printed state equations",
+            _z_loop(feedforward=False, printed=True),
+            scope="experiment",
+        ),
+        "printed": OptionValue(
+            "x-z, x-y-z: the printed state equations (plant.params.equations)",
+            _z_loop(feedforward=True, printed=True),
+            scope="experiment",
+        ),
+    },
+    "disturbance_phase": {
+        "zero": OptionValue("d = A sin(2 pi f t), as printed (default)", _unchanged),
+        "quarter": OptionValue("the disturbance's phase pi/2", _disturbance(phase=math.pi / 2), scope="experiment"),
+        "half": OptionValue("the disturbance's phase pi", _disturbance(phase=math.pi), scope="experiment"),
+        "three_quarter": OptionValue(
+            "the disturbance's phase 3 pi/2", _disturbance(phase=3 * math.pi / 2), scope="experiment"
+        ),
+    },
+    "disturbance_start": {
+        "zero": OptionValue("the disturbance acts from t = 0 (default)", _unchanged),
+        "one_second": OptionValue(
+            "the disturbance starts at t = 1 s (d = 0 before)", _disturbance(start=1.0), scope="experiment"
+        ),
+    },
+    "disturbance_entry": {
+        "accelerations": OptionValue("d added to every acceleration, as eqs. 2.13-2.16 print it (default)", _unchanged),
+        "input": OptionValue(
+            "d added as a force to every plant input", _disturbance(entry="input"), scope="experiment"
+        ),
+    },
+    "integrator_limit": {
+        "none": OptionValue("unlimited integrators (default)", _unchanged),
+        "position": OptionValue(
+            "the position loops' (x, y) integrators held inside [-L, L]", _integral_limit(POSITIONS), L_MAX
+        ),
+        "all": OptionValue("every loop's integrator held inside [-L, L]", _integral_limit(None), L_MAX),
+    },
 }
 
 
@@ -206,13 +419,6 @@ def _derivative_n(method: str, on: str, n: float) -> Callable[[Raw, Mapping[str,
         pid["derivative"] = {"method": method, "N": n, "on": on}
 
     return change
-
-
-def _step_at_one_second(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
-    """The reference steps at t = 1 s (Simulink's Step block default), not at t = 0."""
-    for reference in raw.get("reference", {}).values():
-        if reference.get("kind") == "step":
-            reference["time"] = 1.0
 
 
 def _actuator_limit(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
@@ -270,12 +476,8 @@ CSTR_FAMILIES: dict[str, dict[str, OptionValue]] = {
         "half": OptionValue("proportional term on 0.5 r - y", _setpoint_weight(0.5)),
         "zero": OptionValue("proportional term on -y (b = 0; I-PD with the derivative on y)", _setpoint_weight(0.0)),
     },
-    "step_time": {
-        "zero": OptionValue("reference step at t = 0 (default)", _unchanged),
-        "one_second": OptionValue(
-            "reference step at t = 1 s (Simulink's default)", _step_at_one_second, scope="experiment"
-        ),
-    },
+    # the pendulums' family, its times measured from the step as chapter 5's always were
+    "step_time": {v: FAMILIES["step_time"][v] for v in ("zero", "one_second_from_step")},
     "actuator_limit": {
         "none": OptionValue("unlimited dilution rate (default)", _unchanged),
         "saturated": OptionValue(
@@ -293,8 +495,28 @@ CSTR_FAMILIES: dict[str, dict[str, OptionValue]] = {
         ),
     },
 }
-#: Every option by family, both chapters.
-OPTIONS = {**FAMILIES, **CSTR_FAMILIES}
+
+
+def _merged(
+    first: dict[str, dict[str, OptionValue]], second: dict[str, dict[str, OptionValue]]
+) -> dict[str, dict[str, OptionValue]]:
+    """Both catalogues in one, each keeping its own order of families (a hypothesis's name
+    lists its options in that order): ``second``'s families before one both hold come before
+    it. A family both hold has ``first``'s values, then any more of ``second``'s."""
+    out: dict[str, dict[str, OptionValue]] = {}
+    rest = list(second)
+    for name, values in first.items():
+        if name in second:
+            while (before := rest.pop(0)) != name:
+                out[before] = second[before]
+            values = values | {k: v for k, v in second[name].items() if k not in values}
+        out[name] = values
+    return out | {name: second[name] for name in rest}
+
+
+#: Every option by family, both chapters (step_time is a family of both, chapter 5's values
+#: among the pendulums').
+OPTIONS = _merged(FAMILIES, CSTR_FAMILIES)
 
 
 def default(family: str) -> str:
@@ -337,13 +559,20 @@ class Hypothesis:
         return out
 
 
-def family(families: list[str], max_options: int) -> list[Hypothesis]:
+def family(
+    families: list[str], max_options: int, catalogue: Mapping[str, Mapping[str, OptionValue]] | None = None
+) -> list[Hypothesis]:
     """The literal loop and every combination of up to ``max_options`` non-default values of
-    distinct ``families`` (in the order of :data:`OPTIONS`)."""
+    distinct ``families`` (in the order of :data:`OPTIONS`), each family's values those of
+    ``catalogue`` (default: :data:`CSTR_FAMILIES` where a family named is chapter 5's alone, so
+    chapter 5's step_time has its own two values; :data:`OPTIONS` otherwise)."""
+    if catalogue is None:
+        chapter5 = any(f in CSTR_FAMILIES and f not in FAMILIES for f in families)
+        catalogue = CSTR_FAMILIES if chapter5 else OPTIONS
     ordered = [f for f in OPTIONS if f in families]
     out = [Hypothesis()]
     for size in range(1, max_options + 1):
         for chosen in itertools.combinations(ordered, size):
-            values = [[v for v in OPTIONS[f] if v != default(f)] for f in chosen]
+            values = [[v for v in catalogue[f] if v != default(f)] for f in chosen]
             out += [Hypothesis(tuple(zip(chosen, combo, strict=True))) for combo in itertools.product(*values)]
     return out

@@ -12,6 +12,15 @@ every hypothesis, and the GA settings::
       vars.conventional.angle.kp: [10, 120]
       ...
     optimiser: {kind: ga, pop_size: 30, generations: 20, seed: 1}
+    screen: {keep: 6, min_gain: 0.05}   # optional
+
+With ``screen``, the families are screened on train before any combination: every single
+non-default value of each family is fitted (from the literal fit, as every hypothesis) and
+scored by its train loss only; a family goes forward when its best value lowers the literal
+fit's train loss by at least ``min_gain`` (relative), at most ``keep`` families, the largest
+gain first (ties: the families' order). The combinations of up to ``max_options`` values are
+then those of the forwarded families only, fitted and ranked as without a screen; the
+screening's table is screening.csv.
 
 For every hypothesis (:mod:`nlcx.thesis.hypotheses`), the seeded GA minimises the mean squared
 relative residual over the train cells only (floors as the calibration: 0.05 for M_p, 0.5 s
@@ -23,7 +32,8 @@ comparable cells where the sign of (proposed - conventional) agrees with the the
 Hypotheses are ranked by the validation score, never by the test score.
 
 Each finished fit is written at once (``fits/<hypothesis>.json`` and ``.fit.csv``, atomically),
-so a killed study loses no finished fit and a rerun skips them.
+so a killed study loses no finished fit and a rerun skips them (the screening's fits included:
+a hypothesis screened and then combined is fitted once).
 """
 
 from __future__ import annotations
@@ -40,7 +50,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nlcx import config as cfg
 from nlcx import engine, report
@@ -55,6 +65,17 @@ PENALTY = 10.0
 CONTROLLERS = ("conventional", "proposed")
 
 
+class Screen(BaseModel):
+    """The screening rule, fixed in the spec before any fit."""
+
+    model_config = ConfigDict(extra="forbid")
+    #: At most this many families go forward to the combinations.
+    keep: int = Field(ge=1)
+    #: The least relative gain, 1 - (best single value's train loss) / (literal fit's), that
+    #: sends a family forward.
+    min_gain: float = Field(ge=0, lt=1)
+
+
 class IdentifySpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
     name: str
@@ -64,7 +85,8 @@ class IdentifySpec(BaseModel):
     #: Conventional gains free in every hypothesis: dotted config keys and bounds.
     free: dict[str, tuple[float, float]] = Field(min_length=1)
     optimiser: GASettings = GASettings(pop_size=30, generations=20, seed=1)
-    #: Fit only these hypotheses (by name; default: the whole family).
+    #: Fit only these hypotheses (by name; default: the whole family); not with ``screen``,
+    #: which chooses them.
     only: list[str] | None = None
     #: GA settings of a first fit of the literal loop whose gains seed every other
     #: hypothesis's first population, the freed parameters at their values nearest the default
@@ -75,6 +97,8 @@ class IdentifySpec(BaseModel):
     #: reproduction for their claims (claims.csv, the claims_* columns of ranking.csv);
     #: None: no reproduction.
     claims_top: int | None = Field(5, ge=0)
+    #: Screen the families on train before combining them (None: combine every family).
+    screen: Screen | None = None
 
     @field_validator("families")
     @classmethod
@@ -83,6 +107,12 @@ class IdentifySpec(BaseModel):
         if unknown:
             raise ValueError(f"unknown option families {unknown}; allowed: {', '.join(hypotheses.FAMILIES)}")
         return families
+
+    @model_validator(mode="after")
+    def _only_or_screen(self) -> IdentifySpec:
+        if self.only is not None and self.screen is not None:
+            raise ValueError("only and screen exclude each other: the screen chooses the hypotheses fitted")
+        return self
 
     @field_validator("free")
     @classmethod
@@ -264,39 +294,33 @@ def load_spec(path: Path) -> IdentifySpec:
 
 
 def spec_digest(spec: BaseModel, spec_split: split.Split) -> str:
-    """What a finished fit depends on: the spec (but ``only``; ``warm_start`` when set, so
-    the fits of a spec written before it existed stay valid) and the split."""
-    exclude = {"only", "claims_top"} | (set() if getattr(spec, "warm_start", None) is not None else {"warm_start"})
+    """What a finished fit depends on: the spec (but ``only``; ``warm_start`` and ``screen``
+    when set, so the fits of a spec written before they existed stay valid) and the split."""
+    unset = {key for key in ("warm_start", "screen") if getattr(spec, key, None) is None}
+    exclude = {"only", "claims_top"} | unset
     text = json.dumps([spec.model_dump(exclude=exclude), spec_split.model_dump()], sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def identify(path: Path, out_dir: Path, jobs: int = 1, root: Path | None = None, progress: Any = None) -> pd.DataFrame:
-    """Fit every hypothesis of spec ``path`` (resuming), write ranking.csv and the figure."""
+    """Fit every hypothesis of spec ``path`` (resuming; screening the families first if the
+    spec says so), write ranking.csv and the figure."""
     spec = load_spec(path)
     spec_split = split.load((path.parent / spec.split).resolve())
     root = root or Path("configs") / "thesis"
     cells = all_cells(spec_split)
-    digest = spec_digest(spec, spec_split)
-    family = select(spec, hypotheses.family(spec.families, spec.max_options))
     t0 = time.perf_counter()
-    fits = out_dir / "fits"
-    done = {h.name for h in family if finished(fits / f"{h.name}.json", digest)}
-    fitted_now = len(family) - len(done)
-    start = None
-    if spec.warm_start is not None:
-        literal = hypotheses.Hypothesis()
-        if literal.name not in done:
-            first = spec.model_copy(update={"optimiser": spec.warm_start})
-            save_fit(fits, digest, *fit_hypothesis(first, root, literal, cells, jobs))
-        start = json.loads((fits / "literal.json").read_text())["values"]
-        done.add(literal.name)
-    todo = [h for h in family if h.name not in done]
-    for k, (summary, fit) in enumerate(_fits(spec, root, todo, cells, jobs, start)):
-        save_fit(fits, digest, summary, fit)
-        if progress is not None:
-            progress(len(family) - len(todo) + k + 1, len(family), summary["hypothesis"])
-    write_study(out_dir, len(family), fitted_now, jobs, time.perf_counter() - t0)
+    fits = Fits(spec, root, cells, out_dir / "fits", spec_digest(spec, spec_split), jobs, progress)
+    families = spec.families
+    if spec.screen is not None:
+        singles = hypotheses.family(spec.families, 1)
+        fits.fit(singles)
+        table = screening([fits.summary(h.name) for h in singles], spec.screen)
+        report.write_csv(out_dir / "screening.csv", table)
+        families = list(table.family[table.forwarded == "yes"])
+    family = select(spec, hypotheses.family(families, spec.max_options))
+    fits.fit(family)
+    write_study(out_dir, len(fits.examined), fits.fitted_now, jobs, time.perf_counter() - t0)
     ranking = write_ranking(out_dir, [h.name for h in family])
     chosen = list(dict.fromkeys(["literal", str(ranking.hypothesis.iloc[0])]))
     write_definitions(out_dir, root, cells, [n for n in chosen if n in set(ranking.hypothesis)])
@@ -351,6 +375,75 @@ def select(spec: IdentifySpec, family: list[hypotheses.Hypothesis]) -> list[hypo
     if missing:
         raise ConfigError("only", missing[0], "not a hypothesis of the spec's families and max_options")
     return [h for h in family if h.name in spec.only]
+
+
+class Fits:
+    """The study's fits in ``fits/``: :meth:`fit` fits the hypotheses not finished under the
+    spec's digest (with a warm start, the literal loop first, by the warm start's GA), and
+    counts what it examined and fitted."""
+
+    def __init__(
+        self, spec: IdentifySpec, root: Path, cells: pd.DataFrame, path: Path, digest: str, jobs: int, progress: Any
+    ) -> None:
+        self.spec, self.root, self.cells, self.path, self.digest = spec, root, cells, path, digest
+        self.jobs, self.progress = jobs, progress
+        #: Every hypothesis the study has asked for (fitted now or before), in order.
+        self.examined: dict[str, None] = {}
+        self.fitted_now = 0
+        self._start: dict[str, float] | None = None
+
+    def summary(self, name: str) -> dict[str, Any]:
+        """The finished fit of hypothesis ``name`` (fits/<name>.json)."""
+        summary: dict[str, Any] = json.loads((self.path / f"{name}.json").read_text())
+        return summary
+
+    def fit(self, family: list[hypotheses.Hypothesis]) -> None:
+        """Fit the hypotheses of ``family`` not yet finished (resuming)."""
+        self.examined.update(dict.fromkeys(h.name for h in family))
+        start = self._warm_start()
+        todo = [h for h in family if not finished(self.path / f"{h.name}.json", self.digest)]
+        for k, (summary, fit) in enumerate(_fits(self.spec, self.root, todo, self.cells, self.jobs, start)):
+            save_fit(self.path, self.digest, summary, fit)
+            self.fitted_now += 1
+            if self.progress is not None:
+                self.progress(len(family) - len(todo) + k + 1, len(family), summary["hypothesis"])
+
+    def _warm_start(self) -> dict[str, float] | None:
+        """The literal fit's values every GA starts from (None without a warm start); the
+        literal loop is fitted first where it is not finished."""
+        if self.spec.warm_start is None or self._start is not None:
+            return self._start
+        literal = hypotheses.Hypothesis()
+        self.examined[literal.name] = None
+        if not finished(self.path / f"{literal.name}.json", self.digest):
+            first = self.spec.model_copy(update={"optimiser": self.spec.warm_start})
+            save_fit(self.path, self.digest, *fit_hypothesis(first, self.root, literal, self.cells, self.jobs))
+            self.fitted_now += 1
+        self._start = self.summary(literal.name)["values"]
+        return self._start
+
+
+def screening(summaries: list[dict[str, Any]], rule: Screen) -> pd.DataFrame:
+    """The screening table from the fits of the literal loop and of every single option
+    (``summaries``, the literal's among them): per family, its best value by train loss (ties:
+    the first), that loss, the gain 1 - loss / literal loss (0 where the literal loss is 0) and
+    whether the family goes forward: a gain of at least ``rule.min_gain``, among the
+    ``rule.keep`` largest (ties: the families' order). Rows by gain, largest first."""
+    literal = next(s["train_loss"] for s in summaries if not s["options"])
+    best: dict[str, tuple[str, float]] = {}
+    for s in summaries:
+        for family, value in s["options"].items():
+            if family not in best or s["train_loss"] < best[family][1]:
+                best[family] = (value, s["train_loss"])
+    rows = [
+        {"family": f, "best_value": v, "train_loss": loss, "gain": 1.0 - loss / literal if literal > 0 else 0.0}
+        for f, (v, loss) in best.items()
+    ]
+    table = pd.DataFrame(rows, columns=["family", "best_value", "train_loss", "gain"])
+    table = table.sort_values("gain", ascending=False, kind="stable").reset_index(drop=True)
+    passed = table.gain >= rule.min_gain
+    table["forwarded"] = np.where(passed & (passed.cumsum() <= rule.keep), "yes", "no")
+    return table
 
 
 def finished(path: Path, digest: str) -> bool:

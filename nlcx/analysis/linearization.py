@@ -1,0 +1,433 @@
+"""Frozen-gain linear analysis of a configured PID loop: ``nlcx.linearize`` and ``nlcx linearize``.
+
+The plant is linearised about its operating point (:func:`nlcx.plants.base.linearize`), the
+PID's gain schedules are frozen at one point (t, e) (:mod:`nlcx.analysis.frozen`), and the
+loop is closed (:mod:`nlcx.analysis.linear`): its closed-loop poles and its margins with the
+loop broken at the plant input are those of the linear time-invariant loop the scheduled PID
+would be if its gains stopped moving there. :func:`linearize_along` repeats this along the
+schedule's argument.
+
+What the linear model leaves out, each result says in its ``notes``: the uncertainty
+sections (disturbances, noise, friction, actuator lag and saturation), the PID's actuator
+saturation and integral limits (linear inside them), and its sampling (the model is
+continuous).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, cast
+
+import control as ct
+import numpy as np
+
+from nlcx.analysis.frozen import (
+    AXES,
+    FrozenLoop,
+    FrozenPoint,
+    frozen_loops,
+    loop_schedules,
+    parse_at,
+    schedule_axes,
+    update_period,
+    varying_axes,
+)
+from nlcx.analysis.linear import (
+    closed_loop_system,
+    controller_system,
+    margins_table,
+    plant_system,
+    pole_counts,
+    poles_table,
+)
+from nlcx.errors import ConfigError
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+    import pandas as pd
+
+    from nlcx.api import ConfigLike, OverridesLike
+    from nlcx.config import Experiment, PluginSection
+    from nlcx.controllers.base import ControllerInstance
+    from nlcx.engine import Prepared
+
+__all__ = ["FrozenSweep", "Linearization", "analyse", "linearize", "linearize_along"]
+
+#: Frozen points of :func:`linearize_along` unless told otherwise.
+POINTS = 51
+
+
+@dataclass(frozen=True)
+class Linearization:
+    """A PID loop frozen at one point of its schedules and linearised: named python-control
+    state-space systems and their tables.
+
+    Attributes
+    ----------
+    experiment : nlcx.config.Experiment
+        The validated experiment.
+    label : str
+        The controller analysed.
+    at : FrozenPoint
+        Where its schedules are frozen (t in s, e in the outputs' units).
+    loops : tuple of FrozenLoop
+        Each loop with its frozen gains.
+    period : float
+        The period T the PID updates over (its ``sample_time``, or the simulation step), s.
+    plant : control.StateSpace
+        The plant linearised about its operating point: inputs and outputs by the plant's
+        names, states likewise, in deviations from that point.
+    controller : control.StateSpace
+        The frozen PID, from the references (``<output>_ref``) and the outputs to the inputs.
+    closed_loop : control.StateSpace
+        From the references to the outputs and the inputs.
+    poles : pandas.DataFrame
+        The closed-loop poles: real, imag, zeta, omega_n, the rightmost first.
+    margins : pandas.DataFrame
+        Gain and phase margins with the loop broken at the plant input, per loop (the others
+        closed) and per input that several loops drive (:data:`nlcx.analysis.linear.MARGIN_COLUMNS`).
+    loop_transfers : dict of str to control.StateSpace
+        The loop transfer of each opening of ``margins``, by its name.
+    notes : tuple of str
+        What the linear model leaves out of this configuration.
+    """
+
+    experiment: Experiment
+    label: str
+    at: FrozenPoint
+    loops: tuple[FrozenLoop, ...]
+    period: float
+    plant: ct.StateSpace
+    controller: ct.StateSpace
+    closed_loop: ct.StateSpace
+    poles: pd.DataFrame
+    margins: pd.DataFrame
+    loop_transfers: dict[str, ct.StateSpace] = field(repr=False)
+    notes: tuple[str, ...] = ()
+
+    @property
+    def gains(self) -> pd.DataFrame:
+        """Each loop's frozen gains: its output, input, sign, scale, schedule, the parallel gains
+        k_p, k_i, k_d it acts with, its derivative (filtered or backward) and filter N."""
+        import pandas as pd
+
+        fields = ("name", "output", "input", "sign", "scale", "schedule", "kp", "ki", "kd", "derivative", "N")
+        rows = [{("loop" if f == "name" else f): getattr(loop, f) for f in fields} for loop in self.loops]
+        return pd.DataFrame(rows)
+
+    def __repr__(self) -> str:
+        unstable, on_axis = pole_counts(self.poles)
+        return (
+            f"<Linearization of {self.experiment.name}, controller {self.label!r} at t = {self.at.t:g} s, "
+            f"e = {self.at.e:g}: {len(self.poles)} poles, {unstable} in the right half-plane, {on_axis} on the "
+            f"imaginary axis>"
+        )
+
+    @property
+    def stable(self) -> bool:
+        """Whether every closed-loop pole lies in the open left half-plane (a pole within
+        rounding of the imaginary axis does not, :func:`nlcx.analysis.linear.pole_counts`)."""
+        return pole_counts(self.poles) == (0, 0)
+
+
+@dataclass(frozen=True)
+class FrozenSweep:
+    """:func:`linearize` repeated along one argument of the schedules.
+
+    Attributes
+    ----------
+    axis : {"t", "e"}
+        The argument swept.
+    values : numpy.ndarray
+        Its values, from 0 to the end of the simulation (t) or to the largest error a loop
+        starts from or is commanded to (e).
+    points : tuple of Linearization
+        The analysis at each value.
+    """
+
+    axis: str
+    values: np.ndarray
+    points: tuple[Linearization, ...] = field(repr=False)
+
+    def __repr__(self) -> str:
+        return (
+            f"<FrozenSweep along {self.axis} from {self.values[0]:g} to {self.values[-1]:g}, {self.values.size} points>"
+        )
+
+    def _stacked(self, tables: list[pd.DataFrame]) -> pd.DataFrame:
+        import pandas as pd
+
+        parts = [table.assign(**{self.axis: value}) for table, value in zip(tables, self.values, strict=True)]
+        stacked = pd.concat(parts, ignore_index=True)
+        return stacked[[self.axis, *(c for c in stacked.columns if c != self.axis)]]
+
+    @property
+    def poles(self) -> pd.DataFrame:
+        """The closed-loop poles at each value: the swept argument, then :attr:`Linearization.poles`'s columns."""
+        return self._stacked([p.poles for p in self.points])
+
+    @property
+    def margins(self) -> pd.DataFrame:
+        """The margins at each value: the swept argument, then :attr:`Linearization.margins`'s columns."""
+        return self._stacked([p.margins for p in self.points])
+
+    @property
+    def gains(self) -> pd.DataFrame:
+        """The frozen gains at each value: the swept argument, then :attr:`Linearization.gains`'s columns."""
+        return self._stacked([p.gains for p in self.points])
+
+
+@dataclass(frozen=True)
+class _Setting:
+    """What every frozen point of one analysis shares: the experiment, the prepared plant and
+    controller, the plant's linear model and the notes on what it leaves out."""
+
+    experiment: Experiment
+    prepared: Prepared
+    controller: ControllerInstance
+    plant: ct.StateSpace
+    notes: tuple[str, ...]
+
+
+def _is_pid(section: PluginSection) -> bool:
+    return section.kind == "pid"
+
+
+def _scheduled(section: PluginSection) -> bool:
+    """Whether some loop of a PID section has a schedule that varies."""
+    for loop in section.config.loops.values():
+        kind = loop.schedule["kind"] if isinstance(loop.schedule, dict) else loop.schedule.kind
+        if schedule_axes(str(kind)):
+            return True
+    return False
+
+
+def _chosen(exp: Experiment, controller: str | None) -> PluginSection:
+    """The controller section to analyse: the one named, or the config's first PID with a
+    scheduled loop, or else its first PID."""
+    labels = [c.label for c in exp.controllers]
+    if controller is not None:
+        section = next((c for c in exp.controllers if c.label == controller), None)
+        if section is None:
+            raise ConfigError("controller", controller, f"not a controller of {exp.name}; allowed: {', '.join(labels)}")
+        if not _is_pid(section):
+            raise ConfigError(
+                f"controllers.{controller}.kind", section.kind, "linearize analyses PID controllers (pid)"
+            )
+        return section
+    pids = [c for c in exp.controllers if _is_pid(c)]
+    if not pids:
+        raise ConfigError("controllers", labels, "linearize analyses PID controllers (kind: pid); this config has none")
+    return next((c for c in pids if _scheduled(c)), pids[0])
+
+
+def _notes(exp: Experiment, controller: ControllerInstance) -> tuple[str, ...]:
+    """What the linear model leaves out of ``exp`` and ``controller``."""
+    notes = []
+    if exp.uncertainties:
+        names = ", ".join(u.label for u in exp.uncertainties)
+        notes.append(f"the uncertainty sections ({names}) are not part of the linear model (nominal plant)")
+    config = controller.config
+    if config.get("saturation"):
+        notes.append("the PID's actuator saturation is not part of the linear model (linear below its limits)")
+    limited = [name for name, loop in config["loops"].items() if loop.get("integral_limit") is not None]
+    if limited:
+        notes.append(f"the integral limits of {', '.join(limited)} are not part of the linear model")
+    if config.get("sample_time", 0.0) > 0:
+        notes.append(
+            f"the PID samples every {config['sample_time']:g} s; the linear model is continuous (it leaves out the "
+            "hold's delay of about half a sample)"
+        )
+    return tuple(notes)
+
+
+def _setting(config: ConfigLike, controller: str | None, overrides: OverridesLike) -> _Setting:
+    """The experiment of ``config``, built with only the controller analysed."""
+    from nlcx import api, engine
+
+    exp = api.experiment(config, overrides)
+    section = _chosen(exp, controller)
+    prepared = engine.prepare(dataclasses.replace(exp, controllers=(section,)))
+    (built,) = prepared.controllers
+    return _Setting(exp, prepared, built, plant_system(prepared.plant), _notes(exp, built))
+
+
+def _frozen(setting: _Setting, at: FrozenPoint) -> Linearization:
+    """The analysis of ``setting`` frozen at ``at``."""
+    plant = setting.prepared.plant
+    outputs, inputs = plant.output_names, plant.input_names
+    dt = setting.experiment.section.simulation.dt
+    loops = frozen_loops(setting.controller, at, outputs, inputs, dt)
+    controller = controller_system(loops, outputs, inputs)
+    closed = closed_loop_system(setting.plant, controller)
+    margins, transfers = margins_table(setting.plant, loops)
+    return Linearization(
+        experiment=setting.experiment, label=setting.controller.label, at=at, loops=loops,
+        period=update_period(setting.controller, dt), plant=setting.plant,
+        controller=controller, closed_loop=closed, poles=poles_table(closed), margins=margins,
+        loop_transfers=transfers, notes=setting.notes,
+    )  # fmt: skip
+
+
+def _check_axes(setting: _Setting, given: tuple[str, ...], key: str, value: Any) -> None:
+    """Refuse a frozen point or sweep on an axis no loop of the controller varies with."""
+    varying = varying_axes(setting.controller)
+    unused = [axis for axis in given if axis not in varying]
+    if not unused:
+        return
+    kinds = ", ".join(f"{name} {kind}" for name, kind in loop_schedules(setting.controller).items())
+    allowed = f"allowed: {', '.join(varying)}" if varying else "its gains are constant: give none"
+    message = f"the gains of controller {setting.controller.label!r} do not vary with {unused[0]} ({kinds}); {allowed}"
+    raise ConfigError(key, value, message)
+
+
+def linearize(
+    config: ConfigLike,
+    controller: str | None = None,
+    at: str | Mapping[str, float] | FrozenPoint | None = None,
+    *,
+    overrides: OverridesLike = None,
+) -> Linearization:
+    """Linearise ``config``'s plant about its operating point and close its PID loops with the
+    gains frozen at ``at``.
+
+    The schedules are evaluated as the simulation evaluates them (time-AGS at t, eqs.
+    2.17-2.19; error-AGS at e, eqs. 2.20-2.22; constant gains as they are), and each loop's
+    law is k_p + k_i/s + k_d N s/(s + N) in its PID form's parallel gains. A backward-difference
+    derivative, an ideal k_d s delayed by half a sample, is realised with N = 2/T (T the PID's
+    period), so the controller is proper (:func:`nlcx.analysis.frozen.derivative_filter`).
+
+    Parameters
+    ----------
+    config : str, path, mapping or Experiment
+        What :func:`nlcx.experiment` takes.
+    controller : str, optional
+        The controller's label; default: the config's first PID with a scheduled loop, or else
+        its first PID.
+    at : str, mapping or FrozenPoint, optional
+        ``"t=T"`` (time-AGS frozen at time T, in s) or ``"e=E"`` (error-AGS frozen at error
+        E = r - y, in the outputs' units), or ``{"t": T, "e": E}``; default: t = 0 and e = 0,
+        the point the schedules start from. An axis no loop varies with is refused.
+    overrides : list of str or mapping, optional
+        What :func:`nlcx.experiment` takes.
+
+    Returns
+    -------
+    Linearization
+        The named state-space systems ``plant``, ``controller`` and ``closed_loop``, the
+        tables ``poles``, ``margins`` and ``gains``, and the loop transfers.
+
+    Raises
+    ------
+    nlcx.errors.ConfigError
+        An unknown or non-PID controller, a malformed ``at``, or an axis its gains do not vary with.
+
+    Examples
+    --------
+    >>> import nlcx
+    >>> lin = nlcx.linearize("configs/x_error_ags.yaml", "proposed", at="e=0.5")
+    >>> lin.plant.input_labels, lin.plant.output_labels, lin.closed_loop.nstates
+    (['F_x'], ['x', 'theta'], 8)
+    >>> lin.gains[["loop", "kp", "ki", "kd"]].round(3).values.tolist()
+    [['theta', 24.585, 3.498, 3.049], ['x', -2.971, -1.01, -4.471]]
+    >>> list(lin.poles.columns)
+    ['real', 'imag', 'zeta', 'omega_n']
+    >>> lin.margins[["opening", "name", "input"]].values.tolist()
+    [['loop', 'theta', 'F_x'], ['loop', 'x', 'F_x'], ['input', 'F_x', 'F_x']]
+    """
+    result, _ = analyse(config, controller, at, overrides=overrides)
+    return result
+
+
+def _extent(setting: _Setting, axis: str) -> float:
+    """Where a sweep along ``axis`` ends: the simulation's end (t), or the largest error a loop
+    starts from or is commanded to, max |r(t) - y(0)| over its output's reference (e)."""
+    prepared = setting.prepared
+    if axis == "t":
+        return float(setting.experiment.section.simulation.t_end)
+    plant = prepared.plant
+    y0 = plant.C @ plant.x0
+    largest = 0.0
+    for name in dict.fromkeys(loop["signal"] or key for key, loop in setting.controller.config["loops"].items()):
+        reference = prepared.references[name]
+        r = reference.model.values(reference.config, prepared.grid.t)
+        largest = max(largest, float(np.max(np.abs(r - y0[plant.output_names.index(name)]))))
+    if not largest > 0:
+        raise ConfigError("along", axis, "no loop's error leaves 0 (each reference equals its output's start)")
+    return largest
+
+
+def linearize_along(
+    config: ConfigLike,
+    along: str,
+    controller: str | None = None,
+    at: str | Mapping[str, float] | FrozenPoint | None = None,
+    *,
+    points: int = POINTS,
+    overrides: OverridesLike = None,
+) -> FrozenSweep:
+    """:func:`linearize` at evenly spaced values of one argument of the schedules.
+
+    Parameters
+    ----------
+    config : str, path, mapping or Experiment
+        What :func:`nlcx.experiment` takes.
+    along : {"t", "e"}
+        The argument swept: t from 0 to the end of the simulation, or e from 0 to the largest
+        error a loop starts from or is commanded to, max |r(t) - y(0)| over the loops'
+        outputs. Some loop's schedule must vary with it.
+    controller : str, optional
+        As for :func:`linearize`.
+    at : str, mapping or FrozenPoint, optional
+        Where the other argument stays (default 0); its value on the swept one is replaced.
+    points : int
+        Values of the swept argument, the ends included (at least 2).
+    overrides : list of str or mapping, optional
+        What :func:`nlcx.experiment` takes.
+
+    Returns
+    -------
+    FrozenSweep
+        The analysis at each value, and its tables.
+
+    Examples
+    --------
+    >>> import nlcx.analysis
+    >>> sweep = nlcx.analysis.linearize_along("configs/x_error_ags.yaml", "e", "proposed", points=3)
+    >>> sweep.values.tolist()
+    [0.0, 0.5, 1.0]
+    >>> sweep.gains.query("loop == 'theta'").kp.round(4).tolist()
+    [24.0, 24.5852, 25.142]
+    """
+    _, sweep = analyse(config, controller, at, along, points=points, overrides=overrides)
+    return cast("FrozenSweep", sweep)  # analyse sweeps when told along what
+
+
+def analyse(
+    config: ConfigLike,
+    controller: str | None = None,
+    at: str | Mapping[str, float] | FrozenPoint | None = None,
+    along: str | None = None,
+    *,
+    points: int = POINTS,
+    overrides: OverridesLike = None,
+) -> tuple[Linearization, FrozenSweep | None]:
+    """:func:`linearize` at ``at`` and, ``along`` an axis, :func:`linearize_along` it, from one
+    built experiment (``nlcx linearize`` runs this). The arguments are checked before the
+    experiment is built."""
+    point, given = parse_at(at)
+    if along is not None:
+        if along not in AXES:
+            raise ConfigError("along", along, "allowed: t (time) or e (error)")
+        if isinstance(points, bool) or not isinstance(points, int) or points < 2:
+            raise ConfigError("points", points, "an integer >= 2")
+    setting = _setting(config, controller, overrides)
+    _check_axes(setting, given, "at", at)
+    result = _frozen(setting, point)
+    if along is None:
+        return result, None
+    _check_axes(setting, (along,), "along", along)
+    values = np.linspace(0.0, _extent(setting, along), points)
+    return result, FrozenSweep(along, values, tuple(_frozen(setting, point.moved(along, v)) for v in values))
