@@ -45,13 +45,6 @@ def _no_painter(module: ModuleType) -> None:
     module._painter = lambda raw: None  # figures drawn in a thread of the run's own process
 
 
-def _no_arena(module: ModuleType) -> None:
-    import numpy as np
-
-    module.RecordArena.take = lambda self, shape: np.empty(shape)  # fresh records for every batch
-    module.RecordArena.release = lambda self: None
-
-
 def _no_mallopt(module: ModuleType) -> None:
     module.reuse_freed_memory = lambda: False  # glibc's default thresholds
 
@@ -71,10 +64,6 @@ def _no_reference_cache(module: ModuleType) -> None:
     module.REFERENCES.size = 0  # every variant computes its own reference arrays
 
 
-def _no_dedup(module: ModuleType) -> None:
-    module.first_of_same_loop = lambda items, keys: list(range(len(items)))  # every loop simulated
-
-
 def _no_structure_pid(module: ModuleType) -> None:
     general = module.pid_step
     module.step_for = lambda structure: general  # the general step for every PID
@@ -84,17 +73,11 @@ def _no_freezing(module: ModuleType) -> None:
     gc.freeze = lambda: None  # nothing frozen: every collection scans the whole heap
 
 
-def _no_collector_pause(module: ModuleType) -> None:
-    gc.disable = lambda: None  # the collector runs during imports and batches too
-
-
 #: mechanism -> (what it is, the module holding it, how it is switched off)
 WITHOUT: dict[str, tuple[str, str, Callable[[ModuleType], None]]] = {
     "painter": ("painter process (nlcx run's figure drawn in a second process)", "nlcx.cli.experiments", _no_painter),
-    "record_arena": ("record arena (a sweep worker's records reused batch to batch)", "nlcx.engine.memory", _no_arena),
     "mallopt": ("mallopt (glibc keeps freed blocks up to 32 MB)", "nlcx.engine.pipeline", _no_mallopt),
     "collector_freezing": ("collector freezing (gc.freeze after imports, in workers, at exit)", "nlcx", _no_freezing),
-    "collector_pause": ("collector paused (gc.disable while importing and per batch)", "nlcx", _no_collector_pause),
     "pandas_free_csv": ("pandas-free CSV path (metrics and time series to Arrow)", "nlcx.report", _no_pandas_free_csv),
     "build_cache_pid": ("build cache: PIDs shared by variants", "nlcx.controllers.pid", _no_built_controllers),
     "build_cache_reference": (
@@ -102,7 +85,6 @@ WITHOUT: dict[str, tuple[str, str, Callable[[ModuleType], None]]] = {
         "nlcx.engine.prepared",
         _no_reference_cache,
     ),
-    "dedup": ("in-call de-duplication of identical loops", "nlcx.engine.simulate", _no_dedup),
     "structure_pid": ("per-structure PID step", "nlcx.controllers.pid", _no_structure_pid),
 }
 

@@ -118,10 +118,9 @@ def kernel_parts(prepared: list[engine.Prepared]) -> dict[str, float]:
     """ns per variant-step of the closed loop and of its parts (see the module docstring)."""
     grid = prepared[0].grid
     batches = kernel_batches(prepared)
-    arena = engine.RecordArena()
     runs = [run for items in batches for run in engine.simulate_items(items, grid, "rk4", record_logs=False)]
     steps = sum(run.t.size - 1 for run in runs)
-    out = {"closed loop": 1e9 * cpu_best(lambda: kernel_pass(batches, grid, arena)) / steps}
+    out = {"closed loop": 1e9 * cpu_best(lambda: kernel_pass(batches, grid)) / steps}
     items = [item for items in batches for item in items]
     ok = [i for i, run in enumerate(runs) if run.status == "ok"][:100]
     plant = items[0].plant

@@ -188,13 +188,12 @@ def kernel_batches(prepared: list[Any]) -> list[list[Any]]:
     return [[item for p in prepared[k : k + 100] for item in engine.items_of(p)] for k in range(0, len(prepared), 100)]
 
 
-def kernel_pass(batches: list[list[Any]], grid: Any, arena: Any) -> None:
-    """Every batch through nlcx's kernel, its records lent by ``arena``, as a sweep batch calls it."""
+def kernel_pass(batches: list[list[Any]], grid: Any) -> None:
+    """Every batch through nlcx's kernel, as a sweep batch calls it."""
     from nlcx import engine
 
     for items in batches:
-        engine.simulate_items(items, grid, "rk4", record_logs=False, arena=arena)
-        arena.release()
+        engine.simulate_items(items, grid, "rk4", record_logs=False)
 
 
 def planned_batches(n_batches: int) -> list[Any]:
@@ -314,7 +313,7 @@ def limit_reference(raw: dict[str, Any], jobs: int = 2) -> dict[str, Any]:
 def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[str, Any]:
     """The first ``n`` variants of the sweep in this process, batches of 100, through three
     loops, alternated, CPU time of the best of ``repeats``: nlcx's kernel (with its array
-    packing and its records lent by an arena, as a sweep batch calls it), the reference's loop
+    packing, as a sweep batch calls it), the reference's loop
     with its PID reading nlcx's packed rows (:func:`reference.simulate_nlcx_pid`: the plant state in
     registers) and the
     limit reference. Where a sweep's time goes beyond the kernel (metrics, configs, files,
@@ -332,8 +331,6 @@ def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[s
     X, U, n_valid = np.empty((100, n_k, 4)), np.empty((100, n_k)), np.empty(100, dtype=np.int64)
     theta_loop, x_loop = (reference.loop_parameters(base_raw["controllers"]["proposed"]["loops"][s]["schedule"])
                           for s in ("theta", "x"))  # fmt: skip
-
-    arena = engine.RecordArena()
 
     def register_level(loop: str, keep: bool = False) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """The batches through one of the reference's loops; the trajectories copied out if ``keep``."""
@@ -365,7 +362,7 @@ def kernels_alone(raw: dict[str, Any], n: int = 600, repeats: int = 3) -> dict[s
     for _ in range(repeats):
         for name in cpu:
             start = time.process_time()
-            kernel_pass(batches, grid, arena) if name == "nlcx" else register_level(name)
+            kernel_pass(batches, grid) if name == "nlcx" else register_level(name)
             cpu[name].append(time.process_time() - start)
     ns = {name: 1e9 * min(times) / steps for name, times in cpu.items()}
     return {"variants": n, "ns": ns, "same": same, "lockstep_same": lockstep_same, "limit_dev": limit_dev}

@@ -11,7 +11,6 @@ This module imports neither pandas nor the simulation code; matplotlib only wher
 
 from __future__ import annotations
 
-import gc
 import io
 import os
 import pickle
@@ -218,10 +217,8 @@ def _serve() -> None:
     """The painter process: import matplotlib, then draw the jobs read from stdin; reply "ok"
     and leave at once. Every file is written and closed by then; the interpreter's teardown of
     matplotlib's modules would only keep the run waiting."""
-    gc.disable()  # the imports build large object graphs; collecting them midway only costs
     import matplotlib.figure  # noqa: F401
 
-    gc.enable()
     _warm_up()
     try:
         jobs = pickle.load(sys.stdin.buffer)

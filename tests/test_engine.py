@@ -176,69 +176,6 @@ def test_lock_step_batch_equals_single_runs_with_friction_noise_and_divergence(
                 assert np.array_equal(getattr(run, name), getattr(other, name)), name
 
 
-def test_identical_closed_loops_are_simulated_once_and_equal_runs_alone(x_error_raw: dict) -> None:
-    """Items with the same functions and the same arrays bit for bit (here the proposed loop of
-    two experiments that differ only in the conventional gains) share one simulated
-    trajectory; loops that differ in anything the kernel reads (gains, noise seed) do not.
-    Every run equals its experiment run alone, and the shared trajectories are read-only."""
-    raws = []
-    for kp, seed in ((30.0, 0), (31.0, 0), (30.0, 1), (30.0, 2)):
-        raw = copy.deepcopy(x_error_raw)
-        raw["simulation"]["t_end"] = 3.0
-        raw["seed"] = seed
-        raw["controllers"]["conventional"]["loops"]["theta"]["schedule"]["kp"] = kp
-        if seed:
-            raw["uncertainty"] = {"noise": {"kind": "noise", "power": 1e-7, "sample_time": 0.01}}
-        raws.append(raw)
-    prepared = [engine.prepare(config.build(raw)) for raw in raws]
-    items = [item for p in prepared for item in engine.items_of(p)]
-    runs = engine.simulate_items(items, prepared[0].grid, "rk4")
-    conventional = runs[0::2]
-    proposed = runs[1::2]
-    assert [r.label for r in runs] == ["conventional", "proposed"] * 4
-    assert np.shares_memory(proposed[0].x, proposed[1].x)  # the same loop: simulated once
-    assert not np.shares_memory(conventional[0].x, conventional[1].x)  # other gains
-    assert not np.shares_memory(proposed[2].x, proposed[3].x)  # other noise
-    assert not np.shares_memory(proposed[0].x, proposed[2].x)  # noise against none
-    for p, pair in zip(prepared, zip(conventional, proposed, strict=True), strict=True):
-        for alone, other in zip(engine.evaluate([p], measure=False)[0].runs, pair, strict=True):
-            assert alone.label == other.label and alone.status == other.status
-            for name in ("x", "u", "log", "r"):
-                assert np.array_equal(getattr(alone, name), getattr(other, name)), name
-    with pytest.raises(ValueError, match="read-only"):
-        proposed[1].x[0, 0] = 1.0
-
-
-def test_a_record_arena_lends_memory_again_only_after_release_and_changes_no_bit(x_error_raw: dict) -> None:
-    """Arrays lent by a :class:`~nlcx.engine.RecordArena` are not lent twice before
-    :meth:`release`; after it, the next call writes into the same memory, and its runs equal
-    runs simulated into fresh arrays bit for bit (stale samples of the earlier call are never
-    read). Only what the last call used is kept."""
-    arena = engine.RecordArena()
-    first = arena.take((2, 3))
-    assert not np.shares_memory(first, arena.take((2, 3)))
-    arena.release()
-    assert np.shares_memory(first, arena.take((2, 3)))
-    assert arena.take((4,)).shape == (4,)
-    raws = []
-    for M in (1.0, 3.0):  # the second batch's variants stop at other samples than the first's
-        raw = copy.deepcopy(x_error_raw)
-        raw["simulation"]["t_end"] = 3.0
-        raw["plant"]["params"]["M"] = M
-        raws.append(raw)
-    arena = engine.RecordArena()
-    before = engine.evaluate([config.build(raws[0])], measure=False, arena=arena)[0].runs
-    memory = [run.x for run in before]
-    arena.release()
-    reused = engine.evaluate([config.build(raws[1])], measure=False, arena=arena)[0].runs
-    assert any(np.shares_memory(run.x, m) for run in reused for m in memory)
-    fresh = engine.evaluate([config.build(raws[1])], measure=False)[0].runs
-    for a, b in zip(reused, fresh, strict=True):
-        assert a.status == b.status and a.t.size == b.t.size
-        for name in ("x", "u", "log", "friction"):
-            assert np.array_equal(getattr(a, name), getattr(b, name)), name
-
-
 def test_a_right_hand_side_that_ignores_the_columns_is_refused() -> None:
     """A plant written for one state (RHS_SIG's columns are variants) is caught before it runs."""
     from numba import njit

@@ -146,9 +146,9 @@ def test_a_command_restores_what_it_set_when_it_ends(tmp_path: Path, args: list[
 
 
 def test_a_command_runs_with_its_settings(tmp_path: Path) -> None:
-    """While a command runs: the collector is off until its imports are done, matplotlib's
-    backend is Agg for it and the processes it starts, and numba's note on experimental
-    first-class function types is not shown."""
+    """While a command runs: the collector is on as the caller left it, matplotlib's backend
+    is Agg for it and the processes it starts, and numba's note on experimental first-class
+    function types is not shown."""
     during = (
         "import warnings\n"
         "from nlcx.cli import _app\n"
@@ -160,7 +160,7 @@ def test_a_command_runs_with_its_settings(tmp_path: Path) -> None:
     code = PROBE.format(workload=during)
     done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    assert json.loads(done.stdout.splitlines()[0]) == [False, "Agg"]
+    assert json.loads(done.stdout.splitlines()[0]) == [True, "Agg"]
     assert "experimental" not in done.stderr
 
 

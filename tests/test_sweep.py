@@ -104,7 +104,7 @@ def test_batch_equals_single_runs_bit_for_bit(tmp_path: Path) -> None:
             other = batched[2 * k + j]
             assert np.array_equal(run.x, other.x) and np.array_equal(run.u, other.u) and run.status == other.status
     # and the metrics a sweep batch computes (vectorised over variants) equal single runs',
-    # also in a second batch, which writes its trajectories into the first one's records
+    # also in a second batch, with the collector on or off (a batch leaves it as it was)
     half = len(variants) // 2
     for collecting in (True, False):
         (gc.enable if collecting else gc.disable)()
@@ -112,7 +112,7 @@ def test_batch_equals_single_runs_bit_for_bit(tmp_path: Path) -> None:
             sweep.run_batch(sweep.Batch(base_raw, variants[s], hashes[s], tmp_path / "b", False))
             for s in (slice(0, half), slice(half, None))
         ]
-        assert gc.isenabled() is collecting  # the batch held the collector off, then gave it back
+        assert gc.isenabled() is collecting
         gc.enable()
         result = pd.concat([part.metrics for part in parts])
         for k in (0, 7, half, len(variants) - 1):

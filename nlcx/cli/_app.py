@@ -60,17 +60,14 @@ def _options(
 def command_settings() -> Iterator[None]:
     """What a command sets for its whole process, each restored when it ends.
 
-    - The garbage collector is off while the command imports its libraries (the long commands
-      switch it back on, see :func:`_imported`): collecting the object graphs of numba, pandas
-      and matplotlib over and over would slow the imports down. Afterwards it is on or off as
-      before, and what the command froze is unfrozen (unless something was frozen before).
+    - What the command freezes for the collector (:func:`_imported`) is unfrozen when it ends
+      (unless something was frozen before).
     - Warnings: numba's note that first-class function types are experimental (the kernel's
       function tables) is not shown; nlcx's own warnings (an untested numba) print as one line.
     - matplotlib's backend is Agg (``MPLBACKEND``, inherited by the processes the command
       starts): every figure is written to a file."""
-    collecting, frozen = gc.isenabled(), gc.get_freeze_count()
+    frozen = gc.get_freeze_count()
     backend = os.environ.get("MPLBACKEND")
-    gc.disable()
     try:
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", _numba_compat.FIRST_CLASS_FUNCTION_WARNING)
@@ -81,8 +78,6 @@ def command_settings() -> Iterator[None]:
         _restore_variable("MPLBACKEND", backend)
         if not frozen:
             gc.unfreeze()
-        if collecting:
-            gc.enable()
 
 
 def _restore_variable(name: str, value: str | None) -> None:
@@ -159,12 +154,9 @@ def one_line_errors(func: F) -> F:
 
 
 def _imported() -> None:
-    """Collect garbage again from here on, leaving out what the imports built (frozen).
-
-    :func:`command_settings` holds the collector off while a command imports numba, pandas and
-    matplotlib; a long command calls this once they are imported."""
+    """Leave what the imports built (numba, pandas, matplotlib) out of later collections: a long
+    command calls this once they are imported (:func:`command_settings` unfreezes at its end)."""
     gc.freeze()
-    gc.enable()
 
 
 def _fmt(value: float) -> str:

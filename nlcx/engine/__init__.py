@@ -13,10 +13,10 @@ The package by job; this module names what the rest of nlcx uses:
   :func:`run_experiment`, and :class:`LoopSimulator`, the tuners' way back into the pipeline;
 - :mod:`nlcx.engine.prepared`: a prepared experiment's parts (time grid, references,
   perturbations, memory checks) and its closed loops (:func:`items_of`);
-- :mod:`nlcx.engine.batching`: which loops share a kernel call, which are simulated once;
+- :mod:`nlcx.engine.batching`: which loops share a kernel call;
 - :mod:`nlcx.engine.simulate`: the kernel's arguments, its calls, their runs;
 - :mod:`nlcx.engine.measure`: the metric rows of the runs;
-- :mod:`nlcx.engine.memory`: record arrays lent again, freed blocks kept for reuse;
+- :mod:`nlcx.engine.memory`: freed blocks kept by the C allocator for reuse;
 - :mod:`nlcx.engine.prewarm`: the kernel loaded on demand, the rest compiled ahead;
 - :mod:`nlcx.engine.results`: :class:`Run`, :class:`Result` and the metric tables.
 """
@@ -24,7 +24,7 @@ The package by job; this module names what the rest of nlcx uses:
 from __future__ import annotations
 
 from nlcx.engine.measure import measure_runs
-from nlcx.engine.memory import RecordArena, reuse_freed_memory
+from nlcx.engine.memory import reuse_freed_memory
 from nlcx.engine.pipeline import LoopSimulator, evaluate, prepare, remeasure, run_experiment
 from nlcx.engine.prepared import (
     TABLEAUS,
@@ -51,7 +51,6 @@ __all__ = [
     "MetricBlock",
     "MetricTable",
     "Prepared",
-    "RecordArena",
     "Reference",
     "ReferenceCache",
     "Result",

@@ -1,21 +1,14 @@
-"""Which closed loops go through the kernel together, and which are simulated only once.
+"""Which closed loops go through the kernel together.
 
 Items that share their compiled functions and array shapes (:func:`group_key`) go through one
-batched kernel call; an item whose closed loop equals an earlier one's bit for bit
-(:func:`first_of_same_loop`) is not simulated again but shares that one's trajectory
-(:func:`with_repeats`); :func:`kernel_calls` decides which controller step each call runs.
+batched kernel call; :func:`kernel_calls` decides which controller step each call runs.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import hashlib
 from typing import Any, NamedTuple
 
-import numpy as np
-
 from nlcx.engine.prepared import Item
-from nlcx.engine.results import Run
 
 #: Rows a loop structure needs for a kernel call of its own (see :func:`kernel_calls`).
 MIN_ROWS_PER_STEP = 8
@@ -43,45 +36,11 @@ def group_key(item: Item) -> tuple[Any, ...]:
     )  # fmt: skip
 
 
-def kernel_arrays(item: Item) -> tuple[np.ndarray | None, ...]:
-    """Every array of an item the kernel reads (its functions are in :func:`group_key`)."""
-    c, plant = item.controller, item.plant
-    elements = (a for e in item.elements for a in (e.params, e.state, e.data))
-    return (plant.x0, plant.p, plant.bounds, c.cp, c.cs0, item.ref, item.dist, item.element_data, item.friction,
-            *elements)  # fmt: skip
-
-
-def first_of_same_loop(items: list[Item], group_keys: list[tuple[Any, ...]]) -> list[int]:
-    """``first[i]``: the first item whose closed loop is item i's (the same compiled functions,
-    ``group_keys[i]``, and, bit for bit, the same arrays). The kernel's result for a variant
-    does not depend on the batch around it, so such a loop is simulated once (an identification
-    study's candidates share their proposed controller, a reproduction's figures their
-    conventional runs). Arrays are compared by a SHA-1 of their bytes, each array object hashed once."""
-    hashed: list[np.ndarray] = []  # kept while hashing, so that an array's id stays its own
-    digests: dict[int, tuple[Any, ...]] = {}
-
-    def digest(a: np.ndarray | None) -> tuple[Any, ...] | None:
-        if a is None:
-            return None
-        if id(a) not in digests:
-            hashed.append(a)
-            data = np.ascontiguousarray(a)
-            digests[id(a)] = (a.shape, a.dtype.str, hashlib.sha1(data.data, usedforsecurity=False).digest())
-        return digests[id(a)]
-
-    first: dict[tuple[Any, ...], int] = {}
-    return [
-        first.setdefault((key, tuple(item.controller.log_names), *map(digest, kernel_arrays(item))), i)
-        for i, (item, key) in enumerate(zip(items, group_keys, strict=True))
-    ]
-
-
-def distinct_groups(group_keys: list[tuple[Any, ...]], first: list[int]) -> list[list[int]]:
-    """The items to simulate (each first of its loop, ``first``) grouped by their key, in order."""
+def groups_of(group_keys: list[tuple[Any, ...]]) -> list[list[int]]:
+    """The items grouped by their key (:func:`group_key`), in order."""
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i, key in enumerate(group_keys):
-        if first[i] == i:
-            groups.setdefault(key, []).append(i)
+        groups.setdefault(key, []).append(i)
     return list(groups.values())
 
 
@@ -103,18 +62,3 @@ def kernel_calls(groups: list[list[int]], items: list[Item]) -> list[KernelCall]
         else:
             calls.append(KernelCall(indices, items[indices[0]].controller.general_step))
     return calls
-
-
-def with_repeats(runs: list[Run | None], items: list[Item], first: list[int]) -> list[Run]:
-    """Every item's run: an item repeating the loop of item ``first[i]`` gets that run's
-    trajectory under its own controller (label) and reference."""
-    out = []
-    for i, j in enumerate(first):
-        source = runs[j]
-        assert source is not None
-        out.append(
-            source
-            if j == i
-            else dataclasses.replace(source, controller=items[i].controller, r=items[i].ref[: source.t.size])
-        )
-    return out

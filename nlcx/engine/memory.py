@@ -1,43 +1,10 @@
-"""The engine's memory: record arrays lent again between batches, and freed blocks kept for reuse."""
+"""The engine's memory: freed blocks kept by the C allocator for reuse."""
 
 from __future__ import annotations
 
 import ctypes
 import functools
 import os
-
-import numpy as np
-
-
-class RecordArena:
-    """Record arrays (X, U, logs, friction) handed out again once their runs are done with.
-
-    A sweep batch's records are tens of MB. Fresh from ``np.empty`` for every batch, each of
-    their pages costs the kernel a page fault and the operating system's zeroing when first
-    written. A sweep worker lends a batch's records from its arena and, once the
-    batch's metrics are written, :meth:`release` returns them: the next batch writes into the
-    same memory. Only what the last batch used is kept."""
-
-    def __init__(self) -> None:
-        self._free: list[np.ndarray] = []
-        self._lent: list[np.ndarray] = []
-
-    def take(self, shape: tuple[int, ...]) -> np.ndarray:
-        """An array of ``shape`` (its values undefined, as ``np.empty``'s)."""
-        for i, a in enumerate(self._free):
-            if a.shape == shape:
-                a = self._free.pop(i)
-                a.flags.writeable = True
-                break
-        else:
-            a = np.empty(shape)
-        self._lent.append(a)
-        return a
-
-    def release(self) -> None:
-        """Every array lent so far may be handed out again: no run reading it is used after this."""
-        self._free, self._lent = self._lent, []
-
 
 #: glibc's mallopt parameters (malloc.h) and the values :func:`reuse_freed_memory` sets.
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3

@@ -20,7 +20,7 @@ import numpy as np
 from nlcx import preflight
 from nlcx.config import Experiment, MetricsSection, build, controller_section
 from nlcx.engine.measure import controller_records, measure_experiments
-from nlcx.engine.memory import RecordArena, reuse_freed_memory
+from nlcx.engine.memory import reuse_freed_memory
 from nlcx.engine.prepared import Prepared, check_memory, perturbations, reference_models, time_grid
 from nlcx.engine.results import MetricBlock, Result, Run
 from nlcx.engine.simulate import simulate_experiments
@@ -32,7 +32,6 @@ def evaluate(
     experiments: Sequence[Experiment | Prepared],
     record_logs: bool = True,
     measure: bool = True,
-    arena: RecordArena | None = None,
 ) -> list[Result]:
     """The pipeline: experiments (or prepared ones) to trajectories and metrics, batched.
 
@@ -41,8 +40,7 @@ def evaluate(
     (:func:`~nlcx.engine.measure.measure_runs`). ``nlcx run``, sweeps, tuners (through
     :class:`LoopSimulator`), the calibration and the thesis reproduction all come through here.
     ``record_logs=False`` skips controller logs and friction forces; ``measure=False`` leaves
-    the metrics empty (a tuner scoring runs itself). With an ``arena`` the runs' records are its
-    arrays, lent until the caller releases them (:class:`~nlcx.engine.memory.RecordArena`).
+    the metrics empty (a tuner scoring runs itself).
     Timings are per experiment; a shared kernel call, and the measuring, are split evenly
     between their experiments.
     """
@@ -52,7 +50,7 @@ def evaluate(
         start = time.perf_counter()
         prepared.append(exp if isinstance(exp, Prepared) else prepare(exp))
         timings.append({"prepare": time.perf_counter() - start})
-    runs = simulate_experiments(prepared, record_logs, arena, timings)
+    runs = simulate_experiments(prepared, record_logs, timings)
     start = time.perf_counter()
     blocks = measure_experiments(prepared, runs) if measure else [None] * len(prepared)
     for timing in timings:

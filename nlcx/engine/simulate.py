@@ -2,7 +2,7 @@
 its records turned into runs.
 
 :func:`simulate_items` takes the items of any number of experiments on one time grid through
-the kernel (:func:`nlcx.kernel.integrator.simulate`), batched and de-duplicated by
+the kernel (:func:`nlcx.kernel.integrator.simulate`), batched by
 :mod:`nlcx.engine.batching`; the kernel's arguments are the named structures of
 :mod:`nlcx.kernel.structures`, built here item by item.
 """
@@ -11,13 +11,11 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from nlcx.engine.batching import distinct_groups, first_of_same_loop, group_key, kernel_calls, with_repeats
-from nlcx.engine.memory import RecordArena
+from nlcx.engine.batching import group_key, groups_of, kernel_calls
 from nlcx.engine.prepared import TABLEAUS, Item, Prepared, TimeGrid, items_of
 from nlcx.engine.results import Run
 from nlcx.kernel.abi import ELEMENT_ENTRY, HOOKS, STATUS_BOUND, STATUS_NONFINITE, callback_slots, element_slots
@@ -37,7 +35,7 @@ from nlcx.plants.base import Plant, check_rows
 
 
 def simulate_experiments(
-    prepared: list[Prepared], record_logs: bool, arena: RecordArena | None, timings: list[dict[str, float]]
+    prepared: list[Prepared], record_logs: bool, timings: list[dict[str, float]]
 ) -> list[list[Run]]:
     """The runs of every prepared experiment: the closed loops of the experiments on the same
     time grid (dt, number of steps, integrator) go through one :func:`simulate_items` call, whose
@@ -51,7 +49,7 @@ def simulate_experiments(
         start = time.perf_counter()
         items = [(e, item) for e in members for item in items_of(prepared[e])]
         grid, integrator = prepared[members[0]].grid, prepared[members[0]].experiment.section.simulation.integrator
-        done = simulate_items([item for _, item in items], grid, integrator, record_logs, arena)
+        done = simulate_items([item for _, item in items], grid, integrator, record_logs)
         for (e, _), run in zip(items, done, strict=True):
             runs[e].append(run)
         for e in members:
@@ -59,29 +57,22 @@ def simulate_experiments(
     return runs
 
 
-def simulate_items(
-    items: list[Item], grid: TimeGrid, integrator: str, record_logs: bool = True, arena: RecordArena | None = None
-) -> list[Run]:
+def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_logs: bool = True) -> list[Run]:
     """Integrate every item; items sharing plant equations and controller kind go through one
-    batched kernel call (per-item parameters, states, references and perturbations), and an
-    item whose closed loop equals an earlier one's shares that one's trajectory
-    (:func:`~nlcx.engine.batching.first_of_same_loop`; the trajectories are read-only).
+    batched kernel call (per-item parameters, states, references and perturbations). The
+    trajectories are read-only views of the call's records.
 
     ``record_logs=False`` skips the controller logs and friction forces (``Run.log`` and
-    ``Run.friction`` are None): a sweep that keeps only metrics does not need them. With an
-    ``arena`` the records are its arrays (see :class:`~nlcx.engine.memory.RecordArena`)."""
+    ``Run.friction`` are None): a sweep that keeps only metrics does not need them."""
     from nlcx.kernel.integrator import simulate  # loaded (or compiled) on first use: see load_kernel
 
     tableau = TABLEAUS[integrator]
     integration = Integration(method=method_of(integrator), rk_a=tableau.a, rk_b=tableau.b, dt=grid.dt)
-    empty = np.empty if arena is None else arena.take
-    keys = [group_key(item) for item in items]
-    first = first_of_same_loop(items, keys)
     runs: list[Run | None] = [None] * len(items)
-    for call in kernel_calls(distinct_groups(keys, first), items):
+    for call in kernel_calls(groups_of([group_key(item) for item in items]), items):
         group = [items[i] for i in call.indices]
         check_rows(group[0].plant)
-        records = _records(group, grid.t.size, grid.t.size if record_logs else 1, empty)
+        records = _records(group, grid.t.size, grid.t.size if record_logs else 1)
         outcome = Outcome(
             status=np.zeros(len(group), dtype=np.int64), n_valid=np.zeros(len(group), dtype=np.int64),
             fail_index=np.zeros(len(group), dtype=np.int64),
@@ -90,11 +81,11 @@ def simulate_items(
             integration, _plant_call(group), _controller_call(group, call.step), _loop_elements(group),
             _plant_forces(group), records, outcome, _friction_path(group),
         )  # fmt: skip
-        for array in records:  # runs of identical loops share them
+        for array in records:
             array.flags.writeable = False
         for j, i in enumerate(call.indices):
             runs[i] = _run(group[j], j, records, outcome, grid, record_logs)
-    return with_repeats(runs, items, first)
+    return [run for run in runs if run is not None]
 
 
 def _plant_call(group: list[Item]) -> PlantCall:
@@ -158,15 +149,15 @@ def _friction_path(group: list[Item]) -> FrictionPath:
     return FRICTIONAL if any(_has_friction(g.friction) for g in group) else FRICTIONLESS
 
 
-def _records(group: list[Item], n_k: int, n_rec: int, empty: Callable[[tuple[int, ...]], np.ndarray]) -> Records:
+def _records(group: list[Item], n_k: int, n_rec: int) -> Records:
     """The records of a group of items: states and inputs at the n_k samples, controller logs
     and friction forces at n_rec (1: not recorded). The kernel writes every sample up to where
     a run stops; the rest is never read."""
     plant, n_b = group[0].plant, len(group)
     n_u = len(plant.inputs)
     return Records(
-        X=empty((n_b, n_k, len(plant.states))), U=empty((n_b, n_k, n_u)),
-        LOG=empty((n_b, n_rec, len(group[0].controller.log_names))), FRICTION=empty((n_b, n_rec, n_u)),
+        X=np.empty((n_b, n_k, len(plant.states))), U=np.empty((n_b, n_k, n_u)),
+        LOG=np.empty((n_b, n_rec, len(group[0].controller.log_names))), FRICTION=np.empty((n_b, n_rec, n_u)),
     )  # fmt: skip
 
 

@@ -7,7 +7,6 @@ files, the metrics first and the index last (which marks the batch complete).
 
 from __future__ import annotations
 
-import functools
 import gc
 import hashlib
 import json
@@ -24,7 +23,7 @@ from nlcx import config as cfg
 from nlcx.sweeps.planning import Variant
 
 if TYPE_CHECKING:
-    from nlcx import engine
+    pass
 
 #: The thread-count variables of BLAS, OpenMP and numba: one thread per worker.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
@@ -56,21 +55,6 @@ def set_threads() -> None:
         os.environ[name] = "1"
 
 
-@functools.cache
-def _records() -> engine.RecordArena:
-    """This process's :class:`~nlcx.engine.RecordArena`: a worker's batches write their
-    trajectories into the same memory, one batch after the other."""
-    from nlcx import engine
-
-    return engine.RecordArena()
-
-
-def forget_records() -> None:
-    """Let go of this process's :class:`~nlcx.engine.RecordArena` (the records of the batches
-    the sweep's own process ran, with the serial executor)."""
-    _records.cache_clear()
-
-
 def _settle_heap() -> None:
     """Collect, then freeze what survives (imported modules, loaded kernels, caches).
 
@@ -89,19 +73,13 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
     """Simulate a batch of variants and write its part files (the metrics, then the index).
 
     ``return_metrics=False`` leaves the metrics out of the result (a pool worker's result
-    travels back pickled; the sweep reads the metrics from the part files). The garbage
-    collector waits for the end of the batch (:func:`_settle_heap`): its collections while the
-    batch built its configs showed in a sweep's profile under ``perf``."""
+    travels back pickled; the sweep reads the metrics from the part files). After the batch
+    the heap is settled (:func:`_settle_heap`)."""
     set_threads()
-    collecting = gc.isenabled()
-    gc.disable()
     try:
         return _run_batch(batch, return_metrics)
     finally:
-        _records().release()  # no run of this batch is read again: the next batch writes into its records
         _settle_heap()
-        if collecting:
-            gc.enable()
 
 
 def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
@@ -124,7 +102,7 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
         rows.append(row)
     # one pipeline call: variants on the same time grid go through the kernel together
     members = list(prepared_of)
-    results = engine.evaluate([prepared_of[pos] for pos in members], record_logs=batch.timeseries, arena=_records())
+    results = engine.evaluate([prepared_of[pos] for pos in members], record_logs=batch.timeseries)
     for pos, result in zip(members, results, strict=True):
         row = rows[pos]
         row["wall_s"] += result.timings["simulate"] + result.timings["metrics"]

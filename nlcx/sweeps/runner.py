@@ -15,7 +15,7 @@ import pandas as pd
 
 from nlcx.errors import NlcxError
 from nlcx.sweeps.assembly import assemble, write_manifest, write_report
-from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, forget_records, run_batch, set_threads
+from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, run_batch, set_threads
 from nlcx.sweeps.planning import SweepSection, Variant, load, plan
 from nlcx.sweeps.resuming import completed, open_staging
 
@@ -94,7 +94,6 @@ def _run_batches(
         close()
         if thawed:
             gc.unfreeze()
-        forget_records()  # the records of batches run in this process (serial executor)
 
 
 def _batches(

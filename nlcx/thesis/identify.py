@@ -510,7 +510,7 @@ def write_ranking(out_dir: Path, names: list[str]) -> pd.DataFrame:
     for name in names:
         summary = json.loads((out_dir / "fits" / f"{name}.json").read_text())
         fit = pd.read_csv(out_dir / "fits" / f"{name}.fit.csv", dtype={"table": str})
-        keep = ("hypothesis", "train_loss", "evaluations", "wall_s")
+        keep = ("hypothesis", "train_loss", "evaluations")
         rows.append(
             {**{k: summary[k] for k in keep}, **scores(fit),
              "options": json.dumps(summary["options"]), "values": json.dumps(summary["values"])}

@@ -177,7 +177,7 @@ def write_ranking(out_dir: Path, names: list[str]) -> pd.DataFrame:
     for name in names:
         summary = json.loads((out_dir / "fits" / f"{name}.json").read_text())
         fit = pd.read_csv(out_dir / "fits" / f"{name}.fit.csv")
-        keep = ("hypothesis", "train_loss", "wall_s")
+        keep = ("hypothesis", "train_loss")
         rows.append(
             {**{k: summary[k] for k in keep}, **method_scores(fit),
              "options": json.dumps(summary["options"]), "values": json.dumps(summary["values"])}
