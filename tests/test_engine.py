@@ -489,3 +489,13 @@ def test_the_kernel_reads_and_writes_only_inside_its_arrays() -> None:
     env = {**os.environ, "NUMBA_DISABLE_JIT": "1"}
     done = subprocess.run([sys.executable, "-c", _BOUNDS_SCRIPT], cwd=root, env=env, capture_output=True, text=True)
     assert done.returncode == 0 and "in bounds" in done.stdout, done.stderr[-2000:]
+
+
+def test_a_reference_shared_between_runs_is_read_only(x_error_raw: dict) -> None:
+    """Runs that read the same reference channels share one array (engine.REFERENCES): it is
+    read-only, so no run, metric or caller can change the reference another run reads."""
+    first, second = (run_raw(x_error_raw).runs for _ in range(2))
+    assert np.shares_memory(first[0].r, second[0].r)
+    with pytest.raises(ValueError, match="read-only"):
+        first[0].r[-1, 0] = 0.0
+    assert np.array_equal(first[0].r, second[0].r)

@@ -169,6 +169,7 @@ class ReferenceCache:
             for s, off in zip(signals, offsets, strict=True)
         ]
         array = np.ascontiguousarray(np.stack(cols, axis=-1) if cols else np.zeros((grid.t.size, 0)))
+        array.flags.writeable = False  # shared by every variant that asks for the same channels
         self._arrays[key] = array
         if len(self._arrays) > self.size:
             self._arrays.popitem(last=False)

@@ -207,7 +207,7 @@ def _stack(arrays: list[np.ndarray | None], empty_shape: tuple[int, ...]) -> np.
     first = arrays[0]
     if all(a is first for a in arrays):
         base = np.zeros(empty_shape) if first is None else first
-        return np.ascontiguousarray(base[None])
+        return np.ascontiguousarray(base[None]) if base.flags.writeable else base[None].copy()
     filled = [np.zeros(empty_shape) if a is None else a for a in arrays]
     # an axis of length 1 (e.g. no noise: one zero row for every sample) meets the others' length
     shape = tuple(max(sizes) for sizes in zip(*(a.shape for a in filled), strict=True))
