@@ -18,8 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from nlcx._version import __version__
 
-if TYPE_CHECKING:
-    from nlcx.analysis import linearize
+if TYPE_CHECKING:  # not nlcx.analysis: it imports nlcx.api, and naming it here would close an import loop
     from nlcx.api import experiment, run, sweep
     from nlcx.comparison import compare, improvement
     from nlcx.errors import ConfigError, NlcxError

@@ -17,7 +17,7 @@ def load_kernel() -> None:
     """Load the kernel (:func:`nlcx.kernel.integrator.simulate`) from numba's disk cache, or
     compile it (seconds; loading from a warm cache is quick). Importing the engine does not: a process
     that only prepares and measures (:func:`prewarm`) never needs it."""
-    import nlcx.kernel.integrator  # noqa: F401
+    from nlcx.kernel import integrator  # noqa: F401
 
 
 def prewarm(exp: Experiment) -> None:

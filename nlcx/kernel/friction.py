@@ -304,7 +304,6 @@ def frictional_sample(rhs, t, k, nb, n_free, slots, u, forces, work, records):  
     dist, dist_map, FRICTION = forces.dist, forces.dist_map, records.FRICTION
     record = FRICTION.shape[1] > 1
     scratch = work.scratch
-    kd = min(shared_row(dist.shape[1], k), dist.shape[1] - 1)
     for b in range(nb):
         if slots.stopped[b]:
             continue
@@ -315,7 +314,7 @@ def frictional_sample(rhs, t, k, nb, n_free, slots, u, forces, work, records):  
                     FRICTION[v, k, j] = 0.0
             continue
         _load_one(b, slots, u, work)
-        d_k = _disturbance_at_sample(dist[shared_row(dist.shape[0], v)], k, kd)
+        d_k = _disturbance_at_sample(dist[shared_row(dist.shape[0], v)], k)
         axes, mode, direction = slots.axes[b], slots.mode[b], slots.direction[b]
         update_friction_modes(rhs, t, work.x, work.u, d_k, dist_map, axes, mode, direction, scratch)
         if record:
@@ -325,14 +324,16 @@ def frictional_sample(rhs, t, k, nb, n_free, slots, u, forces, work, records):  
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _disturbance_at_sample(drows, k, kd):  # pragma: no cover - compiled
-    """d at the sample t_k from one variant's stage table ``drows`` (steps, stages, n_d), ``kd``
-    its step row (k clipped to the table): the first stage of step k (c = 0, t_k), and at the
-    final sample t_K, which begins no step, the last stage of the last step (t_K itself for
-    RK4 and Heun, whose last node is c = 1; t_{K-1} for Euler, which has no later node)."""
-    if drows.shape[0] > 1 and k >= drows.shape[0]:
-        return drows[kd, drows.shape[1] - 1]
-    return drows[kd, 0]
+def _disturbance_at_sample(drows, k):  # pragma: no cover - compiled
+    """d at the sample t_k from one variant's stage table ``drows`` (steps, stages, n_d; one
+    row when shared over time): the first stage of step k (c = 0, t_k), and at the final sample
+    t_K, which begins no step, the last stage of the last step (t_K itself for RK4 and Heun,
+    whose last node is c = 1; t_{K-1} for Euler, which has no later node)."""
+    if drows.shape[0] == 1:
+        return drows[0, 0]
+    if k < drows.shape[0]:
+        return drows[k, 0]
+    return drows[drows.shape[0] - 1, drows.shape[1] - 1]
 
 
 @njit(cache=True, inline="always", error_model="numpy")
