@@ -243,18 +243,50 @@ def plant(
     >>> bool(abs(result.trajectory("pid")["x"].iloc[-1] - 1.0) < 0.01)
     True
     """
-    declared = _Declared(
+    declared = _declared(name, states, inputs, outputs, params)
+    out_names = _outputs(declared, velocity_states, bounds)
+    loops = _loop_inputs(declared, out_names, loop_inputs)
+
+    def register(f: Callable[..., Any]) -> Callable[..., Any]:
+        return _register(f, declared, out_names, loops, tuple(velocity_states), dict(bounds or {}), replace)
+
+    return register
+
+
+def _declared(
+    name: str,
+    states: Mapping[str, SignalSpec] | Sequence[str],
+    inputs: Mapping[str, SignalSpec] | Sequence[str],
+    outputs: Sequence[str] | None,
+    params: Mapping[str, ParamSpec] | None,
+) -> _Declared:
+    """The plant's signals and parameters as :func:`plant` was given them, validated."""
+    return _Declared(
         name=name,
         states=_signals("states", states),
         inputs=_signals("inputs", inputs),
         outputs=tuple(outputs) if outputs is not None else (),
         params=_parameters(params or {}),
     )
+
+
+def _outputs(
+    declared: _Declared, velocity_states: Sequence[str], bounds: Mapping[str, float] | None
+) -> tuple[str, ...]:
+    """The measured states (default: every state); they, the velocity states and the bounded
+    states must be declared states."""
     state_names = [s.name for s in declared.states]
     out_names = declared.outputs or tuple(state_names)
     for key in (*out_names, *velocity_states, *(bounds or {})):
         if key not in state_names:
             raise ConfigError("outputs", key, f"not a declared state; allowed: {', '.join(state_names)}")
+    return tuple(out_names)
+
+
+def _loop_inputs(
+    declared: _Declared, out_names: tuple[str, ...], loop_inputs: Mapping[str, str] | None
+) -> dict[str, str]:
+    """The input a PID loop on each output drives by default (with one input: that input)."""
     input_names = [s.name for s in declared.inputs]
     loops = dict(loop_inputs) if loop_inputs is not None else {}
     if not loops and len(input_names) == 1:
@@ -263,37 +295,47 @@ def plant(
         if output not in out_names or input_name not in input_names:
             raise ConfigError(f"loop_inputs.{output}", input_name, f"an output ({', '.join(out_names)}) "
                               f"mapped to an input ({', '.join(input_names)})")  # fmt: skip
+    return loops
 
-    def register(f: Callable[..., Any]) -> Callable[..., Any]:
-        scalar, params_type = compile_scalar(f, declared)
-        direct = _check_scalar(scalar, params_type, declared)
-        try:
-            rhs = batched_rhs(scalar, params_type, declared)
-        except Exception as exc:  # pragma: no cover - f compiled and ran above
-            raise _not_callable(declared.name, exc) from None
-        existing = registry.plants.get(name) if name in registry.plants else None
-        if existing is not None and not (replace and isinstance(existing, ScalarPlant)):
-            allowed = "a new name" + ("" if replace else ", or replace=True")
-            raise ConfigError("plant", name, f"already registered ({type(existing).__name__}); allowed: {allowed}")
-        model_cls = type(
-            f"{name}_plant",
-            (ScalarPlant,),
-            {
-                "__doc__": (f.__doc__ or f"{name}: a plant written in plain Python").strip().splitlines()[0],
-                "Params": _params_model(declared),
-                "states": declared.states,
-                "inputs": declared.inputs,
-                "outputs": tuple(out_names),
-                "velocity_states": tuple(velocity_states),
-                "default_bounds": dict(bounds or {}),
-                "loop_inputs": loops,
-                "rhs": staticmethod(rhs),
-                "function": staticmethod(f),
-            },
-        )
-        model = model_cls()
-        _check_batched(model, declared, direct)
-        registry.plants.register(name, model, replace=True)
-        return f
 
-    return register
+def _register(
+    f: Callable[..., Any],
+    declared: _Declared,
+    out_names: tuple[str, ...],
+    loops: dict[str, str],
+    velocity_states: tuple[str, ...],
+    bounds: dict[str, float],
+    replace: bool,
+) -> Callable[..., Any]:
+    """Compile ``f``, check it, wrap it for the kernel and register its plant (see :func:`plant`)."""
+    name = declared.name
+    scalar, params_type = compile_scalar(f, declared)
+    direct = _check_scalar(scalar, params_type, declared)
+    try:
+        rhs = batched_rhs(scalar, params_type, declared)
+    except Exception as exc:  # pragma: no cover - f compiled and ran above
+        raise _not_callable(name, exc) from None
+    existing = registry.plants.get(name) if name in registry.plants else None
+    if existing is not None and not (replace and isinstance(existing, ScalarPlant)):
+        allowed = "a new name" + ("" if replace else ", or replace=True")
+        raise ConfigError("plant", name, f"already registered ({type(existing).__name__}); allowed: {allowed}")
+    model_cls = type(
+        f"{name}_plant",
+        (ScalarPlant,),
+        {
+            "__doc__": (f.__doc__ or f"{name}: a plant written in plain Python").strip().splitlines()[0],
+            "Params": _params_model(declared),
+            "states": declared.states,
+            "inputs": declared.inputs,
+            "outputs": out_names,
+            "velocity_states": velocity_states,
+            "default_bounds": bounds,
+            "loop_inputs": loops,
+            "rhs": staticmethod(rhs),
+            "function": staticmethod(f),
+        },
+    )
+    model = model_cls()
+    _check_batched(model, declared, direct)
+    registry.plants.register(name, model, replace=True)
+    return f
