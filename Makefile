@@ -75,12 +75,12 @@ tables figures: reproduce
 
 ## baseline: deliberately refresh the committed baseline tables (results/baseline/) after a reviewed change
 baseline: install
-	$(BIN)/nlcx reproduce --only $(BASELINE_TABLES) --jobs $(JOBS) --out results/ci
+	$(BIN)/nlcx reproduce --only $(BASELINE_TABLES) --profile literal --jobs $(JOBS) --out results/ci
 	rm -rf results/baseline/tables && mkdir -p results/baseline && cp -r results/ci/tables results/baseline/
 
 ## baseline-diff: regenerate the baseline subset and diff it against results/baseline/ (also a test)
 baseline-diff: install
-	$(BIN)/nlcx reproduce --only $(BASELINE_TABLES) --jobs $(JOBS) --out results/ci
+	$(BIN)/nlcx reproduce --only $(BASELINE_TABLES) --profile literal --jobs $(JOBS) --out results/ci
 	$(BIN)/nlcx diff results/baseline/tables results/ci/tables
 
 ## sweep-demo: the robustness sweep of configs/sweeps/ and its plot

@@ -21,13 +21,15 @@ CONFIGS = ROOT / "configs"
 
 
 def reproduce_only(only: str, out: Path) -> Any:
-    """``nlcx reproduce --only ONLY`` on the committed thesis configs, two jobs, into ``out``
-    (the CLI runner's result)."""
+    """``nlcx reproduce --only ONLY --profile literal`` on the committed thesis configs, two
+    jobs, into ``out`` (the CLI runner's result): the loop as printed, whatever profile the
+    identification study made the default."""
     from typer.testing import CliRunner
 
     from nlcx.cli import app
 
-    args = ["reproduce", "--only", only, "--jobs", "2", "--out", str(out), "--configs", str(CONFIGS / "thesis")]
+    args = ["reproduce", "--only", only, "--profile", "literal", "--jobs", "2", "--out", str(out),
+            "--configs", str(CONFIGS / "thesis")]  # fmt: skip
     return CliRunner().invoke(app, args)
 
 
@@ -74,14 +76,14 @@ def rel(a: np.ndarray, b: np.ndarray) -> float:
 
 @pytest.fixture(scope="session")
 def reproduction(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One full ``nlcx reproduce`` (every figure, table and claim, with its report), shared by
-    the report tests."""
+    """One full ``nlcx reproduce --profile literal`` (every figure, table and claim, with its
+    report), shared by the report tests."""
     from typer.testing import CliRunner
 
     from nlcx.cli import app
 
     out = tmp_path_factory.mktemp("reproduction")
-    args = ["reproduce", "--jobs", "2", "--out", str(out), "--configs", str(CONFIGS / "thesis")]
+    args = ["reproduce", "--profile", "literal", "--jobs", "2", "--out", str(out), "--configs", str(CONFIGS / "thesis")]
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     return out

@@ -71,3 +71,44 @@ def test_an_unknown_profile_or_option_is_a_one_line_error() -> None:
     assert result.exit_code == 2 and result.output.strip().startswith("config error: --profile = 'nonesuch'")
     with pytest.raises(ValueError, match="unknown option saturation=sometimes"):
         profiles.Profile(name="x", hypothesis={"saturation": "sometimes"})
+
+
+def _row(error: float, direction: float) -> dict[str, float]:
+    return {"validation_median_rel_error": error, "validation_direction_agreement": direction}
+
+
+def test_the_rule_selects_only_a_tenth_lower_validation_error_at_no_loss_of_direction() -> None:
+    literal = _row(0.50, 0.60)
+    assert profiles.rule_selects(_row(0.449, 0.60), literal)  # 10.2 % lower, same direction
+    assert not profiles.rule_selects(_row(0.46, 0.90), literal)  # 8 % lower
+    assert not profiles.rule_selects(_row(0.20, 0.59), literal)  # far lower, direction lost
+    assert profiles.rule_selects(_row(0.30, 0.61), literal)
+
+
+def test_reproduce_without_profile_runs_the_profile_the_rule_chose(tmp_path: Path) -> None:
+    """The default follows ``default:`` of selected.yaml; the manifest names what ran."""
+    import json
+    import shutil
+
+    configs = tmp_path / "thesis"
+    shutil.copytree(THESIS, configs)
+    selected = configs / "profiles" / "selected.yaml"
+    spec = yaml.safe_load(selected.read_text())
+    for chosen, expected in ((True, "selected"), (False, "literal")):
+        selected.write_text(yaml.safe_dump({**spec, "default": chosen}))
+        assert profiles.default_name(configs) == expected
+        out = tmp_path / expected
+        args = ["reproduce", "--only", "table-2.1", "--jobs", "1", "--out", str(out), "--configs", str(configs)]
+        result = runner.invoke(app, [*args, "--no-report"])
+        assert result.exit_code == 0, result.output
+        assert f"profile {expected}:" in result.output
+        assert json.loads((out / "manifest.json").read_text())["profile"] == expected
+    selected.unlink()
+    assert profiles.default_name(configs) == "literal"
+
+
+def test_the_committed_selected_profile_records_the_rules_verdict() -> None:
+    """``default`` of the committed selected.yaml is a bool the study wrote, never absent."""
+    spec = yaml.safe_load((THESIS / "profiles" / "selected.yaml").read_text())
+    assert isinstance(spec.get("default"), bool)
+    assert profiles.default_name(THESIS) == ("selected" if spec["default"] else "literal")

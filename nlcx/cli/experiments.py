@@ -226,9 +226,13 @@ def reproduce(
         typer.Option("--set", help="Override for every experiment, e.g. plant.params.equations=printed."),
     ] = None,
     profile: Annotated[
-        str,
-        typer.Option("--profile", help="Loop profile (configs/thesis/profiles/NAME.yaml); literal: as printed."),
-    ] = "literal",
+        str | None,
+        typer.Option(
+            "--profile",
+            help="Loop profile (configs/thesis/profiles/NAME.yaml); literal: as printed. "
+            "Default: selected where the identification study's rule chose it, else literal.",
+        ),
+    ] = None,
     no_report: NoReport = False,
 ) -> None:
     """Regenerate the thesis's figures and tables (ours beside theirs) and check its claims."""
@@ -237,7 +241,7 @@ def reproduce(
     from nlcx.thesis.reproduce import reproduce as run_reproduce
 
     _imported()
-    chosen = profiles.load(profile, configs)
+    chosen = profiles.load(profile or profiles.default_name(configs), configs)
 
     start = time.perf_counter()
     keys = [k for k in (only or "").split(",") if k.strip()]

@@ -12,11 +12,14 @@ gains and the hypothesis's own parameters, e.g. F_max) and the plants it applies
     chapter5: {hypothesis: {zn_rule: pessen}, values: {}}   # Table 5.8's experiments
 
 ``literal`` is the default loop: no option, no value, every experiment exactly as its config.
-``nlcx reproduce --profile NAME`` runs every figure, table and claim under a profile.
+``nlcx reproduce --profile NAME`` runs every figure, table and claim under a profile; without
+``--profile`` it runs under :func:`default_name`: ``selected`` when the identification study's
+rule (:func:`rule_selects`) chose it, ``literal`` otherwise.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +30,10 @@ from nlcx import config as cfg
 from nlcx.errors import ConfigError
 from nlcx.thesis import hypotheses
 from nlcx.validation import validate_model
+
+#: The rule fixed before the identification study's first fit: the selected hypothesis becomes
+#: the default profile when it lowers the literal loop's validation error by at least this share.
+MIN_VALIDATION_GAIN = 0.10
 
 PENDULUMS = ["x_pendulum", "xy_pendulum", "xz_pendulum", "xyz_pendulum"]
 #: The plants of chapter 5's experiments (a profile's ``chapter5`` part applies to them).
@@ -72,6 +79,9 @@ class Profile(BaseModel):
     #: Chapter 5's hypothesis (its experiments' plants: the transfer function, the reactor).
     chapter5: Chapter5Part = Chapter5Part()
     source: str = ""
+    #: Whether the rule fixed before the study (:func:`rule_selects`) made this profile the
+    #: default of ``nlcx reproduce``.
+    default: bool = False
 
     @field_validator("hypothesis")
     @classmethod
@@ -84,6 +94,30 @@ class Profile(BaseModel):
 
     def as_hypothesis(self) -> hypotheses.Hypothesis:
         return _as_hypothesis(self.hypothesis)
+
+
+def rule_selects(selected: Mapping[str, Any], literal: Mapping[str, Any]) -> bool:
+    """Whether the selected hypothesis replaces the literal loop as the default profile.
+
+    The rule, fixed before the study's first fit: the selected hypothesis (rank 1 by
+    validation error) lowers the literal loop's validation median relative error by at least
+    :data:`MIN_VALIDATION_GAIN` of it, and does not lower its validation direction agreement.
+    The test tables play no part. ``selected`` and ``literal`` are rows of the study's
+    ``ranking.csv``.
+    """
+    gain = 1.0 - float(selected["validation_median_rel_error"]) / float(literal["validation_median_rel_error"])
+    agrees = float(selected["validation_direction_agreement"]) >= float(literal["validation_direction_agreement"])
+    return gain >= MIN_VALIDATION_GAIN and agrees
+
+
+def default_name(root: Path) -> str:
+    """The profile ``nlcx reproduce`` runs without ``--profile``: ``selected`` where
+    ``root/profiles/selected.yaml`` records that the rule chose it (``default: true``),
+    ``literal`` otherwise."""
+    path = root / "profiles" / "selected.yaml"
+    if path.is_file() and (yaml.safe_load(path.read_text(encoding="utf-8")) or {}).get("default") is True:
+        return "selected"
+    return "literal"
 
 
 def load(name: str, root: Path) -> Profile:
