@@ -118,7 +118,27 @@ def test_the_robustness_sweeps_page_is_its_metrics_aggregated(tmp_path: Path) ->
     html = (out / "report.html").read_text()
     medians = [float(v) for v in re.findall(r'data-median="([^"]*)"', html)]
     np.testing.assert_array_equal(np.array(medians), summary["median"].to_numpy())
-    assert html.count('src="./report_files/parameter_') == 4  # friction model, M, m, l
+    assert html.count('<svg class="sweep-chart"') == 5  # distributions; friction model, M, m, l
+    assert "<img" not in html.split('id="distributions"')[1]  # charts inline, no image files
+    profiles = pd.read_csv(out / "profiles.csv")
+    index = pd.read_csv(out / "sweep.csv")
+    ok = metrics[(metrics.status == "ok") & metrics.value.notna()]
+    for row in profiles.sample(n=40, random_state=0).itertuples(index=False):
+        column = index[f"value:{row.parameter}"]
+        if pd.api.types.is_numeric_dtype(column) and column.nunique() > 20:  # 20 equal-width bins
+            edges = np.linspace(column.min(), column.max(), 21)
+            low, high = edges[row.bin], edges[row.bin + 1]
+            inside = (column >= low) & ((column < high) if row.bin < 19 else (column <= high))
+        elif pd.api.types.is_numeric_dtype(column):  # each distinct value, ascending
+            inside = column == sorted(column.unique())[row.bin]
+        else:  # each level, in order of first appearance
+            inside = column.astype(str) == str(row.at)
+        variants = index.variant[inside]
+        values = ok[(ok.controller == row.controller) & (ok.signal == row.signal) & (ok.metric == row.metric)
+                    & ok.variant.isin(variants)].value.astype(float)  # fmt: skip
+        assert row.n == len(values)
+        assert row.median == pytest.approx(values.median(), rel=1e-12)
+        assert (row.q25, row.q75) == pytest.approx((values.quantile(0.25), values.quantile(0.75)), rel=1e-12)
     assert "3 distinct values: none, simple, exponential" in html  # the grid of robustness.yaml
     assert "| conventional | x | rise_time |" in (out / "report.md").read_text()
 

@@ -171,7 +171,7 @@ def _sweep(
         f"{outcome.wall:.1f} s -> {outcome.out_dir}/"
     )
     if outcome.report is not None:
-        typer.echo(f"report {outcome.report}")
+        typer.echo(f"report {outcome.report} ({outcome.report_s:.2f} s)")
     if counts.get("failed"):
         failed = outcome.index[outcome.index.status == "failed"].head(3)
         for row in failed.itertuples():

@@ -60,6 +60,8 @@ class SweepOutcome:
     wall: float
     #: The sweep's report.html, when one was written.
     report: Path | None = None
+    #: Seconds spent writing the report (0 without one).
+    report_s: float = 0.0
 
 
 def _run_batches(
@@ -175,6 +177,8 @@ def run(
             executor=executor, jobs=jobs, overrides=overrides or [], started=start,
         )  # fmt: skip
         page = write_report(staging) if with_report and not index.empty else None
+        reported = time.perf_counter()
         rundir.install(staging, out_dir)
     report = out_dir / page.name if page is not None else None
-    return SweepOutcome(out_dir, index, len(todo), len(variants) - len(todo), end - start, report)
+    done = len(variants) - len(todo)
+    return SweepOutcome(out_dir, index, len(todo), done, end - start, report, reported - end if page else 0.0)
