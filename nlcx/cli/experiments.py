@@ -140,11 +140,13 @@ def _sweep(
     )
 
     from nlcx import sweeps as sweep
+    from nlcx.sweeps import sizing
 
     _imported()
 
     if dry_run:
         base_raw, spec, base = sweep.load(config, overrides)
+        sizing.check(spec, base, None)  # the plan's memory, before it is expanded
         variants, hashes = sweep.plan(base_raw, spec)
         typer.echo(f"{base.name}: {len(variants)} variant(s) x {len(base.controllers)} controller(s)")
         for v, h in list(zip(variants, hashes, strict=True))[:20]:
@@ -157,13 +159,19 @@ def _sweep(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
         TextColumn("failed {task.fields[failed]}"), TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
     )  # fmt: skip
-    with Progress(*columns, transient=False) as bar:
-        task = bar.add_task("variants", total=None, failed=0)
+    bar = Progress(*columns, transient=False)
+    tasks: list[Any] = []
 
-        def progress(done: int, total: int, failed: int) -> None:
-            bar.update(task, completed=done, total=total, failed=failed)
+    def progress(done: int, total: int, failed: int) -> None:
+        if not tasks:  # shown from the first batch on: a refused plan prints its one line alone
+            bar.start()
+            tasks.append(bar.add_task("variants", total=None, failed=0))
+        bar.update(tasks[0], completed=done, total=total, failed=failed)
 
+    try:
         outcome = sweep.run(config, overrides, out, executor, jobs, scheduler, force, progress, with_report)
+    finally:
+        bar.stop()
     counts = outcome.index.status.value_counts().to_dict() if not outcome.index.empty else {}
     summary = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
     typer.echo(
@@ -201,14 +209,22 @@ def sweep_command(
 @app.command()
 @one_line_errors
 def validate(config: ConfigArg, overrides: OverridesArg = None) -> None:
-    """Check CONFIG (with overrides) without running it; exit 2 with one line if invalid."""
+    """Check CONFIG (with overrides) without running it; exit 2 with one line if invalid. A
+    sweep config's base experiment, its sweep section and its plan's size are checked."""
     from nlcx import config as cfg
     from nlcx import engine
+    from nlcx import sweeps as sweep
+    from nlcx.sweeps import sizing
 
-    exp = cfg.load(config, overrides or [])
+    if "sweep" in cfg.apply_overrides(cfg.read_config(config), overrides or []):
+        _, spec, exp = sweep.load(config, overrides or [])
+        size = sizing.check(spec, exp, None)
+        planned = f"; a sweep of {size.variants:,} variants"
+    else:
+        exp, planned = cfg.load(config, overrides or []), ""
     engine.prepare(exp)
     labels = ", ".join(c.label for c in exp.controllers)
-    typer.echo(f"{config}: valid ({exp.section.plant.name}; controllers: {labels})")
+    typer.echo(f"{config}: valid ({exp.section.plant.name}; controllers: {labels}{planned})")
 
 
 @app.command()

@@ -80,7 +80,7 @@ def _box_panel(title: str, rows: pd.DataFrame, colour: dict[str, str]) -> str:
                      f"min {_num(r.min)}, max {_num(r.max)}, n {r.n}")  # fmt: skip
         c = colour[r.controller]
         parts.append(
-            f'<g><title>{tip}</title>'
+            f"<g><title>{tip}</title>"
             f'<line x1="{x(r.min):.1f}" x2="{x(r.max):.1f}" y1="{y:.1f}" y2="{y:.1f}" stroke="{c}"/>'
             f'<rect x="{x(r.q25):.1f}" y="{y - step / 4:.1f}" width="{max(x(r.q75) - x(r.q25), 1):.1f}" '
             f'height="{step / 2:.1f}" fill="{c}" fill-opacity="0.35" stroke="{c}"/>'

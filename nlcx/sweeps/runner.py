@@ -14,6 +14,7 @@ from typing import Any
 import pandas as pd
 
 from nlcx.errors import NlcxError
+from nlcx.sweeps import sizing
 from nlcx.sweeps.assembly import assemble, write_manifest, write_report
 from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, run_batch, set_threads
 from nlcx.sweeps.planning import SweepSection, Variant, load, plan
@@ -153,6 +154,7 @@ def run(
     start = time.perf_counter()
     base_raw, spec, base = load(path, overrides)
     out_dir = Path(out_dir or base.section.outputs.dir or Path("results") / base.name)
+    sizing.check(spec, base, out_dir)  # before anything is expanded
     variants, hashes = plan(base_raw, spec)
     workers = 1 if executor == "serial" else jobs
     engine.check_sweep_memory(base, min(spec.batch_size, len(variants)) * workers)
