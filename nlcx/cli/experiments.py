@@ -129,6 +129,7 @@ def _sweep(
     force: bool,
     dry_run: bool,
     with_report: bool = True,
+    cluster_file: Path | None = None,
 ) -> None:
     from rich.progress import (
         BarColumn,
@@ -140,9 +141,13 @@ def _sweep(
     )
 
     from nlcx import sweeps as sweep
+    from nlcx.sweeps import cluster as clusters
     from nlcx.sweeps import sizing
 
     _imported()
+    cluster = clusters.load(cluster_file) if cluster_file is not None else None
+    if cluster is not None:  # the cluster's workers; the memory check counts one node's
+        executor, jobs = "dask", cluster.workers if cluster.kind == "local" else cluster.cores
 
     if dry_run:
         base_raw, spec, base = sweep.load(config, overrides)
@@ -154,6 +159,11 @@ def _sweep(
             typer.echo(f"  {v.index:>6}  seed {v.seed:>10}  {h}  {values}")
         if len(variants) > 20:
             typer.echo(f"  ... {len(variants) - 20} more")
+        if cluster is not None:
+            typer.echo(
+                f"{cluster.kind} cluster: {cluster.jobs} job(s) of {cluster.cores} worker(s); each job's script:"
+            )
+            typer.echo(clusters.job_script(cluster).rstrip())
         return
     columns = (
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -169,7 +179,7 @@ def _sweep(
         bar.update(tasks[0], completed=done, total=total, failed=failed)
 
     try:
-        outcome = sweep.run(config, overrides, out, executor, jobs, scheduler, force, progress, with_report)
+        outcome = sweep.run(config, overrides, out, executor, jobs, scheduler, force, progress, with_report, cluster)
     finally:
         bar.stop()
     counts = outcome.index.status.value_counts().to_dict() if not outcome.index.empty else {}
@@ -199,11 +209,21 @@ def sweep_command(
     force: Annotated[bool, typer.Option("--force", help="Recompute variants that already have results.")] = False,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Print the expansion and stop.")] = False,
     no_report: NoReport = False,
+    cluster: Annotated[
+        Path | None,
+        typer.Option(
+            "--cluster",
+            help="Cluster file (local, slurm or pbs; configs/clusters/): run on Dask workers there. "
+            "With --dry-run, print the job script.",
+        ),
+    ] = None,
 ) -> None:
     """Run the sweep of CONFIG (its sweep: section); a rerun resumes where it stopped."""
     if executor not in ("process", "serial", "dask"):
         raise NlcxError(f"--executor = {executor!r}: allowed values: process, serial, dask")
-    _sweep(config, overrides or [], out, executor, jobs, scheduler, force, dry_run, not no_report)
+    if cluster is not None and (scheduler or executor not in ("process", "dask")):
+        raise NlcxError("--cluster: runs on Dask workers of its own; leave out --scheduler and --executor")
+    _sweep(config, overrides or [], out, executor, jobs, scheduler, force, dry_run, not no_report, cluster)
 
 
 @app.command()

@@ -14,15 +14,20 @@ from typing import Any
 import pandas as pd
 
 from nlcx.errors import NlcxError
+from nlcx.sweeps import cluster as clusters
 from nlcx.sweeps import sizing
 from nlcx.sweeps.assembly import assemble, write_manifest, write_report
 from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, run_batch, set_threads
+from nlcx.sweeps.cluster import ClusterSpec
 from nlcx.sweeps.planning import SweepSection, Variant, load, plan
 from nlcx.sweeps.resuming import completed, open_staging
 
 
-def make_executor(kind: str, jobs: int, scheduler: str | None) -> tuple[Executor | None, Callable[[], None]]:
-    """(executor, close) for "serial", "process" or "dask"."""
+def make_executor(
+    kind: str, jobs: int, scheduler: str | None, cluster: ClusterSpec | None = None
+) -> tuple[Executor | None, Callable[[], None]]:
+    """(executor, close) for "serial", "process" or "dask" (on ``scheduler``'s cluster, on
+    the cluster a cluster file describes (:mod:`nlcx.sweeps.cluster`), or on a local one)."""
     for name in THREAD_VARIABLES:  # one BLAS/OpenMP thread per worker
         os.environ.setdefault(name, "1")
     if kind == "serial":
@@ -37,14 +42,17 @@ def make_executor(kind: str, jobs: int, scheduler: str | None) -> tuple[Executor
     if scheduler:
         client = Client(scheduler)
         return client.get_executor(), client.close
-    cluster = LocalCluster(
-        n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
-    )
-    client = Client(cluster)
+    if cluster is not None:
+        workers = clusters.make(cluster)
+    else:
+        workers = LocalCluster(
+            n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+        )
+    client = Client(workers)
 
     def close() -> None:
         client.close()
-        cluster.close()
+        workers.close()
 
     return client.get_executor(), close
 
@@ -71,6 +79,7 @@ def _run_batches(
     jobs: int,
     scheduler: str | None,
     on_batch: Callable[[BatchResult], None],
+    cluster: ClusterSpec | None = None,
 ) -> None:
     """Simulate ``batches`` on ``executor`` (:func:`make_executor`), handing each result to
     ``on_batch`` as it completes. The kernel must be loaded already (:func:`nlcx.engine.load_kernel`):
@@ -83,7 +92,7 @@ def _run_batches(
         # skips what they inherit (imports, the kernel) in each worker's first batch;
         # a list splice, nothing collected, free here (docs/performance.md)
         gc.freeze()
-    pool, close = make_executor(executor, jobs, scheduler) if batches else (None, lambda: None)
+    pool, close = make_executor(executor, jobs, scheduler, cluster) if batches else (None, lambda: None)
     try:
         results: Iterable[BatchResult]
         if pool is None:
@@ -144,11 +153,13 @@ def run(
     force: bool = False,
     progress: Callable[[int, int, int], None] | None = None,
     with_report: bool = True,
+    cluster: ClusterSpec | None = None,
 ) -> SweepOutcome:
     """Run (or resume) a sweep; write sweep.csv, metrics.csv, config.yaml, manifest.json and,
     ``with_report``, the report, and rename the whole directory into place (:mod:`nlcx.sweeps`).
     ``out_dir`` is claimed (:func:`nlcx.rundir.claim`) before any variant is computed;
-    ``progress(finished, total, failed)`` is called before the first batch and after each."""
+    ``progress(finished, total, failed)`` is called before the first batch and after each;
+    ``cluster`` (with ``executor="dask"``): where the workers run (:mod:`nlcx.sweeps.cluster`)."""
     from nlcx import engine, rundir
 
     start = time.perf_counter()
@@ -168,7 +179,7 @@ def run(
         if batches:
             engine.load_kernel()  # here, once, before the workers fork (_run_batches)
         planned = time.perf_counter()
-        _run_batches(batches, executor, jobs, scheduler, tally.add)
+        _run_batches(batches, executor, jobs, scheduler, tally.add, cluster)
         simulated = time.perf_counter()
         index = assemble(staging, variants, hashes, base_raw, spec, tally.written)
         end = time.perf_counter()
