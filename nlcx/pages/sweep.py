@@ -29,7 +29,8 @@ def summary(metrics: pd.DataFrame, index: pd.DataFrame) -> pd.DataFrame:
     run stopped: diverged) and failed (the variant did not run)."""
     failed = int((index.status == "failed").sum()) if "status" in index else 0
     rows = []
-    for (controller, signal, metric), group in metrics.groupby(["controller", "signal", "metric"], sort=False):
+    keys = ["controller", "signal", "metric"]
+    for (controller, signal, metric), group in metrics.groupby(keys, sort=False, observed=True):
         ran = group[group.status == "ok"].value.astype(float)
         ok = ran[np.isfinite(ran)]
         q25, median, q75 = (float(np.percentile(ok, q)) if len(ok) else np.nan for q in (25, 50, 75))
@@ -62,7 +63,9 @@ def described(values: pd.Series, shown: int = 12) -> str:
 
 def context(directory: Path) -> dict[str, Any]:
     """Everything the sweep page shows; writes summary.csv, profiles.csv and the charts' SVG files beside it."""
-    metrics = pd.read_csv(directory / "metrics.csv")
+    # the text columns as categories: every grouping below then factorizes small integer codes
+    labels = {column: "category" for column in ("controller", "signal", "metric", "unit", "status")}
+    metrics = pd.read_csv(directory / "metrics.csv", dtype=labels)
     index = pd.read_csv(directory / "sweep.csv")
     table = summary(metrics, index)
     report.write_csv(directory / "summary.csv", table)

@@ -136,7 +136,7 @@ def profiles(ok: pd.DataFrame, index: pd.DataFrame, column: str) -> pd.DataFrame
     codes, labels = bins_of(index[column])
     bin_of = pd.Series(codes.to_numpy(), index=index.variant.to_numpy())
     frame = ok.assign(bin=ok.variant.map(bin_of)).dropna(subset=["bin"])
-    grouped = frame.groupby(["signal", "metric", "controller", "bin"], sort=False).value
+    grouped = frame.groupby(["signal", "metric", "controller", "bin"], sort=False, observed=True).value
     table = grouped.quantile([0.25, 0.5, 0.75]).unstack()
     table.columns = ["q25", "median", "q75"]
     table["n"] = grouped.size()
