@@ -94,7 +94,7 @@ bench: install
 
 ## identify: the identification studies and docs/fidelity.md (every number on it): fit every loop hypothesis on
 ## the train tables, reproduce under the literal and selected profiles, ask of each printed conventional column
-## whether any loop gives it (times on 2 cores in docs/fidelity.md)
+## whether any loop gives it (each study resumes where it stopped; its wall time is in results/identify/*/study.json)
 identify: install
 	$(BIN)/nlcx identify configs/identify/pendulum_all.yaml --jobs $(JOBS) --out results/identify/pendulum_all
 	$(BIN)/nlcx identify configs/identify/cstr.yaml --jobs $(JOBS) --out results/identify/cstr
