@@ -291,3 +291,24 @@ def test_a_whole_section_can_be_varied_and_is_recorded_as_json(tmp_path: Path) -
     metrics = pd.read_csv(out / "metrics.csv")
     peak = metrics[(metrics.controller == "conventional") & (metrics.metric == "peak_input")]
     assert peak[peak.variant == 1].value.abs().max() <= 2.5 < peak[peak.variant == 0].value.abs().max()
+
+
+def test_sweep_metrics_keeps_only_the_metrics_asked_for(tmp_path: Path) -> None:
+    """``sweep.metrics`` keeps those rows of metrics.csv, the same values as a full sweep's, and
+    is part of what identifies a result: a rerun keeping other metrics recomputes."""
+    spec = {**SPEC, "random": {**SPEC["random"], "n": 2}}
+    full, kept = tmp_path / "full", tmp_path / "kept"
+    path = write_sweep(tmp_path, spec, t_end=2.0)
+    assert runner.invoke(app, ["sweep", str(path), "--out", str(full), "--no-report", "--jobs", "1"]).exit_code == 0
+    chosen = ["overshoot", "settling_time"]
+    path = write_sweep(tmp_path, {**spec, "metrics": chosen}, t_end=2.0, name="kept")
+    result = runner.invoke(app, ["sweep", str(path), "--out", str(kept), "--no-report", "--jobs", "1"])
+    assert result.exit_code == 0, result.output
+    ours, every = pd.read_csv(kept / "metrics.csv"), pd.read_csv(full / "metrics.csv")
+    assert set(ours.metric) == set(chosen)
+    pd.testing.assert_frame_equal(ours, every[every.metric.isin(chosen)].reset_index(drop=True))
+    assert not set(pd.read_csv(kept / "sweep.csv").config_hash) & set(pd.read_csv(full / "sweep.csv").config_hash)
+    bad = write_sweep(tmp_path, {**spec, "metrics": ["overshot"]}, name="bad")
+    result = runner.invoke(app, ["sweep", str(bad), "--dry-run"])
+    assert result.exit_code == 2 and "unknown metric 'overshot'" in result.output
+    assert len(result.output.strip().splitlines()) == 1

@@ -37,6 +37,8 @@ class Batch:
     hashes: list[str]
     out_dir: Path
     timeseries: bool
+    #: The metrics to keep (``sweep.metrics``); None: every metric.
+    metrics: tuple[str, ...] | None = None
 
 
 @dataclass
@@ -110,6 +112,8 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
             fmt = result.prepared.experiment.section.outputs.timeseries_format
             report.write_timeseries(stem, report.timeseries_columns(result), fmt)
     metrics = engine.shared_metrics(results)
+    if batch.metrics is not None:
+        metrics = metrics[metrics.metric.isin(batch.metrics)].reset_index(drop=True)
     index_of = np.array([batch.variants[pos].index for pos in members], dtype=int)
     metrics.insert(0, "variant", index_of[metrics.pop("experiment").to_numpy(dtype=int)])
     digest = hashlib.sha256("".join(batch.hashes).encode()).hexdigest()[:10]

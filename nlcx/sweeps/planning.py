@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from nlcx import config as cfg
 from nlcx.errors import ConfigError
+from nlcx.metrics.names import METRIC_UNITS
 from nlcx.validation import validate_model
 
 
@@ -71,6 +72,8 @@ class SweepSection(BaseModel):
     random: RandomSpec | None = None
     batch_size: int = Field(64, ge=1)
     timeseries: bool = False
+    #: The metrics metrics.csv keeps (names of :data:`nlcx.metrics.names.METRIC_UNITS`); None: all.
+    metrics: list[str] | None = Field(None, min_length=1)
 
     @model_validator(mode="after")
     def _zip_lengths(self) -> SweepSection:
@@ -80,6 +83,9 @@ class SweepSection(BaseModel):
         for key, values in self.grid.items():
             if not values:
                 raise ValueError(f"grid list of {key} is empty")
+        unknown = [m for m in self.metrics or [] if m not in METRIC_UNITS]
+        if unknown:
+            raise ValueError(f"unknown metric {unknown[0]!r} in metrics; allowed: {', '.join(METRIC_UNITS)}")
         return self
 
 
@@ -191,5 +197,6 @@ def load(
 def plan(base_raw: dict[str, Any], spec: SweepSection) -> tuple[list[Variant], list[str]]:
     """The variants and the hash of each one's resolved config."""
     variants = expand(spec, cfg.interpolate(base_raw))
-    base_digest = config_hash(base_raw)
+    # the metrics kept are part of what a variant's result is (a rerun keeping others recomputes)
+    base_digest = config_hash(base_raw if spec.metrics is None else {"base": base_raw, "metrics": spec.metrics})
     return variants, [variant_hash(base_digest, v) for v in variants]

@@ -115,7 +115,7 @@ def _batches(
     size = spec.batch_size
     return [
         Batch(base_raw, [variants[i] for i in todo[k : k + size]], [hashes[i] for i in todo[k : k + size]], out,
-              spec.timeseries)
+              spec.timeseries, tuple(spec.metrics) if spec.metrics is not None else None)
         for k in range(0, len(todo), size)
     ]  # fmt: skip
 
