@@ -64,13 +64,13 @@ def described(values: pd.Series, shown: int = 12) -> str:
 def context(directory: Path) -> dict[str, Any]:
     """Everything the sweep page shows; writes summary.csv, profiles.csv and the charts' SVG files beside it."""
     # the text columns as categories: every grouping below then factorizes small integer codes
-    labels = {column: "category" for column in ("controller", "signal", "metric", "unit", "status")}
-    metrics = pd.read_csv(directory / "metrics.csv", dtype=labels)
+    categories = {column: "category" for column in ("controller", "signal", "metric", "unit", "status")}
+    metrics = pd.read_csv(directory / "metrics.csv", dtype=categories)
     index = pd.read_csv(directory / "sweep.csv")
     table = summary(metrics, index)
     report.write_csv(directory / "summary.csv", table)
     files = directory / FILES
-    colour = sweep_charts.controller_colours(list(metrics.controller.unique()))
+    colour = sweep_charts.controller_colours([str(c) for c in metrics.controller.unique()])
     distribution = sweep_charts.distribution_svg(table)
     report.write_text(files / "distributions.svg", str(distribution))
     ok = metrics[(metrics.status == "ok") & metrics.value.notna()]

@@ -72,21 +72,23 @@ def _box_panel(title: str, rows: pd.DataFrame, colour: dict[str, str]) -> str:
     x = _scale(lo, hi, LEFT + 4, WIDTH - RIGHT - 4)
     step = (HEIGHT - BOTTOM - TOP) / max(len(rows), 1)
     parts = [_frame(title, (_num(lo), _num(hi)), ("", ""))]
-    for k, r in enumerate(rows.itertuples(index=False)):
-        if not r.n:
+    for k, r in enumerate(rows.to_dict("records")):
+        if not r["n"]:
             continue
         y = TOP + (k + 0.5) * step
-        tip = escape(f"{r.controller}: median {_num(r.median)}, IQR {_num(r.q25)} to {_num(r.q75)}, "
-                     f"min {_num(r.min)}, max {_num(r.max)}, n {r.n}")  # fmt: skip
-        c = colour[r.controller]
+        name = str(r["controller"])
+        low, mid, high, least, most = (float(r[q]) for q in ("q25", "median", "q75", "min", "max"))
+        tip = escape(f"{name}: median {_num(mid)}, IQR {_num(low)} to {_num(high)}, "
+                     f"min {_num(least)}, max {_num(most)}, n {r['n']}")  # fmt: skip
+        c = colour[name]
         parts.append(
             f"<g><title>{tip}</title>"
-            f'<line x1="{x(r.min):.1f}" x2="{x(r.max):.1f}" y1="{y:.1f}" y2="{y:.1f}" stroke="{c}"/>'
-            f'<rect x="{x(r.q25):.1f}" y="{y - step / 4:.1f}" width="{max(x(r.q75) - x(r.q25), 1):.1f}" '
+            f'<line x1="{x(least):.1f}" x2="{x(most):.1f}" y1="{y:.1f}" y2="{y:.1f}" stroke="{c}"/>'
+            f'<rect x="{x(low):.1f}" y="{y - step / 4:.1f}" width="{max(x(high) - x(low), 1):.1f}" '
             f'height="{step / 2:.1f}" fill="{c}" fill-opacity="0.35" stroke="{c}"/>'
-            f'<line x1="{x(r.median):.1f}" x2="{x(r.median):.1f}" y1="{y - step / 4:.1f}" y2="{y + step / 4:.1f}" '
+            f'<line x1="{x(mid):.1f}" x2="{x(mid):.1f}" y1="{y - step / 4:.1f}" y2="{y + step / 4:.1f}" '
             f'stroke="{c}" stroke-width="2"/>'
-            f'<text x="{LEFT - 3}" y="{y + 3:.1f}" font-size="8" text-anchor="end">{escape(r.controller)}</text></g>'
+            f'<text x="{LEFT - 3}" y="{y + 3:.1f}" font-size="8" text-anchor="end">{escape(name)}</text></g>'
         )
     return "".join(parts)
 
@@ -99,10 +101,10 @@ def controller_colours(controllers: Sequence[str]) -> dict[str, str]:
 def distribution_svg(summary: pd.DataFrame) -> Markup:
     """Per (signal, metric) of the summary table, a box per controller (its quartiles, median,
     min and max over the variants that measured it)."""
-    colour = controller_colours(list(summary.controller.unique()))
+    colour = controller_colours([str(c) for c in summary.controller.unique()])
     panels = [
         _box_panel(f"{signal} {metric}", rows, colour)
-        for (signal, metric), rows in summary.groupby(["signal", "metric"], sort=False)
+        for (signal, metric), rows in summary.groupby(["signal", "metric"], sort=False, observed=True)
         if rows["n"].sum()
     ]
     return _grid(panels, "distributions per controller")
@@ -157,7 +159,8 @@ def _profile_panel(title: str, rows: pd.DataFrame, n_bins: int, labels: list[str
     x = _scale(0, max(n_bins - 1, 0), LEFT + 6, WIDTH - RIGHT - 6)
     y = _scale(lo, hi, HEIGHT - BOTTOM - 3, TOP + 3)
     parts = [_frame(title, (labels[0], labels[-1]), (_num(lo), _num(hi)))]
-    for controller, line in rows.groupby("controller", sort=False):
+    for key, line in rows.groupby("controller", sort=False, observed=True):
+        controller = str(key)
         c = colour[controller]
         bins, q25, median, q75, n = (line[k].tolist() for k in ("bin", "q25", "median", "q75", "n"))
         upper = " ".join(f"{x(b):.1f},{y(v):.1f}" for b, v in zip(bins, q75, strict=True))
@@ -175,7 +178,7 @@ def profile_svg(table: pd.DataFrame, labels: list[str], colour: dict[str, str]) 
     """One panel per (signal, metric) of a parameter's :func:`profiles` table."""
     panels = [
         _profile_panel(f"{signal} {metric}", rows, len(labels), labels, colour)
-        for (signal, metric), rows in table.groupby(["signal", "metric"], sort=False)
+        for (signal, metric), rows in table.groupby(["signal", "metric"], sort=False, observed=True)
     ]
     return _grid(panels, f"metrics against {table.parameter.iloc[0]}" if len(table) else "no metric")
 

@@ -193,5 +193,5 @@ def run(
         reported = time.perf_counter()
         rundir.install(staging, out_dir)
     report = out_dir / page.name if page is not None else None
-    done = len(variants) - len(todo)
-    return SweepOutcome(out_dir, index, len(todo), done, end - start, report, reported - end if page else 0.0)
+    skipped = len(variants) - len(todo)
+    return SweepOutcome(out_dir, index, len(todo), skipped, end - start, report, reported - end if page else 0.0)
