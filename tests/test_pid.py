@@ -490,3 +490,25 @@ def test_the_step_factory_gives_the_general_step_for_no_structure() -> None:
     c = build(CONST).controllers[0]
     assert pid.step_for(None) is pid_step and c.general_step is pid_step
     assert pid.step_for(pid.structure_of(c.cp)) is c.step is not pid_step
+
+
+def test_each_structure_s_step_compiles_under_a_symbol_of_its_own() -> None:
+    """numba names a compiled function's symbol after its qualified name and a counter unique
+    only within one process; steps of different structures cached by different processes
+    must not share a symbol (a process loading both would run one's code for the other), so
+    the structure is in the name of its step and of the compiled symbol."""
+    from nlcx.controllers import pid_step
+    from nlcx.kernel.abi import CONTROLLER_SIG
+
+    exp = config.load(CONFIGS / "x_error_ags.yaml", ["simulation.t_end=0.1"])
+    steps = {item.controller.step for item in engine.items_of(engine.prepare(exp))}
+    assert len(steps) == 2  # the conventional and the error-AGS loop structures
+    symbols = set()
+    for step in steps:
+        step.compile(CONTROLLER_SIG)  # compiled, or loaded from the disk cache
+        structure = step.py_func.__closure__[0].cell_contents
+        assert step.py_func.__qualname__ == pid_step.structure_name(structure)
+        (overload,) = step.overloads.values()
+        assert pid_step.structure_name(structure) in overload.fndesc.mangled_name
+        symbols.add(overload.fndesc.mangled_name)
+    assert len(symbols) == 2

@@ -19,16 +19,22 @@ form, the sampling and saturation options) that is either read from each paramet
 :class:`Structure` of compile-time constants (:func:`step_for`): numba removes the branches on
 ``structure is None`` before it types the body, and the compiler folds the constants, so the
 step for a structure has no branch or index arithmetic on it and computes the same bits.
-:func:`step_for` makes that step as a closure over its structure, once a structure. numba's
-disk cache keys a closure's compiled code by its bytecode and the values it closes over, so
-every structure's step is one function name with one entry a structure in its index, and
-:func:`nlcx.compiled_cache.serialize_cache_access` keeps the entries that processes save at
-once (a sweep's workers compiling different structures) from overwriting each other.
+:func:`step_for` makes that step as a closure over its structure, once a structure, and names
+it after a hash of the structure (:func:`structure_name`). The name matters: numba names a
+compiled function's machine-code symbol after its qualified name and a counter that is unique
+only within the process that compiled it. Closures sharing one name, compiled for different
+structures by different processes (a sweep's or a study's workers) and saved to the disk
+cache, can carry the same symbol; a process that then loads two of them runs one structure's
+code for the other (seen as a fuzzy-PID loop that diverged or never moved). With the
+structure in the name, different structures never share a symbol, and each has its own cache
+files. :func:`nlcx.compiled_cache.serialize_cache_access` keeps the processes that save at
+once from overwriting each other's files.
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
 import math
 from typing import Any, NamedTuple
 
@@ -341,4 +347,12 @@ def step_for(structure: Structure | None) -> Any:
     def pid_step_for_structure(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
         _pid_rows(structure, t, dt, x, y, r, cp, cs, u, log, callbacks)
 
+    # its own name, hence its own symbols and its own cache files (see the module docstring)
+    pid_step_for_structure.__qualname__ = structure_name(structure)
     return hot_njit(cache=True, error_model="numpy")(pid_step_for_structure)
+
+
+def structure_name(structure: Structure) -> str:
+    """The qualified name of ``structure``'s step: a hash of its fields in the name."""
+    digest = hashlib.sha256(repr(tuple(structure)).encode()).hexdigest()[:16]
+    return f"pid_step_for_structure_{digest}"
