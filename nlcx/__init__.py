@@ -14,17 +14,9 @@ warning filters, matplotlib's backend) or of numba's cache is changed
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from nlcx._version import __version__
-
-if TYPE_CHECKING:  # not nlcx.analysis: it imports nlcx.api, and naming it here would close an import loop
-    from nlcx.api import experiment, run, sweep
-    from nlcx.comparison import compare, improvement
-    from nlcx.errors import ConfigError, NlcxError
-    from nlcx.metrics import step_info
-    from nlcx.plants.scalar import plant
-    from nlcx.results import Result, SweepResult, load_run
 
 __all__ = [
     "ConfigError",
@@ -43,7 +35,8 @@ __all__ = [
     "sweep",
 ]
 
-#: Where each public name lives (imported on first access, PEP 562).
+#: Where each public name lives (imported on first access, PEP 562; ``__init__.pyi`` gives type
+#: checkers and editors the same names, so this module imports none of them, even for typing).
 _HOMES = {
     "Result": "nlcx.results",
     "SweepResult": "nlcx.results",

@@ -168,3 +168,19 @@ def test_sweep_without_out_leaves_nothing_behind(tmp_path: Path, monkeypatch: py
                        executor="serial")  # fmt: skip
     assert swept.directory is None and list(tmp_path.iterdir()) == []
     assert len(swept.variants) == 3
+
+
+def test_the_type_stub_names_what_the_package_exports_lazily() -> None:
+    """``nlcx/__init__.pyi`` (what type checkers and editors read) names exactly ``__all__``,
+    each from the module the package loads it from."""
+    import ast
+    from pathlib import Path
+
+    import nlcx
+
+    stub = ast.parse((Path(nlcx.__file__).with_suffix(".pyi")).read_text())
+    imported = {a.asname or a.name: node.module for node in stub.body if isinstance(node, ast.ImportFrom)
+                for a in node.names}  # fmt: skip
+    assert set(imported) == set(nlcx.__all__)
+    for name, home in imported.items():
+        assert getattr(nlcx, name) is getattr(__import__(home, fromlist=[name]), name)

@@ -29,8 +29,25 @@ from nlcx.metrics.rows import (
 )
 from nlcx.metrics.scans import extremes, first_crossing, last_exit
 
-#: What :func:`step_info` returns: floats for a 1-D signal, ``(B,)`` arrays for a batch.
 StepInfo = dict[str, float] | dict[str, FloatArray]
+"""What :func:`step_info` returns: floats for a 1-D signal, ``(B,)`` arrays for a batch.
+
+With D = y_final - y_init, s = sign(D), tau = t - t_step and ``(lo, hi) = rise_limits``:
+
+- ``rise_time`` [s]: t_hi - t_lo, the first times s*(y - y_init - lo*D) >= 0 and
+  s*(y - y_init - hi*D) >= 0, each interpolated linearly between the sample before and
+  the first sample satisfying it; NaN if the upper level is never reached.
+- ``settling_time`` [s]: last exit from |y - y_final| <= settling_band*|D|,
+  interpolated to the band edge; 0 if y never leaves it, NaN if not settled at the end.
+- ``overshoot`` [%]: 100 * max(0, max s*(y - y_final)) / |D|.
+- ``undershoot`` [%]: 100 * max(0, max -s*(y - y_init)) / |D|.
+- ``peak``: max |y|, python-control's and MATLAB's ``Peak``; ``peak_time`` [s]: tau of
+  its first sample (not interpolated).
+- ``steady_state_value``: y_final.
+- ``settling_min``, ``settling_max``: min and max of y over the samples from the first
+  one satisfying the upper rise condition, and of y_final (as python-control).
+
+All but ``peak``, ``peak_time`` and ``steady_state_value`` are NaN where D == 0."""
 
 
 class _StepGrid(NamedTuple):
@@ -247,23 +264,13 @@ def step_info(
     Returns
     -------
     dict
-        Floats for 1-D ``y``, arrays of shape (B,) for 2-D ``y``.  With D = y_final - y_init,
-        s = sign(D), tau = t - t_step and ``(lo, hi) = rise_limits``:
-
-        - ``rise_time`` [s]: t_hi - t_lo, the first times s*(y - y_init - lo*D) >= 0 and
-          s*(y - y_init - hi*D) >= 0, each interpolated linearly between the sample before and
-          the first sample satisfying it; NaN if the upper level is never reached.
-        - ``settling_time`` [s]: last exit from |y - y_final| <= settling_band*|D|,
-          interpolated to the band edge; 0 if y never leaves it, NaN if not settled at the end.
-        - ``overshoot`` [%]: 100 * max(0, max s*(y - y_final)) / |D|.
-        - ``undershoot`` [%]: 100 * max(0, max -s*(y - y_init)) / |D|.
-        - ``peak``: max |y|, python-control's and MATLAB's ``Peak``; ``peak_time`` [s]: tau of
-          its first sample (not interpolated).
-        - ``steady_state_value``: y_final.
-        - ``settling_min``, ``settling_max``: min and max of y over the samples from the first
-          one satisfying the upper rise condition, and of y_final (as python-control).
-
-        All but ``peak``, ``peak_time`` and ``steady_state_value`` are NaN where D == 0.
+        The values of ``STEP_INFO_METRICS``, floats for 1-D ``y`` and arrays of shape (B,) for
+        2-D ``y``. With D = y_final - y_init and s = sign(D): the rise time between the
+        interpolated first crossings of y_init + lo*D and y_init + hi*D; the settling time at
+        the interpolated last exit from |y - y_final| <= settling_band*|D|; overshoot
+        100 max(0, max s(y - y_final))/|D| and undershoot 100 max(0, max -s(y - y_init))/|D|
+        [%]; the peak max |y| and its time; y_final; settling_min and settling_max as
+        python-control. Each is defined in full at :data:`StepInfo`.
 
     Notes
     -----

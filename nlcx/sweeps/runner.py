@@ -14,13 +14,13 @@ from typing import Any
 import pandas as pd
 
 from nlcx.errors import NlcxError
-from nlcx.sweeps import cluster as clusters
-from nlcx.sweeps import sizing
 from nlcx.sweeps.assembly import assemble, write_manifest, write_report
 from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, run_batch, set_threads
 from nlcx.sweeps.cluster import ClusterSpec
+from nlcx.sweeps.cluster import make as make_cluster
 from nlcx.sweeps.planning import SweepSection, Variant, load, plan
 from nlcx.sweeps.resuming import completed, open_staging
+from nlcx.sweeps.sizing import check as check_plan_size
 
 
 def make_executor(
@@ -43,7 +43,7 @@ def make_executor(
         client = Client(scheduler)
         return client.get_executor(), client.close
     if cluster is not None:
-        workers = clusters.make(cluster)
+        workers = make_cluster(cluster)
     else:
         workers = LocalCluster(
             n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
@@ -165,7 +165,7 @@ def run(
     start = time.perf_counter()
     base_raw, spec, base = load(path, overrides)
     out_dir = Path(out_dir or base.section.outputs.dir or Path("results") / base.name)
-    sizing.check(spec, base, out_dir)  # before anything is expanded
+    check_plan_size(spec, base, out_dir)  # before anything is expanded
     variants, hashes = plan(base_raw, spec)
     workers = 1 if executor == "serial" else jobs
     engine.check_sweep_memory(base, min(spec.batch_size, len(variants)) * workers)
