@@ -218,6 +218,14 @@ def _children_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def report_seconds(output: str) -> float:
+    """The report's time in the output of ``nlcx sweep`` (its line ``report PATH (S s)``)."""
+    match = re.search(r"^report .* \(([0-9.]+) s\)$", output, re.MULTILINE)
+    if match is None:
+        raise RuntimeError(f"no report line in the sweep's output:\n{output}")
+    return float(match.group(1))
+
+
 def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
     """nlcx's sweep and the hand-written limit reference (benchmarks/reference.py) of the same
     variants on two processes each, alternated, in one run: wall times and their ratio."""
@@ -235,7 +243,7 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
         wall, out = run_timed(command(f"out{repeat}"), ROOT)
         cpus.append(_children_cpu_s() - before)
         walls.append(wall)
-        reports.append(float(re.search(r"^report .* \(([0-9.]+) s\)$", out, re.M).group(1)))
+        reports.append(report_seconds(out))
         limits.append(limit_reference(raw))
     sampled_wall, peak_kb, _ = run_measured(command("memory"), ROOT)
     summary = next(line for line in out.splitlines() if " variants (" in line).replace(str(work), "<tmp>")

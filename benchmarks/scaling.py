@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from pathlib import Path
 
@@ -39,7 +38,7 @@ def one(n: int, jobs: int, repeats: int) -> dict[str, float]:
             [*bench.NLCX, "sweep", str(path), "--jobs", str(jobs), "--out", str(out)], bench.ROOT
         )
         walls.append(wall)
-        reports.append(float(re.search(r"^report .* \(([0-9.]+) s\)$", text, re.M).group(1)))
+        reports.append(bench.report_seconds(text))
         timings = json.loads((out / "manifest.json").read_text())["timings_s"]
         serial.append(timings["plan"] + timings["assemble"])
         outside.append(wall - timings["batches"])  # imports, planning, assembling, the report

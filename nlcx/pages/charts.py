@@ -10,6 +10,7 @@ every text inside them (labels, tooltips) is escaped here.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from markupsafe import Markup, escape
@@ -76,11 +77,12 @@ def grouped_bars(cells: list[Cell]) -> Markup:
     return Markup("".join(parts))
 
 
-def legend() -> Markup:
-    """The four series' colours, once per page."""
+def legend(keys: Iterable[tuple[str, str]] | None = None) -> Markup:
+    """A colour key, once per page: ``keys`` as (label, colour) pairs; default: the four series."""
+    pairs = keys if keys is not None else ((f"{source} {controller}", colour) for source, controller, colour in SERIES)
     items = "".join(
         f'<span class="key"><svg width="10" height="10"><rect width="10" height="10" fill="{escape(colour)}"/></svg> '
-        f"{escape(source)} {escape(controller)}</span>"
-        for source, controller, colour in SERIES
+        f"{escape(label)}</span>"
+        for label, colour in pairs
     )
     return Markup(f'<p class="legend">{items}</p>')

@@ -18,7 +18,7 @@ import pandas as pd
 import yaml
 
 from nlcx import report
-from nlcx.pages import sweep_charts
+from nlcx.pages import charts, sweep_charts
 
 FILES = "report_files"
 
@@ -78,8 +78,7 @@ def context(directory: Path) -> dict[str, Any]:
     params = varied(index)
     plots, tables = [], []
     for i, column in enumerate(params):
-        profile = sweep_charts.profiles(ok, index, column)
-        _, labels = sweep_charts.bins_of(index[column])
+        profile, labels = sweep_charts.profiles(ok, index, column)
         chart = sweep_charts.profile_svg(profile, labels, colour)
         report.write_text(files / f"parameter_{i}.svg", str(chart))
         tables.append(profile)
@@ -104,7 +103,7 @@ def context(directory: Path) -> dict[str, Any]:
         "parameters": [c.removeprefix("value:") for c in params],
         "distribution": f"{FILES}/distributions.svg",
         "distribution_chart": distribution,
-        "legend": sweep_charts.legend(colour),
+        "legend": charts.legend(colour.items()),
         "plots": plots,
         "config": config,
     }

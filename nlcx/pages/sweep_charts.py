@@ -130,11 +130,11 @@ def bins_of(values: pd.Series) -> tuple[pd.Series, list[str]]:
     return keys.map(position), [f"{v:.4g}" if numeric else str(v) for v in levels]
 
 
-def profiles(ok: pd.DataFrame, index: pd.DataFrame, column: str) -> pd.DataFrame:
+def profiles(ok: pd.DataFrame, index: pd.DataFrame, column: str) -> tuple[pd.DataFrame, list[str]]:
     """The metrics against one varied parameter: per (signal, metric, controller) and bin of
     the parameter (:func:`bins_of`), the number of variants that measured the metric, its
     median and its quartiles (pandas' linear interpolation), in the order metrics.csv lists
-    them. ``ok``: metrics.csv's rows of runs that finished, with a value."""
+    them; and the bins' labels. ``ok``: metrics.csv's rows of runs that finished, with a value."""
     codes, labels = bins_of(index[column])
     bin_of = pd.Series(codes.to_numpy(), index=index.variant.to_numpy())
     frame = ok.assign(bin=ok.variant.map(bin_of)).dropna(subset=["bin"])
@@ -150,7 +150,7 @@ def profiles(ok: pd.DataFrame, index: pd.DataFrame, column: str) -> pd.DataFrame
     first = {key: i for i, key in enumerate(listed)}
     table["_order"] = [first[k] for k in zip(table.signal, table.metric, table.controller, strict=True)]
     table = table.sort_values(["_order", "bin"], kind="stable").drop(columns="_order")
-    return table.reset_index(drop=True)
+    return table.reset_index(drop=True), labels
 
 
 def _profile_panel(title: str, rows: pd.DataFrame, n_bins: int, labels: list[str], colour: dict[str, str]) -> str:
@@ -181,13 +181,3 @@ def profile_svg(table: pd.DataFrame, labels: list[str], colour: dict[str, str]) 
         for (signal, metric), rows in table.groupby(["signal", "metric"], sort=False, observed=True)
     ]
     return _grid(panels, f"metrics against {table.parameter.iloc[0]}" if len(table) else "no metric")
-
-
-def legend(colour: dict[str, str]) -> Markup:
-    """The controllers' colours, once per page."""
-    items = "".join(
-        f'<span class="key"><svg width="10" height="10"><rect width="10" height="10" fill="{escape(c)}"/></svg> '
-        f"{escape(name)}</span>"
-        for name, c in colour.items()
-    )
-    return Markup(f'<p class="legend">{items}</p>')

@@ -114,10 +114,8 @@ def default_name(root: Path) -> str:
     """The profile ``nlcx reproduce`` runs without ``--profile``: ``selected`` where
     ``root/profiles/selected.yaml`` records that the rule chose it (``default: true``),
     ``literal`` otherwise."""
-    path = root / "profiles" / "selected.yaml"
-    if path.is_file() and (yaml.safe_load(path.read_text(encoding="utf-8")) or {}).get("default") is True:
-        return "selected"
-    return "literal"
+    chosen = (root / "profiles" / "selected.yaml").is_file() and load("selected", root).default
+    return "selected" if chosen else "literal"
 
 
 def load(name: str, root: Path) -> Profile:
