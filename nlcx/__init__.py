@@ -16,24 +16,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from nlcx._version import __version__
-
-__all__ = [
-    "ConfigError",
-    "NlcxError",
-    "Result",
-    "SweepResult",
-    "__version__",
-    "compare",
-    "experiment",
-    "improvement",
-    "linearize",
-    "load_run",
-    "plant",
-    "run",
-    "step_info",
-    "sweep",
-]
+from nlcx._version import __version__ as __version__
 
 #: Where each public name lives (imported on first access, PEP 562; ``__init__.pyi`` gives type
 #: checkers and editors the same names, so this module imports none of them, even for typing).
@@ -52,6 +35,9 @@ _HOMES = {
     "plant": "nlcx.plants.scalar",
     "linearize": "nlcx.analysis",
 }
+
+
+__all__ = sorted(["__version__", *_HOMES])
 
 
 def __getattr__(name: str) -> Any:

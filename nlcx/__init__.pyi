@@ -1,5 +1,6 @@
-"""The names of :mod:`nlcx` (its ``__all__``), for type checkers and editors: the module imports
-them lazily; each ``import X as X`` marks a re-export."""
+"""The names of :mod:`nlcx`, for type checkers, editors and the API reference: the module imports
+them lazily (its ``__all__`` is built from where each lives); each ``import X as X`` marks a
+re-export."""
 
 from nlcx._version import __version__ as __version__
 from nlcx.analysis import linearize as linearize
@@ -16,4 +17,19 @@ from nlcx.results import Result as Result
 from nlcx.results import SweepResult as SweepResult
 from nlcx.results import load_run as load_run
 
-__all__: list[str]
+__all__ = [
+    "ConfigError",
+    "NlcxError",
+    "Result",
+    "SweepResult",
+    "__version__",
+    "compare",
+    "experiment",
+    "improvement",
+    "linearize",
+    "load_run",
+    "plant",
+    "run",
+    "step_info",
+    "sweep",
+]
