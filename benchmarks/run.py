@@ -1,4 +1,4 @@
-"""nlcx speed benchmarks (targets a-e). Run from the repository root:
+"""nlcx speed benchmarks (targets a-f). Run from the repository root:
 
     python benchmarks/run.py | tee benchmarks/latest.txt      (or: make bench)
 
@@ -25,6 +25,9 @@ the table from a saved output without running anything.
 (d) the experiment of (a), proposed controller, through python-control's input_output_response
     and scipy's solve_ivp (RK45, the PID integrators in the ODE), with the speed ratios and the
     agreement of the trajectories.
+(f) (b)'s loop over 0.1 s, a million variants, the default `nlcx sweep --jobs 2` (target <= 30 s and
+    <= 2 GB, <= 10 us a variant outside the kernel), its first 10 000 variants checked against the
+    per-variant path; and the parent's serial time (target <= 0.5 s + 1 us a variant).
 (e) with --fresh-clone: `make run` in a fresh clone with pip's cache off (target <= 90 s).
 Machines are noisy: each timing is the best of a few repeats, and ratios come from one run.
 """
@@ -264,6 +267,100 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
         "kernel_cpu_s": 1e-9 * alone["ns"]["nlcx"] * steps, "serial_s": nlcx_s - batches_s,
         "report_s": reports[best], "report_share": reports[best] / nlcx_s,
     }  # fmt: skip
+
+
+def bench_f(n: int = 1_000_000, subset: int = 10_000) -> dict[str, Any]:
+    """Benchmark (b)'s loop over a 0.1 s horizon (100 steps), ``n`` variants, the default
+    ``nlcx sweep --jobs 2`` (report on, Parquet tables): wall time, CPU time of the process tree
+    beside the kernel's own CPU time for the same variants (so the cost per variant outside the
+    kernel), the parent's serial time (manifest.json's phases outside the batches, and the
+    report), peak memory in a run of its own; and the first ``subset`` variants' statuses and
+    metrics against the per-variant path (``sweep.columnar: false``) run on the same values."""
+    import pandas as pd
+
+    from nlcx.results import read_output_table
+
+    raw = sweep_config(n)
+    raw["simulation"]["t_end"] = 0.1
+    work = scratch()
+    path = work / "sweep.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    command = [*NLCX, "sweep", str(path), "--jobs", "2", "--out", str(work / "out")]
+    before = _children_cpu_s()
+    wall, out = run_timed(command, ROOT)
+    cpu = _children_cpu_s() - before
+    manifest = json.loads((work / "out" / "manifest.json").read_text())
+    timings = manifest["timings_s"]
+    report_s = report_seconds(out)
+    sampled_wall, peak_kb, _ = run_measured([*command[:-1], str(work / "memory")], ROOT)
+    kernel_s = ensemble_kernel_cpu_s(raw, n)
+    index = read_output_table(work / "out", "sweep")
+    metrics = read_output_table(work / "out", "metrics")
+    values = {k: index[f"value:{k}"].iloc[:subset].tolist() for k in raw["sweep"]["random"]["params"]}
+    alone = {**raw, "sweep": {"seed": 1, "zip": values, "batch_size": 100, "columnar": False}}
+    (work / "subset.yaml").write_text(yaml.safe_dump(alone))
+    subset_command = [*NLCX, "sweep", str(work / "subset.yaml"), "--jobs", "2", "--no-report"]
+    run_timed([*subset_command, "--out", str(work / "sub")], ROOT)
+    sub_index, sub_metrics = read_output_table(work / "sub", "sweep"), read_output_table(work / "sub", "metrics")
+    ours = metrics[metrics.variant < subset].reset_index(drop=True)
+    same_status = list(index.status.iloc[:subset]) == list(sub_index.status)
+    try:
+        pd.testing.assert_frame_equal(ours, sub_metrics, check_exact=True)
+        same_metrics = True
+    except AssertionError:
+        same_metrics = False
+    serial = wall - timings["batches"]
+    return {
+        "variants": n, "wall_s": wall, "cpu_s": cpu, "kernel_cpu_s": kernel_s,
+        "outside_us": 1e6 * (cpu - kernel_s) / n, "serial_s": serial, "report_s": report_s,
+        "timings": timings, "peak_memory_mb": peak_kb[0] / 1024, "peak_pss_mb": peak_kb[1] / 1024,
+        "sampled_wall_s": sampled_wall, "same_status": same_status, "same_metrics": same_metrics,
+        "subset": subset, "rows": len(metrics), "statuses": manifest["status"], "path": manifest["path"],
+    }  # fmt: skip
+
+
+def ensemble_kernel_cpu_s(raw: dict[str, Any], n: int, sample: int = 100_000) -> float:
+    """The kernel's CPU time alone for ``n`` variants of the columnar sweep ``raw``: ``sample``
+    of them packed and simulated in this process (batches as the sweep cuts them), scaled."""
+    from nlcx import config, engine
+    from nlcx import sweeps as sweep
+    from nlcx.engine import ensembles
+    from nlcx.sweeps import columnar, planning
+
+    base_raw = {k: v for k, v in raw.items() if k != "sweep"}
+    spec = sweep.SweepSection.model_validate({**raw["sweep"], "random": {**raw["sweep"]["random"], "n": sample}})
+    plan = planning.expand_columns(spec, config.interpolate(base_raw))
+    found = columnar.packing(base_raw, spec, plan)
+    assert isinstance(found, columnar.Packing) and plan is not None
+    size = columnar.batch_size(spec.model_copy(update={"batch_size": 1}), n, found.record_bytes)
+    template = columnar._Probe(base_raw).template(plan.values(0), int(plan.seeds[0]))
+    engine.load_kernel()
+    ensembles.simulate_ensemble(template, found.slots, {k: c[:size] for k, c in plan.columns.items()}, size)
+    start = time.process_time()
+    for k in range(0, sample, size):
+        cols = {key: c[k : k + size] for key, c in plan.columns.items()}
+        ensembles.simulate_ensemble(template, found.slots, cols, len(next(iter(cols.values()))))
+    return (time.process_time() - start) * n / sample
+
+
+def print_f(f: dict[str, Any]) -> None:
+    n = f["variants"]
+    print(
+        f"(f) {n} x-pendulum variants of (b)'s loop over 0.1 s (100 steps), `nlcx sweep --jobs 2` (report on, "
+        f"Parquet): {f['wall_s']:.1f} s wall [target <= 30]; peak {f['peak_memory_mb']:.0f} MB [target <= 2048] "
+        f"(Rss summed; Pss {f['peak_pss_mb']:.0f} MB; sampled in a run of its own, {f['sampled_wall_s']:.1f} s); "
+        f"path {f['path']}; statuses {f['statuses']}; {f['rows']} metric rows"
+    )
+    print(
+        f"    CPU of the process tree {f['cpu_s']:.1f} s, the kernel alone {f['kernel_cpu_s']:.1f} s: "
+        f"{f['outside_us']:.1f} us a variant outside the kernel [target <= 10]; the parent's serial time "
+        f"(wall - batches) {f['serial_s']:.2f} s = 0.5 s + {1e6 * (f['serial_s'] - 0.5) / n:.2f} us a variant "
+        f"[target <= 0.5 s + 1 us a variant], of it the report {f['report_s']:.2f} s; phases {f['timings']}"
+    )
+    print(
+        f"    the first {f['subset']} variants on the per-variant path (sweep.columnar: false, the same values): "
+        f"statuses equal: {f['same_status']}; metrics equal (exact): {f['same_metrics']}"
+    )
 
 
 def _reference_batch(task: tuple[np.ndarray, np.ndarray, np.ndarray, float, int, bool]) -> tuple[int, float]:
@@ -689,7 +786,7 @@ def machine() -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description="nlcx speed benchmarks (latest output: benchmarks/latest.txt)")
-    parser.add_argument("--only", default="a,d,c,b", help="benchmarks to run, comma-separated (default a,d,c,b)")
+    parser.add_argument("--only", default="a,d,c,b,f", help="benchmarks to run, comma-separated (default a,d,c,b,f)")
     parser.add_argument("--fresh-clone", action="store_true", help="also time make run in a fresh clone (downloads)")
     parser.add_argument(
         "--table-from", type=Path, help="only rewrite README.md's speed table from this saved output (latest.txt)"
@@ -732,6 +829,9 @@ def main() -> None:
     if "b" in chosen:
         b = bench_b(repeats=3)
         print_b(b)
+    if "f" in chosen:
+        f = bench_f()
+        print_f(f)
     if args.fresh_clone:
         e = bench_fresh_clone()
         print(

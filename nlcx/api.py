@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, Union
 from nlcx import compiled_cache
 from nlcx._numba_compat import quiet_first_class_functions
 from nlcx.errors import ConfigError
-from nlcx.results import Result, SweepResult, load_run
+from nlcx.results import Result, SweepResult, load_run, read_output_table
 
 if TYPE_CHECKING:
     from nlcx.config import Experiment
@@ -166,7 +166,8 @@ def sweep(
     Returns
     -------
     SweepResult
-        The variants and their metrics.
+        The variants and their metrics, read back from the sweep's tables in whichever form
+        it wrote them (:func:`nlcx.results.read_output_table`).
 
     Examples
     --------
@@ -176,8 +177,6 @@ def sweep(
     >>> len(swept.variants), sorted(swept.metrics.controller.unique())
     (6, ['conventional', 'proposed'])
     """
-    import pandas as pd
-
     compiled_cache.ready()  # before the kernel is loaded; the workers fork from here
     from nlcx import sweeps
 
@@ -187,7 +186,6 @@ def sweep(
     with tempfile.TemporaryDirectory(prefix="nlcx-sweep-") as scratch:
         target = Path(out) if out is not None else Path(scratch) / "sweep"
         with quiet_first_class_functions():
-            outcome = sweeps.run(raw, [], target, executor, jobs or 2, with_report=out is not None)
-        text = {"controller": str, "signal": str, "metric": str, "unit": str, "status": str, "note": str}
-        metrics = pd.read_csv(target / "metrics.csv", dtype=text, keep_default_na=False, na_values={"value": [""]})
-        return SweepResult(outcome.index, metrics, target if out is not None else None)
+            sweeps.run(raw, [], target, executor, jobs or 2, with_report=out is not None)
+        variants, metrics = read_output_table(target, "sweep"), read_output_table(target, "metrics")
+        return SweepResult(variants, metrics, target if out is not None else None)

@@ -1,8 +1,13 @@
 """``nlcx diff BASE NEW``: compare metric CSVs cell by cell, with per-metric tolerances.
 
-Every CSV (and Parquet time series, ``outputs.timeseries_format: parquet``) under BASE is
-matched with the file at the same relative path under NEW (``only``: those whose relative
-path matches one of the given patterns). Rows are matched on their text columns (e.g.
+Every table under BASE, a CSV or Parquet file (e.g. a time series written with
+``outputs.timeseries_format: parquet``) or a Parquet dataset (a directory ``*.parquet`` of
+part files: a sweep's ``metrics.parquet`` and ``sweep.parquet``, one table each), is matched
+with the table at the same relative path under NEW, or, where NEW holds that table in the
+other form, with that one (``metrics.csv`` with ``metrics.parquet``); ``only``: the tables
+whose relative path matches one of the given patterns. A sweep's tables are read as
+:func:`nlcx.results.read_output_table` reads them, so a sweep written as CSV and the same
+sweep written as Parquet hold the same cells. Rows are matched on their text columns (e.g.
 controller, signal, metric) and every numeric column is compared: a cell drifts when
 |new - base| > atol + rtol |base| (NaN equals NaN). Tolerances are given per metric: in
 long-form files the ``metric`` column names the metric, otherwise the column name does, and
@@ -33,6 +38,7 @@ import numpy as np
 import pandas as pd
 
 from nlcx.errors import NlcxError
+from nlcx.pages.output_tables import STEMS, is_table, read_table
 
 #: Text columns that describe a row rather than identify it: compared as cells.
 DESCRIPTIVE = ("note", "message", "reason")
@@ -87,7 +93,7 @@ class Drift:
         return is_status_column(self.column)
 
 
-#: The files compared: CSVs and Parquet time series.
+#: The tables compared: CSVs, Parquet files and Parquet datasets (directories).
 SUFFIXES = (".csv", ".parquet")
 
 
@@ -101,7 +107,11 @@ def status_columns(columns: Sequence[str]) -> list[str]:
 
 
 def _read(path: Path) -> pd.DataFrame:
-    """A CSV (an empty cell is NaN, any other text is kept) or a Parquet file (null is NaN)."""
+    """A table: a sweep's (``metrics`` or ``sweep``, either form, and a run's metrics.csv) as
+    :func:`nlcx.results.read_output_table` reads it; any other CSV with an empty cell as NaN,
+    any other text kept; any other Parquet file or dataset with null as NaN."""
+    if path.stem in STEMS:
+        return read_table(path)
     if path.suffix == ".parquet":
         return pd.read_parquet(path)
     return pd.read_csv(path, keep_default_na=False, na_values=[""])
@@ -109,9 +119,11 @@ def _read(path: Path) -> pd.DataFrame:
 
 def _text(frame: pd.DataFrame, columns: list[str]) -> pd.Series:
     """The cells of ``columns`` joined as ``a | b`` per row (a missing cell as empty text); the
-    row's position where there is no column."""
+    row's position where there is no column (a table without rows: no text)."""
     if not columns:
         return pd.Series(frame.index.map(str), index=frame.index)
+    if frame.empty:  # joining the cells of no row would give a frame, not a series
+        return pd.Series("", index=frame.index, dtype=object)
     cells = frame[columns].map(lambda v: "" if pd.isna(v) else str(v))
     return cells.agg(" | ".join, axis=1)
 
@@ -218,11 +230,21 @@ def compare_frames(name: str, base: pd.DataFrame, new: pd.DataFrame, tol: Tolera
     return drifts + _cell_drifts(name, both, numeric, keys, tol) + _text_drifts(name, both, described)
 
 
+def _tables_under(base: Path) -> list[Path]:
+    """The tables under the directory ``base``, in path order: its CSV and Parquet files and
+    its Parquet datasets (:func:`~nlcx.pages.output_tables.is_table`), each dataset once, not
+    its part files."""
+    found = sorted(p for p in base.rglob("*") if p.suffix in SUFFIXES and is_table(p))
+    return [p for p in found if not any(part.endswith(".parquet") for part in p.relative_to(base).parts[:-1])]
+
+
 def _compared_files(base: Path, only: Sequence[str]) -> list[tuple[Path, str]]:
-    """(path, relative path) of the files of ``base`` to compare: those matching a pattern of
-    ``only`` (fnmatch on the relative path), or all."""
-    files = [base] if base.is_file() else sorted(p for p in base.rglob("*") if p.suffix in SUFFIXES)
-    pairs = [(p, p.name if base.is_file() else p.relative_to(base).as_posix()) for p in files]
+    """(path, relative path) of the tables of ``base`` to compare: those matching a pattern of
+    ``only`` (fnmatch on the relative path), or all. ``base`` itself is one table when it is
+    a file or a Parquet dataset."""
+    one = is_table(base)
+    files = [base] if one else _tables_under(base)
+    pairs = [(p, p.name if one else p.relative_to(base).as_posix()) for p in files]
     if not only:
         return pairs
     chosen = [(p, rel) for p, rel in pairs if any(fnmatch.fnmatchcase(rel, pattern) for pattern in only)]
@@ -236,6 +258,21 @@ def _compared_files(base: Path, only: Sequence[str]) -> list[tuple[Path, str]]:
     return chosen
 
 
+def _counterpart(new: Path, rel: str) -> Path | None:
+    """The table of ``new`` (a table itself, or a directory) that BASE's table ``rel`` is
+    compared with: the one at ``rel``, else the same table in the other form (a CSV's
+    Parquet file or dataset, a Parquet's CSV); None when NEW has neither."""
+    if is_table(new):
+        return new
+    same = new / rel
+    if is_table(same):
+        return same
+    if same.suffix not in SUFFIXES:
+        return None
+    other = same.with_suffix(".parquet" if same.suffix == ".csv" else ".csv")
+    return other if is_table(other) else None
+
+
 def diff_dirs(base: Path, new: Path, tol: Tolerances, only: Sequence[str] = ()) -> tuple[list[Drift], int]:
     """All drifts between the CSV and Parquet files under ``base`` and ``new`` (``only``: the
     files whose relative path matches one of these fnmatch patterns); and how many files were
@@ -247,8 +284,8 @@ def diff_dirs(base: Path, new: Path, tol: Tolerances, only: Sequence[str] = ()) 
     files = _compared_files(base, only)
     drifts: list[Drift] = []
     for path, rel in files:
-        other = new if new.is_file() else new / rel
-        if not other.exists():
+        other = _counterpart(new, rel)
+        if other is None:
             drifts.append(Drift(rel, "(file)", "", "present", "missing"))
             continue
         drifts += compare_frames(rel, _read(path), _read(other), tol)

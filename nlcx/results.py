@@ -1,5 +1,7 @@
-"""What a run or a sweep gives back in Python: :class:`Result`, :class:`SweepResult`, and
-:func:`load_run`, which reads a run directory into a :class:`Result`.
+"""What a run or a sweep gives back in Python: :class:`Result`, :class:`SweepResult`,
+:func:`load_run`, which reads a run directory into a :class:`Result`, and
+:func:`read_output_table`, which reads a sweep's tables (``sweep`` and ``metrics``) in either of
+the forms a sweep writes them: Parquet (the default) or CSV (``sweep.format: csv``).
 
 A :class:`Result` holds one experiment's metrics, trajectories and figure by name, whether it
 comes from the simulation (:func:`nlcx.run`) or from a run directory (:func:`load_run`): both give
@@ -19,6 +21,7 @@ import numpy as np
 
 from nlcx import compiled_cache
 from nlcx.errors import ConfigError
+from nlcx.pages.output_tables import read_output_table
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -26,7 +29,7 @@ if TYPE_CHECKING:
 
     from nlcx import engine
 
-__all__ = ["METRIC_COLUMNS", "Result", "SweepResult", "load_run"]
+__all__ = ["METRIC_COLUMNS", "Result", "SweepResult", "load_run", "read_output_table"]
 
 #: The columns of metrics.csv, in order.
 METRIC_COLUMNS = ("controller", "signal", "metric", "value", "unit", "status", "note")
@@ -401,10 +404,12 @@ class SweepResult:
     Attributes
     ----------
     variants : pandas.DataFrame
-        sweep.csv: one row a variant: its index, the varied values (``value:<key>``), seed,
-        config hash, status (ok, unstable or failed) and message.
+        The table ``sweep`` (sweep.parquet, or sweep.csv): one row a variant: its index, the
+        varied values (``value:<key>``), seed, config hash, status (ok, unstable or failed)
+        and message ("" for none), as :func:`read_output_table` reads it.
     metrics : pandas.DataFrame
-        metrics.csv: the metrics of every variant's runs (a ``variant`` column in front).
+        The table ``metrics`` (metrics.parquet, or metrics.csv): the metrics of every
+        variant's runs (a ``variant`` column in front), as :func:`read_output_table` reads it.
     directory : pathlib.Path or None
         Where the sweep was written, if ``out`` was given.
     """

@@ -46,6 +46,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from nlcx.errors import NlcxError
+from nlcx.pages.output_tables import has_table
 
 if TYPE_CHECKING:
     from nlcx.drawing import Painter
@@ -116,13 +117,15 @@ def _read_manifest(directory: Path) -> dict[str, Any]:
 
 def _written_before_the_marker(directory: Path, manifest: Mapping[str, Any]) -> bool:
     """An output of an nlcx that wrote no :data:`MARKER`: a manifest recording nlcx's version,
-    a sweep's sweep.csv or part files (an interrupted sweep has only these), or a
-    reproduction's tables/ beside its claims.csv."""
+    a sweep's index in either form (sweep.parquet, a dataset directory or a file, or
+    sweep.csv) or its part files (an interrupted sweep has only these), or a reproduction's
+    tables/ beside its claims.csv."""
     versions = manifest.get("versions")
     return (
         (isinstance(versions, dict) and "nlcx" in versions)
-        or (directory / "sweep.csv").is_file()
+        or has_table(directory, "sweep")
         or any((directory / "parts").glob("*.index.csv"))
+        or any((directory / "parts").glob("*.index.parquet"))
         or ((directory / "tables").is_dir() and (directory / "claims.csv").is_file())
     )
 

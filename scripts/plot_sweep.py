@@ -1,5 +1,6 @@
 """Plot a robustness sweep: distributions of x overshoot and settling time per controller,
 split by the first grid key (e.g. the friction model). Writes <run dir>/robustness.png.
+Reads the sweep's tables in either form, Parquet or CSV (nlcx.results.read_output_table).
 
     python scripts/plot_sweep.py results/robustness
 """
@@ -15,10 +16,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import pandas as pd
 
+from nlcx.results import read_output_table
+
 
 def main(run_dir: Path) -> Path:
-    index = pd.read_csv(run_dir / "sweep.csv")
-    metrics = pd.read_csv(run_dir / "metrics.csv")
+    index = read_output_table(run_dir, "sweep")
+    metrics = read_output_table(run_dir, "metrics")
     groups = [c for c in index.columns if c.startswith("value:") and not pd.api.types.is_numeric_dtype(index[c])]
     by = groups[0] if groups else None
     data = metrics[(metrics.signal == "x") & metrics.metric.isin(["overshoot", "settling_time"])]

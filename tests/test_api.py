@@ -15,6 +15,7 @@ from typer.testing import CliRunner
 import nlcx
 from nlcx.cli import app
 from nlcx.errors import ConfigError
+from nlcx.results import read_output_table
 
 ROOT = Path(__file__).resolve().parent.parent
 X_CONFIG = ROOT / "configs" / "x_error_ags.yaml"
@@ -152,7 +153,9 @@ def test_sweep_returns_variants_and_metrics_as_the_cli_writes_them(tmp_path: Pat
     swept = nlcx.sweep(config, overrides, executor="serial", out=tmp_path / "api")
     out = CliRunner().invoke(app, ["sweep", str(config), *overrides, "--out", str(tmp_path / "cli"), "--no-report"])
     assert out.exit_code == 0, out.output
-    assert (tmp_path / "api" / "metrics.csv").read_bytes() == (tmp_path / "cli" / "metrics.csv").read_bytes()
+    for stem, frame in (("metrics", swept.metrics), ("sweep", swept.variants)):
+        pd.testing.assert_frame_equal(frame, read_output_table(tmp_path / "cli", stem), check_exact=True)
+        pd.testing.assert_frame_equal(frame, read_output_table(tmp_path / "api", stem), check_exact=True)
     assert len(swept.variants) == 6 and set(swept.metrics.variant) == set(range(6))
     summary = swept.summary()
     row = summary.set_index(["controller", "signal", "metric"]).loc[("proposed", "x", "overshoot")]

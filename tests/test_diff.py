@@ -133,3 +133,18 @@ def test_a_changed_note_is_a_changed_cell(tmp_path: Path) -> None:
     assert lines[1].split() == ["base.csv", "a", "|", "x", "|", "settling_time", "|", "s", "value", "9.5", "nan", "nan"]
     assert lines[2].split()[-4:] == ["note", "did", "not", "settle"]
     assert "missing" not in result.output and lines[-1] == "drift: 2 cell(s) in 1 of 1 file(s): base.csv 2"
+
+
+def test_a_table_without_rows_is_compared_too(tmp_path: Path) -> None:
+    """A batch whose variants all failed leaves a metrics file with a header and no row: two
+    of them hold no drift; against one with a row, that row is extra."""
+    header = '"variant","controller","signal","metric","value","unit","status","note"\n'
+    for name in ("base", "same"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "part.metrics.csv").write_text(header)
+    same = runner.invoke(app, ["diff", str(tmp_path / "base"), str(tmp_path / "same")])
+    assert same.exit_code == 0 and "no drift: 1 file(s)" in same.output, same.output
+    (tmp_path / "more").mkdir()
+    (tmp_path / "more" / "part.metrics.csv").write_text(header + '4,"a","x","ise",1.5,"","ok",\n')
+    more = runner.invoke(app, ["diff", str(tmp_path / "base"), str(tmp_path / "more")])
+    assert more.exit_code == 1 and "extra in NEW" in more.output, more.output

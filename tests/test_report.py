@@ -17,6 +17,7 @@ from nlcx.cli import app
 from nlcx.comparison import THESIS_METRICS
 from nlcx.pages.tables import cells_of
 from nlcx.pages.tolerances import load as load_tolerances
+from nlcx.results import read_output_table
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
@@ -102,7 +103,7 @@ def test_the_robustness_sweeps_page_is_its_metrics_aggregated(tmp_path: Path) ->
     cfg = str(CONFIGS / "sweeps" / "robustness.yaml")
     result = runner.invoke(app, ["sweep", cfg, "sweep.random.n=8", "--out", str(out), "--jobs", "2"])
     assert result.exit_code == 0, result.output
-    metrics = pd.read_csv(out / "metrics.csv")
+    metrics = read_output_table(out, "metrics")
     summary = pd.read_csv(out / "summary.csv")
     assert len(summary) == metrics.groupby(["controller", "signal", "metric"]).ngroups > 0
     for row in summary.itertuples(index=False):
@@ -121,7 +122,7 @@ def test_the_robustness_sweeps_page_is_its_metrics_aggregated(tmp_path: Path) ->
     assert html.count('<svg class="sweep-chart"') == 5  # distributions; friction model, M, m, l
     assert "<img" not in html.split('id="distributions"')[1]  # charts inline, no image files
     profiles = pd.read_csv(out / "profiles.csv")
-    index = pd.read_csv(out / "sweep.csv")
+    index = read_output_table(out, "sweep")
     ok = metrics[(metrics.status == "ok") & metrics.value.notna()]
     for row in profiles.sample(n=40, random_state=0).itertuples(index=False):
         column = index[f"value:{row.parameter}"]

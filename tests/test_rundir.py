@@ -22,6 +22,7 @@ from typer.testing import CliRunner
 import nlcx
 from nlcx import config, engine, rundir
 from nlcx.cli import app
+from nlcx.results import read_output_table
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "configs" / "x_error_ags.yaml"
@@ -153,7 +154,11 @@ def test_a_directory_nlcx_did_not_write_is_refused_in_one_line(tmp_path: Path) -
         ({"manifest.json": json.dumps({rundir.MARKER: "sweep"})}, True),
         ({"manifest.json": json.dumps({"name": "x", "versions": {"nlcx": "0.1.0"}})}, True),  # before the marker
         ({"parts/000000-0123456789.index.csv": "variant\n", "parts/x.metrics.csv": ""}, True),  # interrupted sweep
+        ({"parts/000000-0123456789.index.parquet": ""}, True),  # its batches' files in Parquet
         ({"sweep.csv": "variant\n"}, True),
+        ({"sweep.parquet/part-000000000.parquet": ""}, True),  # a sweep's index as a Parquet dataset
+        ({"sweep.parquet": ""}, True),  # or as one Parquet file
+        ({"metrics.parquet/part-000000000.parquet": ""}, False),  # metrics alone: not a sweep's mark
         ({"tables/table_2_3.csv": "", "claims.csv": ""}, True),  # a reproduction
         ({"manifest.json": json.dumps({rundir.MARKER: "photos"})}, False),
         ({"manifest.json": json.dumps({"name": "x", "versions": {"numpy": "2"}})}, False),
@@ -262,8 +267,9 @@ def test_a_second_writer_is_refused_while_the_first_writes(tmp_path: Path) -> No
     assert manifest["argv"] == ["-c", str(path), str(out), str(ready), str(go)] and manifest["overrides"] == []
     alone = tmp_path / "alone"
     assert runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(alone)]).exit_code == 0
-    assert (out / "metrics.csv").read_bytes() == (alone / "metrics.csv").read_bytes()
-    assert list(pd.read_csv(out / "sweep.csv").variant) == [0, 1, 2, 3]
+    for stem in ("metrics", "sweep"):
+        pd.testing.assert_frame_equal(read_output_table(out, stem), read_output_table(alone, stem), check_exact=True)
+    assert list(read_output_table(out, "sweep").variant) == [0, 1, 2, 3]
     assert rundir.lock_owner(out) is None and not rundir.partial_dir(out).exists()
 
 

@@ -27,8 +27,9 @@ runner = CliRunner()
 
 
 def write_sweep(tmp_path: Path, sweep_section: dict, t_end: float = 3.0, name: str = "sw") -> Path:
+    """The x pendulum sweep of ``sweep_section``; its tables in CSV unless the section says otherwise."""
     raw = yaml.safe_load((ROOT / "configs" / "x_error_ags.yaml").read_text())
-    raw.update(name=name, outputs={"figure": False, "timeseries": False}, sweep=sweep_section)
+    raw.update(name=name, outputs={"figure": False, "timeseries": False}, sweep={"format": "csv", **sweep_section})
     raw["simulation"]["t_end"] = t_end
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump(raw))
@@ -182,8 +183,14 @@ _merged = assembly._merged_metrics
 
 
 @pytest.mark.slow
-def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) -> None:
-    spec = {"random": {"n": 24, "params": {"plant.params.M": {"dist": "uniform", "relative": 0.2}}}, "batch_size": 2}
+@pytest.mark.parametrize("columnar", [True, False])
+def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path, columnar: bool) -> None:
+    """On both paths (a varied mass runs from columns unless sweep.columnar is false)."""
+    spec = {
+        "random": {"n": 24, "params": {"plant.params.M": {"dist": "uniform", "relative": 0.2}}},
+        "batch_size": 2,
+        "columnar": columnar,
+    }
     path = write_sweep(tmp_path, spec, t_end=8.0)
     out = tmp_path / "resumed"
     staged = rundir.partial_dir(out) / "parts"  # where an unfinished sweep keeps its parts
@@ -191,7 +198,7 @@ def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) 
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     hang_guard = time.monotonic() + 600  # the wait ends on the parts directory; this only stops a hang
     try:
-        while len(list(staged.glob("*.index.csv"))) < 2:
+        while len(list(staged.glob("*.index.*"))) < 2:
             assert proc.poll() is None, f"the sweep ended (exit {proc.returncode}) before its second part"
             assert time.monotonic() < hang_guard, "no second part after 10 minutes: the sweep hangs"
             time.sleep(0.05)  # the poll's period
@@ -199,7 +206,7 @@ def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) 
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
     assert proc.returncode == -signal.SIGKILL, "the kill found the sweep still running"
-    parts = len(list(staged.glob("*.index.csv")))
+    parts = len(list(staged.glob("*.index.*")))
     assert 2 <= parts < 12, "the sweep was killed mid-way, with parts still to compute"
     assert not out.exists(), "an unfinished sweep is not in its directory"
     result = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out)])
@@ -210,9 +217,10 @@ def test_resume_after_kill_recomputes_nothing_and_loses_nothing(tmp_path: Path) 
     clean = tmp_path / "clean"
     assert runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(clean)]).exit_code == 0
     assert (clean / "metrics.csv").read_bytes() == (out / "metrics.csv").read_bytes()
+    assert json.loads((out / "manifest.json").read_text())["path"].startswith("columnar" if columnar else "per-variant")
     forced = runner.invoke(app, ["sweep", str(path), "--executor", "serial", "--out", str(out), "--force"])
     assert "(24 computed, 0 already done)" in forced.output
-    assert len(list((out / "parts").glob("*.index.csv"))) == 12 and not rundir.partial_dir(out).exists()
+    assert len(list((out / "parts").glob("*.index.*"))) == 12 and not rundir.partial_dir(out).exists()
 
 
 @pytest.mark.slow

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pandas as pd
 import yaml
 from typer.testing import CliRunner
 
 from nlcx.cli import app
+from nlcx.results import read_output_table
 from nlcx.sweeps import cluster
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -72,7 +74,8 @@ def test_a_local_cluster_stands_in_for_the_queue_with_the_serial_results(tmp_pat
         outs[name] = tmp_path / name
         result = runner.invoke(app, ["sweep", str(path), "--out", str(outs[name]), "--no-report", *extra])
         assert result.exit_code == 0, result.output
-    assert (outs["serial"] / "metrics.csv").read_bytes() == (outs["cluster"] / "metrics.csv").read_bytes()
-    assert (outs["serial"] / "sweep.csv").read_bytes() == (outs["cluster"] / "sweep.csv").read_bytes()
+    for stem in ("metrics", "sweep"):
+        serial, cluster = read_output_table(outs["serial"], stem), read_output_table(outs["cluster"], stem)
+        pd.testing.assert_frame_equal(serial, cluster, check_exact=True)
     manifest = yaml.safe_load((outs["cluster"] / "manifest.json").read_text())
     assert manifest["executor"] == "dask" and manifest["jobs"] == 2

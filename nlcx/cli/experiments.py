@@ -182,10 +182,11 @@ def _sweep(
         outcome = sweep.run(config, overrides, out, executor, jobs, scheduler, force, progress, with_report, cluster)
     finally:
         bar.stop()
-    counts = outcome.index.status.value_counts().to_dict() if not outcome.index.empty else {}
+    counts = outcome.statuses
     summary = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
     typer.echo(
-        f"{len(outcome.index)} variants ({outcome.computed} computed, {outcome.skipped} already done): {summary}; "
+        f"{outcome.computed + outcome.skipped} variants ({outcome.computed} computed, "
+        f"{outcome.skipped} already done): {summary}; "
         f"{outcome.wall:.1f} s -> {outcome.out_dir}/"
     )
     if outcome.report is not None:

@@ -31,8 +31,12 @@ from nlcx.errors import NlcxError
 @app.command()
 @one_line_errors
 def diff(
-    base: Annotated[Path, typer.Argument(help="Baseline directory (or CSV or Parquet file).", show_default=False)],
-    new: Annotated[Path, typer.Argument(help="Directory (or CSV or Parquet file) to check.", show_default=False)],
+    base: Annotated[
+        Path, typer.Argument(help="Baseline directory (or CSV or Parquet file or dataset).", show_default=False)
+    ],
+    new: Annotated[
+        Path, typer.Argument(help="Directory (or CSV or Parquet file or dataset) to check.", show_default=False)
+    ],
     rtol: Annotated[
         list[str] | None, typer.Option("--rtol", help="Relative tolerance: VALUE (default) or METRIC=VALUE.")
     ] = None,
@@ -43,13 +47,16 @@ def diff(
         list[str] | None,
         typer.Option(
             "--only",
-            help="Compare only the files whose path under BASE matches this pattern (fnmatch, e.g. "
-            "'*metrics.csv'); repeat for several.",
+            help="Compare only the tables whose path under BASE matches this pattern (fnmatch, e.g. "
+            "'metrics.*' for a sweep's metrics as CSV or Parquet); repeat for several.",
             show_default=False,
         ),
     ] = None,
 ) -> None:
-    """Compare the CSV (and Parquet) files of NEW against BASE; exit 1 and list the drift if any cell moved."""
+    """Compare the CSV and Parquet tables of NEW against BASE; exit 1 and list the drift if any cell moved.
+
+    A table held as CSV in one and as Parquet in the other (a sweep's metrics.csv and
+    metrics.parquet) is compared as one table."""
     from nlcx.diff import diff_dirs, parse_tolerances, render, summary
 
     tol = parse_tolerances(rtol or [], atol or [])

@@ -180,12 +180,13 @@ def _run(item: Item, j: int, records: Records, outcome: Outcome, grid: TimeGrid,
     )
 
 
-def _failure_reason(plant: Plant, status: int, index: int, t_fail: float) -> str:
-    """Why a run stopped (``status``: the kernel's, ``index``: its failing state or input), or ''."""
+def _failure_reason(plant: Plant, status: int, index: int, t_fail: float, bounds: np.ndarray | None = None) -> str:
+    """Why a run stopped (``status``: the kernel's, ``index``: its failing state or input), or ''
+    (``bounds``: the run's divergence bounds, when not the plant's own)."""
     n = len(plant.states)
     if status == STATUS_BOUND:
         name = plant.state_names[index]
-        bound = plant.bounds[index]
+        bound = (plant.bounds if bounds is None else bounds)[index]
         return f"diverged at t = {t_fail:.4g} s: |{name}| > {bound:.6g} (simulation.bounds)"
     if status == STATUS_NONFINITE:
         what = plant.state_names[index] if index < n else plant.input_names[index - n]

@@ -20,15 +20,17 @@ import jinja2
 from nlcx import report
 from nlcx.errors import ConfigError
 from nlcx.pages import markup
+from nlcx.pages.output_tables import has_table
 
 TEMPLATES = Path(__file__).parent / "templates"
 
 
 def kind_of(directory: Path) -> str:
-    """reproduction, sweep or run, by the files the directory holds."""
+    """reproduction, sweep or run, by the files the directory holds: a sweep's tables
+    ``sweep`` and ``metrics`` in either form (:func:`~nlcx.pages.output_tables.has_table`)."""
     if (directory / "claims.csv").is_file() or (directory / "tables").is_dir():
         return "reproduction"
-    if (directory / "sweep.csv").is_file() and (directory / "metrics.csv").is_file():
+    if has_table(directory, "sweep") and has_table(directory, "metrics"):
         return "sweep"
     if (directory / "metrics.csv").is_file():
         return "run"

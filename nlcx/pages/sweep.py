@@ -11,14 +11,18 @@ interquartile range per bin of the parameter; ``profiles.csv`` holds the numbers
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 import yaml
 
+if TYPE_CHECKING:
+    import pyarrow as pa
+
 from nlcx import report
 from nlcx.pages import charts, sweep_charts
+from nlcx.pages.output_tables import PART_FILES, STEMS, read_output_table, table_path
 
 FILES = "report_files"
 
@@ -61,12 +65,56 @@ def described(values: pd.Series, shown: int = 12) -> str:
     return f"{len(levels)} distinct values: " + ", ".join(levels[:shown]) + more
 
 
+#: The metrics' columns held as categories: every grouping then factorizes small integer codes.
+CATEGORIES = ("controller", "signal", "metric", "unit", "status")
+
+
+def read_tables(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The sweep's metrics (the columns the page reads; :data:`CATEGORIES` as categories) and
+    index, in either form (:func:`~nlcx.pages.output_tables.read_output_table`). A Parquet
+    dataset's text columns come as categories straight from their dictionaries: a million-variant
+    sweep's tens of millions of rows never become Python strings."""
+    path = table_path(directory, "metrics")
+    if path is None or path.suffix != ".parquet":
+        metrics = read_output_table(directory, "metrics")
+        metrics = metrics.astype({column: "category" for column in CATEGORIES if column in metrics})
+        return metrics, read_output_table(directory, "sweep")
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    files = sorted(path.glob(PART_FILES)) if path.is_dir() else [path]
+    metrics = pa.concat_tables([_coded(pq.read_table(f, columns=["variant", *CATEGORIES, "value"])) for f in files])
+    index_path = table_path(directory, "sweep")
+    assert index_path is not None
+    index_files = sorted(index_path.glob(PART_FILES)) if index_path.is_dir() else [index_path]
+    names = pq.read_schema(index_files[0]).names
+    columns = [c for c in names if c in ("variant", "status") or c.startswith("value:")]
+    try:
+        index = pa.concat_tables([pq.read_table(f, columns=columns) for f in index_files]).to_pandas()
+    except pa.ArrowInvalid:  # parts of different column types: read as the CSV would be
+        index = read_output_table(directory, "sweep")[columns]
+    return metrics.to_pandas(), index
+
+
+def _coded(table: pa.Table) -> pa.Table:
+    """A metrics part with its :data:`CATEGORIES` dictionary-encoded (int32 codes into strings),
+    ``variant`` as int64 and ``value`` as float64: parts written apart then join as one table."""
+    import pyarrow as pa
+
+    category = pa.dictionary(pa.int32(), pa.string())
+    columns = []
+    for name, column in zip(table.column_names, table.columns, strict=True):
+        if name in CATEGORIES:
+            plain = column if pa.types.is_dictionary(column.type) else column.cast(pa.string()).dictionary_encode()
+            columns.append(plain.cast(category))
+        else:
+            columns.append(column.cast(pa.int64() if name == "variant" else pa.float64()))
+    return pa.table(columns, names=table.column_names)
+
+
 def context(directory: Path) -> dict[str, Any]:
     """Everything the sweep page shows; writes summary.csv, profiles.csv and the charts' SVG files beside it."""
-    # the text columns as categories: every grouping below then factorizes small integer codes
-    categories = {column: "category" for column in ("controller", "signal", "metric", "unit", "status")}
-    metrics = pd.read_csv(directory / "metrics.csv", dtype=categories)
-    index = pd.read_csv(directory / "sweep.csv")
+    metrics, index = read_tables(directory)
     table = summary(metrics, index)
     report.write_csv(directory / "summary.csv", table)
     files = directory / FILES
@@ -106,4 +154,12 @@ def context(directory: Path) -> dict[str, Any]:
         "legend": charts.legend(colour.items()),
         "plots": plots,
         "config": config,
+        "table_files": table_files(directory),
     }
+
+
+def table_files(directory: Path) -> dict[str, str]:
+    """The file name of each of the sweep's tables, in the form the directory holds it
+    (e.g. ``{"metrics": "metrics.parquet", "sweep": "sweep.parquet"}``), for the page's links."""
+    names = {stem: table_path(directory, stem) for stem in STEMS}
+    return {stem: path.name for stem, path in names.items() if path is not None}

@@ -133,8 +133,9 @@ def bins_of(values: pd.Series) -> tuple[pd.Series, list[str]]:
 def profiles(ok: pd.DataFrame, index: pd.DataFrame, column: str) -> tuple[pd.DataFrame, list[str]]:
     """The metrics against one varied parameter: per (signal, metric, controller) and bin of
     the parameter (:func:`bins_of`), the number of variants that measured the metric, its
-    median and its quartiles (pandas' linear interpolation), in the order metrics.csv lists
-    them; and the bins' labels. ``ok``: metrics.csv's rows of runs that finished, with a value."""
+    median and its quartiles (pandas' linear interpolation), in the order the metrics table
+    lists them; and the bins' labels. ``ok``: the metrics table's rows of runs that finished,
+    with a value."""
     codes, labels = bins_of(index[column])
     bin_of = pd.Series(codes.to_numpy(), index=index.variant.to_numpy())
     frame = ok.assign(bin=ok.variant.map(bin_of)).dropna(subset=["bin"])

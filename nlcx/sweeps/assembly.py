@@ -29,7 +29,7 @@ def write_report(directory: Path) -> Path:
 
 def write_manifest(
     out_dir: Path,
-    index: pd.DataFrame,
+    statuses: dict[str, int],
     spec: SweepSection,
     timings: dict[str, float],
     *,
@@ -40,11 +40,13 @@ def write_manifest(
     jobs: int,
     overrides: Sequence[str] = (),
     started: float | None = None,
+    path: str = "",
 ) -> None:
     """manifest.json: the run (name, kind ``nlcx_output``: sweep, command line, ``overrides``,
     start and duration from ``started``, variants computed and skipped, statuses, seed,
-    executor), the wall time of each phase (reading, planning and loading the kernel; the
-    batches; assembling sweep.csv and metrics.csv), the host, the platform, the package
+    executor, and ``path``: how the variants ran, columnar or per-variant and why), the wall
+    time of each phase (reading, planning and loading the kernel; the batches; assembling the
+    tables), the host, the platform, the package
     versions and the git commit (:func:`nlcx.report.provenance`, :func:`nlcx.report.environment`)."""
     from nlcx import report
 
@@ -55,7 +57,8 @@ def write_manifest(
         "variants": variants,
         "computed": computed,
         "skipped": variants - computed,
-        "status": index.status.value_counts().to_dict(),
+        "status": statuses,
+        "path": path,
         "seed": spec.seed,
         "executor": executor,
         "jobs": jobs,
@@ -138,13 +141,12 @@ def assemble(
     spec: SweepSection,
     written: Collection[str] = (),
 ) -> pd.DataFrame:
-    """sweep.csv and metrics.csv from the part files, in variant order (deterministic).
+    """The tables sweep and metrics (CSV files or Parquet datasets, ``spec.format``) from the
+    part files of a per-variant sweep, in variant order (deterministic).
 
     ``written`` names the parts this process's run wrote (:func:`nlcx.sweeps.run`): when they are all
     the parts and hold exactly the plan's variants, in order, metrics.csv is their files
     joined (:func:`_joined_metrics`), the same bytes as reading, merging and writing them."""
-    import yaml
-
     from nlcx import report
 
     want = {h: v.index for v, h in zip(variants, hashes, strict=True)}
@@ -156,6 +158,7 @@ def assemble(
     if not indexes:
         report.write_csv(out_dir / "sweep.csv", pd.DataFrame())
         report.write_csv(out_dir / "metrics.csv", pd.DataFrame())
+        write_config(out_dir, base_raw, spec)
         return pd.DataFrame()
     rows = _missing_as_null(pd.concat(indexes, ignore_index=True))
     in_plan_order = set(parts) <= set(written) and _in_plan_order(rows, want)
@@ -167,12 +170,118 @@ def assemble(
     chosen = chosen.assign(new_variant=chosen.config_hash.map(want))
     index = chosen.assign(variant=chosen.new_variant).drop(columns=["_part", "new_variant"])
     index = index.sort_values("variant", kind="stable").reset_index(drop=True)
-    report.write_csv(out_dir / "sweep.csv", index)
-    joined = _joined_metrics(out_dir / "parts", parts) if in_plan_order else None
-    if joined is not None:
-        report.write_bytes(out_dir / "metrics.csv", joined)
+    if spec.format == "parquet":
+        write_dataset(out_dir / "sweep.parquet", [(0, arrow_table(index))])
+        metrics = _merged_metrics(out_dir / "parts", parts, chosen)
+        write_dataset(out_dir / "metrics.parquet", [(0, arrow_table(metrics))])
     else:
-        report.write_csv(out_dir / "metrics.csv", _merged_metrics(out_dir / "parts", parts, chosen))
+        report.write_csv(out_dir / "sweep.csv", index)
+        joined = _joined_metrics(out_dir / "parts", parts) if in_plan_order else None
+        if joined is not None:
+            report.write_bytes(out_dir / "metrics.csv", joined)
+        else:
+            report.write_csv(out_dir / "metrics.csv", _merged_metrics(out_dir / "parts", parts, chosen))
+    write_config(out_dir, base_raw, spec)
+    return index
+
+
+def write_config(out_dir: Path, base_raw: dict[str, Any], spec: SweepSection) -> None:
+    """config.yaml: the base config interpolated, with its sweep section resolved."""
+    import yaml
+
+    from nlcx import report
+
     resolved = {**cfg.interpolate(base_raw), "sweep": spec.model_dump()}
     report.write_text(out_dir / "config.yaml", yaml.safe_dump(resolved, sort_keys=False, allow_unicode=True))
-    return index
+
+
+def arrow_table(frame: pd.DataFrame) -> Any:
+    """``frame`` as the Arrow table of a sweep's Parquet output: text columns as strings (a
+    missing or empty text null), numbers as they are (a NaN null), as the CSV form reads back."""
+    import pyarrow as pa
+
+    from nlcx.report import _empty_text_as_null
+
+    table = pa.Table.from_pandas(_missing_as_null(frame), preserve_index=False)
+    columns = [c.cast(pa.string()) if pa.types.is_null(c.type) or pa.types.is_large_string(c.type) else c
+               for c in table.columns]  # fmt: skip
+    return _empty_text_as_null(pa.table(columns, names=table.column_names))
+
+
+def write_dataset(directory: Path, tables: Sequence[tuple[int, Any]]) -> None:
+    """A Parquet dataset: each (first row's variant, table) as ``directory/part-<variant>.parquet``."""
+    from nlcx.sweeps.columnar import write_parquet_table
+
+    _fresh(directory)
+    for first, table in tables:
+        write_parquet_table(directory / f"part-{first:09d}.parquet", table)
+
+
+def _fresh(directory: Path) -> None:
+    """``directory`` empty (a resumed staging directory may hold an earlier run's tables)."""
+    import shutil
+
+    if directory.is_dir():
+        shutil.rmtree(directory)
+    elif directory.exists():
+        directory.unlink()
+    directory.mkdir(parents=True)
+
+
+def _text_columns(table: Any) -> Any:
+    """``table`` with its dictionary-encoded columns as plain strings (what the CSV writer takes)."""
+    import pyarrow as pa
+
+    columns = [c.cast(pa.string()) if pa.types.is_dictionary(c.type) else c for c in table.columns]
+    return pa.table(columns, names=table.column_names)
+
+
+def _csv_of_parts(target: Path, paths: Sequence[Path]) -> None:
+    """The part files' tables, in order, as one CSV (the bytes :func:`nlcx.report.write_csv`
+    writes for their rows), written part by part."""
+    import pyarrow.csv as pacsv
+    import pyarrow.parquet as pq
+
+    from nlcx.drawing import atomic_write
+
+    def write(tmp: Path) -> None:
+        writer = None
+        for path in paths:
+            table = _text_columns(pq.read_table(path))
+            if writer is None:
+                writer = pacsv.CSVWriter(
+                    str(tmp), table.schema, write_options=pacsv.WriteOptions(quoting_style="needed")
+                )
+            writer.write_table(table)
+        if writer is not None:
+            writer.close()
+
+    atomic_write(target, write)
+
+
+def assemble_columns(
+    out_dir: Path, parts: Sequence[tuple[int, str]], base_raw: dict[str, Any], spec: SweepSection
+) -> dict[str, int]:
+    """The tables of a columnar sweep from its part files (``parts``: each batch's first variant
+    and part name, in plan order, every one complete): in Parquet, the part files themselves,
+    linked into the datasets sweep.parquet/ and metrics.parquet/ (nothing is read again); in
+    CSV, their rows written out part by part. Returns the count of each status."""
+    import pyarrow.parquet as pq
+
+    from nlcx import rundir
+
+    for name, stem in (("metrics", "metrics"), ("index", "sweep")):
+        paths = [out_dir / "parts" / f"{part}.{name}.parquet" for _, part in parts]
+        if spec.format == "parquet":
+            _fresh(out_dir / f"{stem}.parquet")
+            for (first, _), path in zip(parts, paths, strict=True):
+                rundir.link_or_copy(path, out_dir / f"{stem}.parquet" / f"part-{first:09d}.parquet")
+        else:
+            _csv_of_parts(out_dir / f"{stem}.csv", paths)
+    write_config(out_dir, base_raw, spec)
+    counts: dict[str, int] = {}
+    for _, part in parts:
+        status = pq.read_table(out_dir / "parts" / f"{part}.index.parquet", columns=["status"]).column(0)
+        for value in status.value_counts().to_pylist():
+            counts[value["values"]] = counts.get(value["values"], 0) + value["counts"]
+    return counts

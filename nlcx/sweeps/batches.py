@@ -43,11 +43,14 @@ class Batch:
 
 @dataclass
 class BatchResult:
-    """What a batch reports: its rows of sweep.csv, its metrics (unless left out) and its part's name."""
+    """What a batch reports: its part's name, its number of variants and their statuses (status ->
+    count); a per-variant batch also its rows of sweep.csv and its metrics (unless left out)."""
 
     index: list[dict[str, Any]] = field(default_factory=list)
     metrics: pd.DataFrame | None = None
     part: str = ""
+    variants: int = 0
+    statuses: dict[str, int] = field(default_factory=dict)
 
 
 def set_threads() -> None:
@@ -56,7 +59,7 @@ def set_threads() -> None:
         os.environ[name] = "1"
 
 
-def _settle_heap() -> None:
+def settle_heap() -> None:
     """Collect, then freeze what survives (imported modules, loaded kernels, caches).
 
     A worker's later collections then scan only the objects of the batch in hand instead of
@@ -75,12 +78,12 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
 
     ``return_metrics=False`` leaves the metrics out of the result (a pool worker's result
     travels back pickled; the sweep reads the metrics from the part files). After the batch
-    the heap is settled (:func:`_settle_heap`)."""
+    the heap is settled (:func:`settle_heap`)."""
     set_threads()
     try:
         return _run_batch(batch, return_metrics)
     finally:
-        _settle_heap()
+        settle_heap()
 
 
 def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
@@ -123,4 +126,7 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
     # assemble can join the files of a sweep computed in one go (nlcx.sweeps.assembly)
     report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", metrics, empty_as_missing=True)
     report.write_csv(batch.out_dir / "parts" / f"{part}.index.csv", pd.DataFrame(rows))  # last: marks it complete
-    return BatchResult(index=rows, metrics=metrics if return_metrics else None, part=part)
+    statuses = pd.Series([row["status"] for row in rows]).value_counts().to_dict()
+    return BatchResult(
+        rows, metrics if return_metrics else None, part, len(rows), {str(k): int(v) for k, v in statuses.items()}
+    )

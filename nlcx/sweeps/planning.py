@@ -23,6 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from nlcx import config as cfg
 from nlcx.errors import ConfigError
 from nlcx.metrics.names import METRIC_UNITS
+from nlcx.sweeps.seeds import spawned_seeds
 from nlcx.validation import validate_model
 
 
@@ -72,8 +73,14 @@ class SweepSection(BaseModel):
     random: RandomSpec | None = None
     batch_size: int = Field(64, ge=1)
     timeseries: bool = False
-    #: The metrics metrics.csv keeps (names of :data:`nlcx.metrics.names.METRIC_UNITS`); None: all.
+    #: The metrics the metrics table keeps (names of :data:`nlcx.metrics.names.METRIC_UNITS`); None: all.
     metrics: list[str] | None = Field(None, min_length=1)
+    #: The format of the tables sweep and metrics: Parquet datasets (sweep.parquet/,
+    #: metrics.parquet/) or CSV files (sweep.csv, metrics.csv).
+    format: Literal["parquet", "csv"] = "parquet"
+    #: true: variants that differ only in numbers packed as themselves are run from columns
+    #: (:mod:`nlcx.sweeps.columnar`), others config by config; false: always config by config.
+    columnar: bool = True
 
     @model_validator(mode="after")
     def _zip_lengths(self) -> SweepSection:
@@ -122,7 +129,8 @@ def _lookup(raw: dict[str, Any], key: str) -> Any:
     return node
 
 
-def _draw(dist: Distribution, base: Any, n: int, rng: np.random.Generator) -> list[Any]:
+def _draw(dist: Distribution, base: Any, n: int, rng: np.random.Generator) -> list[Any] | np.ndarray:
+    """``n`` draws of ``dist``: an array of floats, or the chosen values of a choice."""
     # Distribution._complete has checked that the parameters each distribution reads are set.
     if dist.dist == "uniform":
         if dist.relative is not None:
@@ -130,15 +138,32 @@ def _draw(dist: Distribution, base: Any, n: int, rng: np.random.Generator) -> li
         else:
             assert dist.low is not None and dist.high is not None
             lo, hi = float(dist.low), float(dist.high)
-        return [float(v) for v in rng.uniform(min(lo, hi), max(lo, hi), n)]
+        return rng.uniform(min(lo, hi), max(lo, hi), n)
     if dist.dist == "loguniform":
         assert dist.low is not None and dist.high is not None
-        return [float(v) for v in np.exp(rng.uniform(math.log(dist.low), math.log(dist.high), n))]
+        return np.exp(rng.uniform(math.log(dist.low), math.log(dist.high), n))
     if dist.dist == "normal":
         assert dist.mean is not None and dist.std is not None
-        return [float(v) for v in rng.normal(dist.mean, dist.std, n)]
+        return rng.normal(dist.mean, dist.std, n)
     values = dist.values or []
     return [values[i] for i in rng.integers(0, len(values), n)]
+
+
+def _draws(spec: SweepSection, base_raw: dict[str, Any]) -> dict[str, list[Any] | np.ndarray]:
+    """The random section's draws, key by key from one generator spawned from the sweep seed."""
+    if spec.random is None:
+        return {}
+    root = np.random.SeedSequence(spec.seed)
+    rng = np.random.default_rng(root.spawn(1)[0])
+    draws = {}
+    for key, dist in spec.random.params.items():
+        base = _lookup(base_raw, key) if dist.relative is not None else None
+        draws[key] = _draw(dist, base, spec.random.n, rng)
+    return draws
+
+
+def _listed(values: list[Any] | np.ndarray) -> list[Any]:
+    return values.tolist() if isinstance(values, np.ndarray) else values
 
 
 def expand(spec: SweepSection, base_raw: dict[str, Any]) -> list[Variant]:
@@ -149,21 +174,77 @@ def expand(spec: SweepSection, base_raw: dict[str, Any]) -> list[Variant]:
     n_zip = len(next(iter(spec.zip.values()))) if spec.zip else 1
     zip_points = [{k: spec.zip[k][i] for k in zip_keys} for i in range(n_zip)]
     if spec.random is not None:
-        root = np.random.SeedSequence(spec.seed)
-        rng = np.random.default_rng(root.spawn(1)[0])
-        draws = {}
-        for key, dist in spec.random.params.items():
-            base = _lookup(base_raw, key) if dist.relative is not None else None
-            draws[key] = _draw(dist, base, spec.random.n, rng)
+        draws = {k: _listed(v) for k, v in _draws(spec, base_raw).items()}
         random_points = [{k: draws[k][i] for k in draws} for i in range(spec.random.n)]
     else:
         random_points = [{}]
     combos = [{**g, **z, **r} for g in grid_points for z in zip_points for r in random_points]
-    children = np.random.SeedSequence(spec.seed).spawn(len(combos) + 1)[1:]
+    seeds = spawned_seeds(spec.seed, 1, len(combos)).tolist()
     return [
-        Variant(index=i, values=values, seed=int(child.generate_state(1)[0]))
-        for i, (values, child) in enumerate(zip(combos, children, strict=True))
+        Variant(index=i, values=values, seed=seed) for i, (values, seed) in enumerate(zip(combos, seeds, strict=True))
     ]
+
+
+def _column(values: list[Any] | np.ndarray) -> np.ndarray | None:
+    """Values as a column: floats, or integers where every value is one; None where a value is
+    not a number (a text, a mapping, a bool) or integers and floats mix."""
+    if isinstance(values, np.ndarray):
+        return values
+    kinds = {type(v) for v in values}
+    if kinds == {int}:
+        return np.array(values, dtype=np.int64)
+    if kinds == {float}:
+        return np.array(values, dtype=np.float64)
+    return None
+
+
+@dataclass(frozen=True)
+class ColumnPlan:
+    """A plan as columns: the values of each varied key and each variant's seed, by variant
+    index, as :func:`expand` gives them (the same values, in the same order)."""
+
+    columns: dict[str, np.ndarray]
+    seeds: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.seeds.size)
+
+    def values(self, index: int) -> dict[str, Any]:
+        """Variant ``index``'s values, as Python numbers."""
+        return {key: column[index].item() for key, column in self.columns.items()}
+
+    def variant(self, index: int) -> Variant:
+        return Variant(index=index, values=self.values(index), seed=int(self.seeds[index]))
+
+
+def expand_columns(spec: SweepSection, base_raw: dict[str, Any]) -> ColumnPlan | None:
+    """The variants of ``spec`` as columns (:class:`ColumnPlan`), without a Python object per
+    variant; None when a varied value is not a number or a key is varied twice."""
+    keys = [*spec.grid, *spec.zip, *(spec.random.params if spec.random else {})]
+    if len(set(keys)) != len(keys):
+        return None
+    lengths = [len(v) for v in spec.grid.values()]
+    n_grid = math.prod(lengths)
+    n_zip = len(next(iter(spec.zip.values()))) if spec.zip else 1
+    n_random = spec.random.n if spec.random is not None else 1
+    raw_columns: dict[str, np.ndarray | None] = {}
+    for k, (key, values) in enumerate(spec.grid.items()):
+        col = _column(values)
+        raw_columns[key] = None if col is None else np.repeat(
+            np.tile(col, math.prod(lengths[:k])), math.prod(lengths[k + 1 :]) * n_zip * n_random
+        )  # fmt: skip
+    for key, values in spec.zip.items():
+        col = _column(values)
+        raw_columns[key] = None if col is None else np.tile(np.repeat(col, n_random), n_grid)
+    for key, draws in _draws(spec, base_raw).items():
+        col = _column(draws)
+        raw_columns[key] = None if col is None else np.tile(col, n_grid * n_zip)
+    if any(col is None for col in raw_columns.values()):
+        return None
+    n = n_grid * n_zip * n_random
+    columns = {key: col for key, col in raw_columns.items() if col is not None}
+    return ColumnPlan(columns, spawned_seeds(spec.seed, 1, n).astype(np.int64))
 
 
 def config_hash(raw: Any) -> str:
@@ -194,9 +275,14 @@ def load(
     return raw, spec, base
 
 
+def base_digest(base_raw: dict[str, Any], spec: SweepSection) -> str:
+    """The hash of what every variant's result depends on besides its values and seed: the base
+    config and the metrics kept (a rerun keeping other metrics recomputes)."""
+    return config_hash(base_raw if spec.metrics is None else {"base": base_raw, "metrics": spec.metrics})
+
+
 def plan(base_raw: dict[str, Any], spec: SweepSection) -> tuple[list[Variant], list[str]]:
     """The variants and the hash of each one's resolved config."""
     variants = expand(spec, cfg.interpolate(base_raw))
-    # the metrics kept are part of what a variant's result is (a rerun keeping others recomputes)
-    base_digest = config_hash(base_raw if spec.metrics is None else {"base": base_raw, "metrics": spec.metrics})
-    return variants, [variant_hash(base_digest, v) for v in variants]
+    digest = base_digest(base_raw, spec)
+    return variants, [variant_hash(digest, v) for v in variants]

@@ -60,3 +60,21 @@ def open_staging(out_dir: Path, variants: list[Variant], hashes: list[str], forc
     if not force and (out_dir / "parts").is_dir():
         _carry_parts(out_dir, staging, {h: v.index for v, h in zip(variants, hashes, strict=True)})
     return staging
+
+
+def open_column_staging(out_dir: Path, force: bool) -> Path:
+    """The staging directory of a columnar sweep into ``out_dir``: an interrupted run's part files
+    kept, and a finished sweep's in ``out_dir`` linked in (a batch's part name is the hash of its
+    values and seeds, so a part of the same name is that batch's result); ``force``: none."""
+    from nlcx import rundir
+
+    staging = rundir.open_partial(out_dir, keep=("parts",), fresh=force)
+    if not force and (out_dir / "parts").is_dir():
+        for path in sorted((out_dir / "parts").glob("*.index.parquet")):
+            part = path.name.removesuffix(".index.parquet")
+            if not (staging / "parts" / path.name).exists():
+                rundir.link_or_copy(
+                    out_dir / "parts" / f"{part}.metrics.parquet", staging / "parts" / f"{part}.metrics.parquet"
+                )
+                rundir.link_or_copy(path, staging / "parts" / path.name)
+    return staging

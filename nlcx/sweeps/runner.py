@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import functools
 import gc
 import os
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,12 +15,12 @@ from typing import Any
 import pandas as pd
 
 from nlcx.errors import NlcxError
-from nlcx.sweeps.assembly import assemble, write_manifest, write_report
+from nlcx.sweeps.assembly import assemble, assemble_columns, write_manifest, write_report
 from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, run_batch, set_threads
 from nlcx.sweeps.cluster import ClusterSpec
 from nlcx.sweeps.cluster import make as make_cluster
-from nlcx.sweeps.planning import SweepSection, Variant, load, plan
-from nlcx.sweeps.resuming import completed, open_staging
+from nlcx.sweeps.planning import ColumnPlan, SweepSection, Variant, base_digest, expand_columns, load, plan
+from nlcx.sweeps.resuming import completed, open_column_staging, open_staging
 from nlcx.sweeps.sizing import check as check_plan_size
 
 
@@ -59,31 +60,47 @@ def make_executor(
 
 @dataclass
 class SweepOutcome:
-    """What :func:`run` returns: the run directory, sweep.csv's rows, how many variants were
-    computed and how many were already done, and the wall time in seconds."""
+    """What :func:`run` returns: the run directory, how many variants were computed and how many
+    were already done, the count of each status, the wall time in seconds, and (read from the
+    run directory when first asked for) the table sweep, one row a variant."""
 
     out_dir: Path
-    index: pd.DataFrame
     computed: int
     skipped: int
     wall: float
+    statuses: dict[str, int]
     #: The sweep's report.html, when one was written.
     report: Path | None = None
     #: Seconds spent writing the report (0 without one).
     report_s: float = 0.0
+    #: How the variants were run: "columnar" or "per-variant" (and why, for the latter).
+    path: str = ""
+    _index: pd.DataFrame | None = field(default=None, repr=False)
+
+    @property
+    def index(self) -> pd.DataFrame:
+        """The table sweep: one row a variant (index, seed, config hash, values, status, message)."""
+        if self._index is None:
+            from nlcx.results import read_output_table
+
+            self._index = read_output_table(self.out_dir, "sweep")
+        return self._index
 
 
 def _run_batches(
-    batches: list[Batch],
+    batches: Sequence[Any],
     executor: str,
     jobs: int,
     scheduler: str | None,
     on_batch: Callable[[BatchResult], None],
     cluster: ClusterSpec | None = None,
+    task: Callable[[Any], BatchResult] = run_batch,
 ) -> None:
-    """Simulate ``batches`` on ``executor`` (:func:`make_executor`), handing each result to
-    ``on_batch`` as it completes. The kernel must be loaded already (:func:`nlcx.engine.load_kernel`):
-    the process pool's workers fork from this process and inherit it."""
+    """Run ``task`` on each of ``batches`` on ``executor`` (:func:`make_executor`), handing each
+    result to ``on_batch`` as it completes (``task``: :func:`~nlcx.sweeps.batches.run_batch`,
+    or :func:`~nlcx.sweeps.columnar.run_column_batch`). The kernel must be loaded already
+    (:func:`nlcx.engine.load_kernel`): the process pool's workers fork from this process and
+    inherit it."""
     # nothing of the caller's is frozen: whatever this sweep freezes is thawed at its end, so the
     # caller's collector is as it was (serial batches settle their heap here, too)
     thawed = gc.get_freeze_count() == 0
@@ -96,9 +113,9 @@ def _run_batches(
     try:
         results: Iterable[BatchResult]
         if pool is None:
-            results = (run_batch(b) for b in batches)
+            results = (task(b) for b in batches)
         else:
-            futures: list[Future[BatchResult]] = [pool.submit(run_batch, b, False) for b in batches]
+            futures: list[Future[BatchResult]] = [pool.submit(task, b) for b in batches]
             results = (f.result() for f in as_completed(futures))
         for result in results:
             on_batch(result)
@@ -138,8 +155,8 @@ class _Tally:
     def add(self, result: BatchResult) -> None:
         """Count a finished batch, then report."""
         self.written.add(result.part)
-        self.finished += len(result.index)
-        self.failures += sum(r["status"] == "failed" for r in result.index)
+        self.finished += result.variants
+        self.failures += result.statuses.get("failed", 0)
         self.report()
 
 
@@ -155,43 +172,122 @@ def run(
     with_report: bool = True,
     cluster: ClusterSpec | None = None,
 ) -> SweepOutcome:
-    """Run (or resume) a sweep; write sweep.csv, metrics.csv, config.yaml, manifest.json and,
-    ``with_report``, the report, and rename the whole directory into place (:mod:`nlcx.sweeps`).
+    """Run (or resume) a sweep; write the tables sweep and metrics (``sweep.format``),
+    config.yaml, manifest.json and, ``with_report``, the report, and rename the whole directory
+    into place (:mod:`nlcx.sweeps`). The variants run from columns where they can
+    (:mod:`nlcx.sweeps.columnar`), else config by config.
     ``out_dir`` is claimed (:func:`nlcx.rundir.claim`) before any variant is computed;
     ``progress(finished, total, failed)`` is called before the first batch and after each;
     ``cluster`` (with ``executor="dask"``): where the workers run (:mod:`nlcx.sweeps.cluster`)."""
-    from nlcx import engine, rundir
+    from nlcx import config as cfg
+    from nlcx.sweeps import columnar
 
     start = time.perf_counter()
     base_raw, spec, base = load(path, overrides)
     out_dir = Path(out_dir or base.section.outputs.dir or Path("results") / base.name)
     check_plan_size(spec, base, out_dir)  # before anything is expanded
-    variants, hashes = plan(base_raw, spec)
-    workers = 1 if executor == "serial" else jobs
-    engine.check_sweep_memory(base, min(spec.batch_size, len(variants)) * workers)
-    with rundir.claim(out_dir):
-        staging = open_staging(out_dir, variants, hashes, force)
-        done = completed(staging)
-        todo = [i for i, h in enumerate(hashes) if h not in done]
-        batches = _batches(base_raw, spec, variants, hashes, todo, staging)
-        tally = _Tally(len(variants), len(variants) - len(todo), progress)
+    columns = expand_columns(spec, cfg.interpolate(base_raw)) if spec.columnar else None
+    found = columnar.packing(base_raw, spec, columns) if spec.columnar else "sweep.columnar is false"
+    job = _Job(
+        base_raw, spec, base, out_dir, executor, jobs, scheduler, force, progress, cluster, overrides or [], start
+    )
+    if isinstance(found, columnar.Packing) and columns is not None:
+        return job.columnar(columns, found, with_report)
+    return job.per_variant(with_report, f"per-variant: {found}")
+
+
+@dataclass
+class _Job:
+    """A sweep's run, on one of its two paths (:meth:`columnar`, :meth:`per_variant`)."""
+
+    base_raw: dict[str, Any]
+    spec: SweepSection
+    base: Any
+    out_dir: Path
+    executor: str
+    jobs: int
+    scheduler: str | None
+    force: bool
+    progress: Callable[[int, int, int], None] | None
+    cluster: ClusterSpec | None
+    overrides: list[str]
+    start: float
+
+    @property
+    def workers(self) -> int:
+        return 1 if self.executor == "serial" else self.jobs
+
+    def _run(self, batches: Sequence[Any], tally: _Tally, task: Callable[[Any], BatchResult]) -> float:
+        """Run the batches (the kernel loaded first, once, before the workers fork); the time they started."""
+        from nlcx import engine
+
         tally.report()
         if batches:
-            engine.load_kernel()  # here, once, before the workers fork (_run_batches)
+            engine.load_kernel()
         planned = time.perf_counter()
-        _run_batches(batches, executor, jobs, scheduler, tally.add, cluster)
-        simulated = time.perf_counter()
-        index = assemble(staging, variants, hashes, base_raw, spec, tally.written)
+        _run_batches(batches, self.executor, self.jobs, self.scheduler, tally.add, self.cluster, task)
+        return planned
+
+    def _finish(self, staging: Path, statuses: dict[str, int], timings: dict[str, float], variants: int,
+                computed: int, how: str, with_report: bool) -> SweepOutcome:  # fmt: skip
+        """manifest.json, the report, the directory renamed into place."""
+        from nlcx import rundir
+
         end = time.perf_counter()
-        timings = {"plan": planned - start, "batches": simulated - planned, "assemble": end - simulated}
-        timings["wall"] = end - start
+        timings["wall"] = end - self.start
         write_manifest(
-            staging, index, spec, timings, name=base.name, variants=len(variants), computed=len(todo),
-            executor=executor, jobs=jobs, overrides=overrides or [], started=start,
+            staging, statuses, self.spec, timings, name=self.base.name, variants=variants, computed=computed,
+            executor=self.executor, jobs=self.jobs, overrides=self.overrides, started=self.start, path=how,
         )  # fmt: skip
-        page = write_report(staging) if with_report and not index.empty else None
+        page = write_report(staging) if with_report and variants else None
         reported = time.perf_counter()
-        rundir.install(staging, out_dir)
-    report = out_dir / page.name if page is not None else None
-    skipped = len(variants) - len(todo)
-    return SweepOutcome(out_dir, index, len(todo), skipped, end - start, report, reported - end if page else 0.0)
+        rundir.install(staging, self.out_dir)
+        report = self.out_dir / page.name if page is not None else None
+        return SweepOutcome(self.out_dir, computed, variants - computed, end - self.start, statuses, report,
+                            reported - end if page else 0.0, how)  # fmt: skip
+
+    def columnar(self, plan: ColumnPlan, found: Any, with_report: bool) -> SweepOutcome:
+        """The variants packed from columns, in batches of :func:`~nlcx.sweeps.columnar.batch_size`."""
+        from nlcx import engine, rundir
+        from nlcx.sweeps import columnar
+
+        size = columnar.batch_size(self.spec, plan.n, found.record_bytes)
+        engine.check_sweep_memory(self.base, min(size, plan.n) * self.workers)
+        metrics = tuple(self.spec.metrics) if self.spec.metrics is not None else None
+        with rundir.claim(self.out_dir):
+            staging = open_column_staging(self.out_dir, self.force)
+            batches = columnar.column_batches(
+                self.base_raw, plan, found, base_digest(self.base_raw, self.spec), staging, size, metrics
+            )
+            todo = [b for b in batches if not (staging / "parts" / f"{b.part}.index.parquet").exists()]
+            tally = _Tally(plan.n, plan.n - sum(b.n for b in todo), self.progress)
+            planned = self._run(todo, tally, columnar.run_column_batch)
+            simulated = time.perf_counter()
+            statuses = assemble_columns(staging, [(b.first, b.part) for b in batches], self.base_raw, self.spec)
+            timings = {"plan": planned - self.start, "batches": simulated - planned}
+            timings["assemble"] = time.perf_counter() - simulated
+            computed = sum(b.n for b in todo)
+            return self._finish(staging, statuses, timings, plan.n, computed, "columnar", with_report)
+
+    def per_variant(self, with_report: bool, how: str) -> SweepOutcome:
+        """The variants one config each (:func:`~nlcx.sweeps.batches.run_batch`)."""
+        from nlcx import engine, rundir
+
+        variants, hashes = plan(self.base_raw, self.spec)
+        engine.check_sweep_memory(self.base, min(self.spec.batch_size, len(variants)) * self.workers)
+        with rundir.claim(self.out_dir):
+            staging = open_staging(self.out_dir, variants, hashes, self.force)
+            done = completed(staging)
+            todo = [i for i, h in enumerate(hashes) if h not in done]
+            batches = _batches(self.base_raw, self.spec, variants, hashes, todo, staging)
+            tally = _Tally(len(variants), len(variants) - len(todo), self.progress)
+            task = run_batch if self.executor == "serial" else functools.partial(run_batch, return_metrics=False)
+            planned = self._run(batches, tally, task)
+            simulated = time.perf_counter()
+            index = assemble(staging, variants, hashes, self.base_raw, self.spec, tally.written)
+            statuses = {str(k): int(v) for k, v in index.status.value_counts().to_dict().items()} if len(index) else {}
+            timings = {"plan": planned - self.start, "batches": simulated - planned}
+            timings["assemble"] = time.perf_counter() - simulated
+            outcome = self._finish(staging, statuses, timings, len(variants), len(todo), how, with_report)
+            outcome._index = index
+            return outcome

@@ -1,0 +1,469 @@
+"""Ensembles: many variants of one prepared experiment that differ only in numbers of its packed arrays.
+
+A columnar sweep (:mod:`nlcx.sweeps.columnar`) prepares one experiment, the :class:`Template`,
+and finds where each varied value lands in the arrays the kernel reads (its :class:`Slot`\\ s).
+:func:`simulate_ensemble` then packs a batch of variants straight from the value columns: the
+template's kernel arguments (:mod:`nlcx.engine.simulate`) repeated once per variant, each slot
+written from its column, every call of the template's loop structure run over the whole batch.
+:func:`measure_ensemble` computes the metric rows of :func:`nlcx.engine.measure_runs` for the
+batch as columns, with the same metric functions on the same rows, so the same bits.
+
+The item arrays a slot can address (:data:`ITEM_FIELDS`) are every per-loop array of the
+kernel's arguments: the plant's x0, p and bounds, the controller's cp and cs0, the reference
+rows, the loop elements' parameters, states and data, the disturbance and the friction axes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from nlcx import metrics as m
+from nlcx.engine.batching import group_key, groups_of, kernel_calls
+from nlcx.engine.measure import (
+    _NAN_NOTES,
+    _input_step,
+    _measured_outputs,
+    _metric_plans,
+    _metric_unit,
+    _signal_metrics,
+    _time_origin,
+)
+from nlcx.engine.prepared import TABLEAUS, Item, Prepared, items_of
+from nlcx.engine.simulate import (
+    _controller_call,
+    _failure_reason,
+    _loop_elements,
+    _plant_call,
+    _plant_forces,
+    _records,
+)
+from nlcx.kernel.friction import FA, FRICTION_NONE, FRICTIONAL, FRICTIONLESS
+from nlcx.kernel.structures import Integration, Outcome, method_of
+
+
+def _element_params(item: Item) -> np.ndarray:
+    return np.concatenate([np.zeros(0), *(e.params for e in item.elements)])
+
+
+def _element_states(item: Item) -> np.ndarray:
+    return np.concatenate([np.zeros(0), *(e.state for e in item.elements)])
+
+
+#: The per-loop arrays of an item, by name, and the kernel argument (structure, field) each becomes.
+ITEM_FIELDS: dict[str, tuple[Callable[[Item], np.ndarray | None], str, str]] = {
+    "x0": (lambda it: it.plant.x0, "plant", "x0"),
+    "p": (lambda it: it.plant.p, "plant", "p"),
+    "bounds": (lambda it: it.plant.bounds, "plant", "bounds"),
+    "cp": (lambda it: it.controller.cp, "controller", "cp"),
+    "cs0": (lambda it: it.controller.cs0, "controller", "cs0"),
+    "ref": (lambda it: it.ref, "controller", "ref"),
+    "ep": (_element_params, "elements", "ep"),
+    "es0": (_element_states, "elements", "es0"),
+    "data": (lambda it: it.element_data, "elements", "data"),
+    "dist": (lambda it: it.dist, "forces", "dist"),
+    "friction": (lambda it: it.friction, "forces", "friction"),
+}
+
+
+@dataclass(frozen=True)
+class Slot:
+    """Where a varied value lands: the flat ``positions`` of field ``field`` (:data:`ITEM_FIELDS`)
+    of the template's loop ``item`` hold the value itself."""
+
+    item: int
+    field: str
+    positions: tuple[int, ...]
+
+
+@dataclass
+class Template:
+    """One variant's prepared experiment and its closed loops: what every variant of an ensemble shares."""
+
+    prepared: Prepared
+    items: list[Item]
+
+    @classmethod
+    def of(cls, prepared: Prepared) -> Template:
+        return cls(prepared, items_of(prepared))
+
+    def arrays(self) -> list[dict[str, np.ndarray | None]]:
+        """Each loop's arrays (:data:`ITEM_FIELDS`)."""
+        return [{name: get(item) for name, (get, _, _) in ITEM_FIELDS.items()} for item in self.items]
+
+    def structure(self) -> tuple[Any, ...]:
+        """What the variants of an ensemble must share, numbers of the item arrays aside: the
+        loops' compiled functions and sizes (:func:`~nlcx.engine.batching.group_key`), their
+        controller steps, references, logs and array shapes, the plant's signals, the metric
+        plans and definitions, the grid and the integrator; and no tuned controller."""
+        p = self.prepared
+        shapes = tuple(tuple(None if a is None else a.shape for a in arrays.values()) for arrays in self.arrays())
+        loops = tuple(
+            (group_key(it), id(it.controller.step), it.controller.label, it.controller.reference_signals,
+             it.controller.reference_offsets, it.controller.log_names)
+            for it in self.items
+        )  # fmt: skip
+        plans = tuple(sorted((s, repr(plan)) for s, plan in _metric_plans(p).items()))
+        sec = p.experiment.section
+        plant = p.plant
+        signals = tuple((s, plant.unit_of(s)) for s in [*plant.state_names, *plant.input_names])
+        return (loops, shapes, plans, sec.metrics.model_dump_json(), sec.simulation.integrator,
+                p.grid.dt, p.grid.n_steps, plant.name, signals, bool(p.tuning))  # fmt: skip
+
+
+def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    if a is None or b is None:
+        return a is b
+    return a.shape == b.shape and np.array_equal(a, b, equal_nan=True)
+
+
+def changed_positions(base: Template, probe: Template, base_value: float, value: float) -> list[Slot] | str:
+    """The slots of a value set to ``value`` in ``probe`` and ``base_value`` in ``base`` (two
+    templates of the same structure): every entry of the item arrays that differs between
+    them, each of which must hold the value itself in both; else why not (a text)."""
+    if probe.structure() != base.structure():
+        return "it changes the loops' structure (a compiled function, a shape or a metric plan)"
+    slots = []
+    for i, (a, b) in enumerate(zip(base.arrays(), probe.arrays(), strict=True)):
+        for name, x in a.items():
+            y = b[name]
+            if x is None or y is None:
+                continue
+            differ = np.flatnonzero(~((x == y) | (np.isnan(x) & np.isnan(y))))
+            if differ.size == 0:
+                continue
+            flat_x, flat_y = x.reshape(-1)[differ], y.reshape(-1)[differ]
+            if not (np.all(flat_x == base_value) and np.all(flat_y == value)):
+                return f"it is not packed as itself (it changes {name} of loop {i} to other numbers)"
+            slots.append(Slot(i, name, tuple(int(d) for d in differ)))
+    return slots
+
+
+def substituted(
+    template: Template, slots: Mapping[str, Sequence[Slot]], values: Mapping[str, float]
+) -> list[dict[str, np.ndarray | None]]:
+    """The template's item arrays with ``values`` written into their slots (a prediction, which
+    a probe's prepared arrays must equal)."""
+    arrays = [{k: None if v is None else v.copy() for k, v in a.items()} for a in template.arrays()]
+    for key, key_slots in slots.items():
+        for slot in key_slots:
+            target = arrays[slot.item][slot.field]
+            assert target is not None
+            target.reshape(-1)[list(slot.positions)] = values[key]
+    return arrays
+
+
+def same_arrays(a: list[dict[str, np.ndarray | None]], b: list[dict[str, np.ndarray | None]]) -> bool:
+    """Whether two lists of item arrays are equal, bit for bit (NaN equal to NaN)."""
+    return all(_same(x[k], y[k]) for x, y in zip(a, b, strict=True) for k in x)
+
+
+@dataclass
+class EnsembleCall:
+    """One kernel call of an ensemble: its rows (variant e, loop i), its records and outcome."""
+
+    variants: np.ndarray
+    loops: np.ndarray
+    X: np.ndarray
+    U: np.ndarray
+    status: np.ndarray
+    n_valid: np.ndarray
+    fail_index: np.ndarray
+    bounds: np.ndarray
+
+
+def _expanded(base: np.ndarray, n_variants: int, n_rows: int) -> np.ndarray:
+    """A call's array for one variant (rows the pattern's loops, or one shared row) repeated for
+    ``n_variants`` variants: (n_variants * n_rows, ...), variant-major."""
+    rows = base if base.shape[0] == n_rows else np.repeat(base, n_rows, axis=0)
+    return np.ascontiguousarray(np.tile(rows, (n_variants,) + (1,) * (rows.ndim - 1)))
+
+
+def _pattern(indices: list[int], n_items: int, n_variants: int) -> np.ndarray:
+    """The loops of a call for one variant, given the call's rows in the ensemble's item order
+    (variant-major): the same loops for every variant, in the same order."""
+    idx = np.asarray(indices)
+    pattern = idx[: idx.size // n_variants] % n_items
+    expected = (np.arange(n_variants)[:, None] * n_items + pattern[None, :]).ravel()
+    if not np.array_equal(idx, expected):  # pragma: no cover - groups_of keeps the item order
+        raise AssertionError("an ensemble's kernel call does not hold every variant's loops alike")
+    return pattern
+
+
+def _call_arguments(
+    template: Template, pattern: np.ndarray, step: Any, n_variants: int,
+    slots: Mapping[str, Sequence[Slot]], columns: Mapping[str, np.ndarray],
+) -> tuple[Any, Any, Any, Any]:  # fmt: skip
+    """(plant, controller, elements, forces) of a call: the pattern's loops of the template,
+    repeated per variant, each slot's positions written from its column."""
+    group = [template.items[i] for i in pattern]
+    parts: dict[str, Any] = {
+        "plant": _plant_call(group),
+        "controller": _controller_call(group, step),
+        "elements": _loop_elements(group),
+        "forces": _plant_forces(group),
+    }
+    n_rows = len(group)
+    filled: dict[tuple[str, str], np.ndarray] = {}
+    for key, key_slots in slots.items():
+        for slot in key_slots:
+            _, part, name = ITEM_FIELDS[slot.field]
+            if (part, name) not in filled:
+                filled[part, name] = _expanded(getattr(parts[part], name), n_variants, n_rows)
+            view = filled[part, name].reshape(n_variants, n_rows, -1)
+            for j in np.flatnonzero(pattern == slot.item):
+                view[:, j, list(slot.positions)] = columns[key][:, None]
+    for (part, name), array in filled.items():
+        parts[part] = parts[part]._replace(**{name: array})
+    for part, names in (("plant", ("x0",)), ("controller", ("cp", "cs0")), ("elements", ("ep", "es0"))):
+        for name in names:  # the per-loop states and rows the kernel writes or reads per row
+            if (part, name) not in filled:
+                parts[part] = parts[part]._replace(**{name: _expanded(getattr(parts[part], name), n_variants, n_rows)})
+    return parts["plant"], parts["controller"], parts["elements"], parts["forces"]
+
+
+def simulate_ensemble(
+    template: Template, slots: Mapping[str, Sequence[Slot]], columns: Mapping[str, np.ndarray], n_variants: int
+) -> list[EnsembleCall]:
+    """Simulate ``n_variants`` variants of ``template``, variant e having ``columns[key][e]`` in
+    the slots of each key: the calls :func:`nlcx.engine.simulate_items` makes for the variants'
+    items (the same loops in the same kernel calls, so the same bits), their arrays packed from
+    the columns instead of built per variant. No controller logs or friction forces are kept."""
+    from nlcx.kernel.integrator import simulate
+
+    sim = template.prepared.experiment.section.simulation
+    grid = template.prepared.grid
+    tableau = TABLEAUS[sim.integrator]
+    integration = Integration(method=method_of(sim.integrator), rk_a=tableau.a, rk_b=tableau.b, dt=grid.dt)
+    items = template.items
+    keys = [group_key(item) for item in items]
+    calls = []
+    for call in kernel_calls(groups_of(keys * n_variants), items * n_variants):
+        pattern = _pattern(call.indices, len(items), n_variants)
+        plant, controller, elements, forces = _call_arguments(template, pattern, call.step, n_variants, slots, columns)
+        n_b = n_variants * pattern.size
+        group = [items[i] for i in pattern]
+        records = _records(group, grid.t.size, 1)
+        records = records._replace(
+            **{name: np.empty((n_b, *getattr(records, name).shape[1:])) for name in records._fields}
+        )
+        outcome = Outcome(*(np.zeros(n_b, dtype=np.int64) for _ in range(3)))
+        friction = forces.friction
+        frictional = bool(np.any(friction[..., FA.model].astype(np.int64) != FRICTION_NONE))
+        simulate(integration, plant, controller, elements, forces, records, outcome,
+                 FRICTIONAL if frictional else FRICTIONLESS)  # fmt: skip
+        calls.append(EnsembleCall(
+            variants=np.repeat(np.arange(n_variants), pattern.size), loops=np.tile(pattern, n_variants),
+            X=records.X, U=records.U, status=outcome.status, n_valid=outcome.n_valid,
+            fail_index=outcome.fail_index, bounds=np.broadcast_to(plant.bounds, (n_b, plant.bounds.shape[-1])),
+        ))  # fmt: skip
+    return calls
+
+
+@dataclass
+class LoopRows:
+    """One loop's rows for every variant of an ensemble: the records of its runs, in variant order."""
+
+    X: np.ndarray  # (n_variants, n_k, n_x)
+    U: np.ndarray
+    status: np.ndarray
+    n_valid: np.ndarray
+    fail_index: np.ndarray
+    bounds: np.ndarray
+
+
+def loop_rows(calls: list[EnsembleCall], n_loops: int, n_variants: int) -> list[LoopRows]:
+    """The runs of each loop of the template, gathered from the calls, in variant order."""
+    out = []
+    for i in range(n_loops):
+        parts = [(c, np.flatnonzero(c.loops == i)) for c in calls]
+        parts = [(c, rows) for c, rows in parts if rows.size]
+        (call, rows), *rest = parts
+        if rest:  # pragma: no cover - a loop runs in one call
+            raise AssertionError("an ensemble's loop is split between kernel calls")
+        out.append(LoopRows(call.X[rows], call.U[rows], call.status[rows], call.n_valid[rows],
+                            call.fail_index[rows], call.bounds[rows]))  # fmt: skip
+    return out
+
+
+@dataclass
+class MetricColumns:
+    """The long-form metric rows of an ensemble as columns (the columns of metrics.csv): text
+    columns as codes into their category lists (``-1``: missing)."""
+
+    variant: np.ndarray
+    value: np.ndarray
+    codes: dict[str, np.ndarray]
+    categories: dict[str, list[str]]
+
+
+class _Categories:
+    """Text columns as codes into lists of their distinct values."""
+
+    def __init__(self, names: Sequence[str]) -> None:
+        self.values: dict[str, list[str]] = {n: [] for n in names}
+        self._index: dict[str, dict[str, int]] = {n: {} for n in names}
+
+    def code(self, column: str, text: str | None) -> int:
+        if text is None or text == "":
+            return -1
+        index = self._index[column]
+        if text not in index:
+            index[text] = len(self.values[column])
+            self.values[column].append(text)
+        return index[text]
+
+
+def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> list[tuple[str, str, np.ndarray]]:
+    """(signal, metric, values over the ok runs) of loop i, in the order :func:`nlcx.engine.measure_runs`
+    writes them: the outputs it follows, the other outputs after an input step, the inputs."""
+    p = template.prepared
+    plant, cfg, run = p.plant, p.experiment.section.metrics, _RunView(template.items[i].controller)
+    plans = _metric_plans(p)
+    t = p.grid.t
+    n_samples = t.size
+    X, U = rows.X[ok], rows.U[ok]
+    out: list[tuple[str, str, np.ndarray]] = []
+
+    def blocked(fn: Callable[[np.ndarray], Mapping[str, np.ndarray]], signal: str, data: np.ndarray) -> None:
+        size = m.rows_per_block(n_samples)
+        pieces = [fn(data[k : k + size]) for k in range(0, data.shape[0], size)]
+        for name in pieces[0]:
+            out.append((signal, name, np.concatenate([np.asarray(piece[name], dtype=float) for piece in pieces])))
+
+    followed = _measured_outputs(run, plant)  # type: ignore[arg-type]
+    ref = template.items[i].ref
+    for s in followed:
+        j = plant.output_names.index(s)
+        r = ref[:, template.items[i].controller.reference_signals.index(s)]
+
+        def tracking(y: np.ndarray, s: str = s, r: np.ndarray = r) -> Mapping[str, np.ndarray]:
+            return _signal_metrics(t, y, r, plans[s], cfg)
+
+        blocked(tracking, s, _output_rows(X, plant.C[j]))
+    step = _input_step(run, plant, plans)  # type: ignore[arg-type]
+    if step is not None:
+        for s in [s for s in plant.output_names if s not in followed]:
+            j = plant.output_names.index(s)
+
+            def info(y: np.ndarray, t_step: float = step.t_step) -> Mapping[str, np.ndarray]:
+                values = m.step_info(t, y, t_step=t_step, settling_band=cfg.settling_band, rise_limits=cfg.rise_limits)
+                return m.measured_from(values, t_step, _time_origin(t_step, cfg))  # type: ignore[arg-type]
+
+            blocked(info, s, _output_rows(X, plant.C[j]))
+    for j, name in enumerate(plant.input_names):
+        blocked(lambda u: m.input_metrics(t, u), name, np.ascontiguousarray(U[:, :, j]))
+    return out
+
+
+class _RunView:
+    """The part of a :class:`~nlcx.engine.Run` the measuring helpers read: its controller."""
+
+    def __init__(self, controller: Any) -> None:
+        self.controller = controller
+
+
+def _output_rows(X: np.ndarray, c_row: np.ndarray) -> np.ndarray:
+    """y = x c of each run (rows), as :func:`nlcx.engine.measure._outputs` forms it."""
+    (nonzero,) = np.nonzero(c_row)
+    if nonzero.size == 1 and c_row[nonzero[0]] == 1.0:
+        return np.ascontiguousarray(X[:, :, nonzero[0]])
+    return np.stack([x @ c_row for x in X])
+
+
+def measure_ensemble(template: Template, rows: list[LoopRows], n_variants: int) -> MetricColumns:
+    """The metric rows of every variant's runs (:func:`nlcx.engine.measure_runs`'s rows, with
+    the variant's position in the column ``variant``), as columns: by variant, then loop (the
+    template's order), then row."""
+    plant, grid = template.prepared.plant, template.prepared.grid
+    cats = _Categories(("controller", "signal", "metric", "unit", "status", "note"))
+    blocks: list[_Block] = []
+    for i, loop in enumerate(rows):
+        label = template.items[i].controller.label
+        ok = loop.status == 0
+        if ok.any():
+            blocks.append(_ok_block(template, i, loop, ok, cats, label))
+        if (~ok).any():
+            followed = _measured_outputs(_RunView(template.items[i].controller), plant)  # type: ignore[arg-type]
+            blocks.append(_failed_block(plant, grid, loop, ~ok, followed, cats, label, i))
+    return _ordered(blocks, cats, n_variants, len(rows))
+
+
+@dataclass
+class _Block:
+    """Rows of one loop for some variants: ``n_rows`` rows each, variant-major."""
+
+    variants: np.ndarray
+    loop: int
+    n_rows: int
+    codes: dict[str, np.ndarray]
+    value: np.ndarray
+
+
+def _ok_block(template: Template, i: int, loop: LoopRows, ok: np.ndarray, cats: _Categories, label: str) -> _Block:
+    plant = template.prepared.plant
+    values = _ok_values(template, i, loop, ok)
+    variants = np.flatnonzero(ok)
+    value = np.stack([v for _, _, v in values], axis=1).reshape(-1)  # variant-major
+    signal = np.array([cats.code("signal", s) for s, _, _ in values])
+    metric = np.array([cats.code("metric", name) for _, name, _ in values])
+    unit = np.array([cats.code("unit", _metric_unit(name, plant.unit_of(s))) for s, name, _ in values])
+    nan_note = np.array([cats.code("note", _NAN_NOTES.get(name, "undefined")) for _, name, _ in values])
+    n = variants.size
+    codes = {
+        "controller": np.full(value.size, cats.code("controller", label)),
+        "signal": np.tile(signal, n), "metric": np.tile(metric, n), "unit": np.tile(unit, n),
+        "status": np.full(value.size, cats.code("status", "ok")),
+        "note": np.where(np.isnan(value), np.tile(nan_note, n), -1),
+    }  # fmt: skip
+    return _Block(variants, i, len(values), codes, value)
+
+
+def _failed_block(plant: Any, grid: Any, loop: LoopRows, failed: np.ndarray, followed: list[str],
+                  cats: _Categories, label: str, i: int) -> _Block:  # fmt: skip
+    """The rows of the runs that stopped: t_fail, and a missing settling time per followed output."""
+    variants = np.flatnonzero(failed)
+    t_fail = grid.t[loop.n_valid[variants] - 1] + grid.dt
+    reasons = [
+        cats.code(
+            "note", _failure_reason(plant, int(loop.status[e]), int(loop.fail_index[e]), float(tf), loop.bounds[e])
+        )
+        for e, tf in zip(variants, t_fail, strict=True)
+    ]
+    n_rows = 1 + len(followed)
+    value = np.full((variants.size, n_rows), math.nan)
+    value[:, 0] = t_fail
+    signal = np.array([cats.code("signal", s) for s in ["all", *followed]])
+    metric = np.array([cats.code("metric", name) for name in ["t_fail", *(["settling_time"] * len(followed))]])
+    n = variants.size
+    codes = {
+        "controller": np.full(value.size, cats.code("controller", label)),
+        "signal": np.tile(signal, n), "metric": np.tile(metric, n),
+        "unit": np.full(value.size, cats.code("unit", "s")),
+        "status": np.full(value.size, cats.code("status", "unstable")),
+        "note": np.repeat(np.array(reasons), n_rows),
+    }  # fmt: skip
+    return _Block(variants, i, n_rows, codes, value.reshape(-1))
+
+
+def _ordered(blocks: list[_Block], cats: _Categories, n_variants: int, n_loops: int) -> MetricColumns:
+    """The blocks' rows in :func:`nlcx.engine.measure_runs`'s order (by variant, then loop, then
+    row), each row put in its place."""
+    counts = np.zeros((n_variants, n_loops), dtype=np.int64)
+    for b in blocks:
+        counts[b.variants, b.loop] = b.n_rows
+    starts = np.concatenate([[0], np.cumsum(counts.reshape(-1))[:-1]]).reshape(n_variants, n_loops)
+    total = int(counts.sum())
+    variant = np.repeat(np.arange(n_variants), counts.sum(axis=1))
+    value = np.empty(total)
+    codes = {k: np.empty(total, dtype=np.int32) for k in cats.values}
+    for b in blocks:
+        pos = (starts[b.variants, b.loop][:, None] + np.arange(b.n_rows)[None, :]).reshape(-1)
+        value[pos] = b.value
+        for k, c in b.codes.items():
+            codes[k][pos] = c
+    return MetricColumns(variant, value, codes, cats.values)

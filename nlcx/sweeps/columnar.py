@@ -1,0 +1,321 @@
+"""Columnar sweeps: a plan of numbers packed straight into the kernel's arrays.
+
+When every varied value is a number that lands, as itself, in the arrays the kernel reads
+(plant parameters, gains, schedule ranges, initial states, bounds, uncertainty amplitudes),
+the variants need no config of their own. :func:`packing` finds out, once per sweep, by
+probing: it prepares the first variant (the template), then each key at its column's
+extremes, and compares the kernel's arrays (:func:`nlcx.engine.ensembles.changed_positions`).
+A key qualifies when the entries it changes hold the value itself, and the loops' structure
+(compiled functions, shapes, metric plans) stays the same. Every corner of the box the
+columns span is then prepared and validated, and its arrays must equal the template's with the
+corner's values written in: the columns are validated once, as intervals, instead of one
+config per variant (a field's bounds and the linear checks between fields hold on the whole
+box when they hold at its corners). Anything else, a varied text or section, a key that
+changes the loop structure or enters the arrays transformed, a tuned controller, uncertainties
+drawing from the variant's seed, or a corner that fails validation, keeps the sweep on the
+per-variant path (:mod:`nlcx.sweeps.batches`), which validates and prepares each variant.
+
+:func:`run_column_batch` is a worker's task: it packs its variants from the columns, simulates
+them (:func:`nlcx.engine.ensembles.simulate_ensemble`), measures them as columns and writes the
+batch's part files in Parquet: the metrics, then the index (sweep.csv's rows), which marks the
+batch complete.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlcx import config as cfg
+from nlcx.errors import NlcxError
+from nlcx.sweeps.planning import ColumnPlan, SweepSection, Variant, variant_hash
+
+#: Up to this many varied keys every corner of their box is probed; above it, the two corners
+#: of all lows and all highs.
+MAX_CORNER_KEYS = 6
+#: The records of one batch (states and inputs of every loop at every sample) stay below this.
+BATCH_RECORD_BYTES = 64 * 2**20
+#: A plan is cut into about this many batches (fewer when a batch would be smaller than the
+#: sweep's batch_size), whatever the number of workers, so that the outputs do not depend on it.
+TARGET_BATCHES = 64
+
+
+@dataclass(frozen=True)
+class Packing:
+    """Where each varied key lands in the template's arrays (:class:`nlcx.engine.ensembles.Slot`)."""
+
+    slots: dict[str, tuple[Any, ...]]
+    #: The bytes of one variant's records (every loop's states and inputs at every sample).
+    record_bytes: int
+
+
+class _Probe:
+    """Templates of the sweep's base config with some values and a seed set."""
+
+    def __init__(self, base_raw: dict[str, Any]) -> None:
+        self.interpolated = cfg.Interpolated.of(base_raw)
+        self.base = cfg.build(self.interpolated.resolved)
+
+    def template(self, values: dict[str, Any], seed: int) -> Any:
+        from nlcx import engine
+        from nlcx.engine.ensembles import Template
+
+        settings = Variant(0, values, seed).settings()
+        return Template.of(engine.prepare(cfg.build(self.interpolated.resolve(settings), like=self.base)))
+
+
+def _probe_values(column: np.ndarray, first: Any) -> list[Any]:
+    """The column's extremes other than the template's own value (as Python numbers)."""
+    return [v for v in dict.fromkeys([column.min().item(), column.max().item()]) if v != first]
+
+
+def _corners(columns: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+    """The corners of the box the columns span (:data:`MAX_CORNER_KEYS`)."""
+    ranges = {k: (c.min().item(), c.max().item()) for k, c in columns.items()}
+    if len(ranges) <= MAX_CORNER_KEYS:
+        return [dict(zip(ranges, corner, strict=True)) for corner in itertools.product(*ranges.values())]
+    return [{k: r[0] for k, r in ranges.items()}, {k: r[1] for k, r in ranges.items()}]
+
+
+def packing(base_raw: dict[str, Any], spec: SweepSection, plan: ColumnPlan | None) -> Packing | str:
+    """The sweep's :class:`Packing`, or why its variants need configs of their own (a text)."""
+    from nlcx.engine.ensembles import changed_positions, same_arrays, substituted
+
+    if spec.timeseries:
+        return "the sweep keeps time series"
+    if plan is None:
+        return "a varied value is not a number"
+    probe = _Probe(base_raw)
+    first, seed = plan.values(0), int(plan.seeds[0])
+    try:
+        template = probe.template(first, seed)
+        if template.prepared.tuning:
+            return "a controller is tuned"
+        other_seed = probe.template(first, (seed + 1) % 2**32)
+        if not same_arrays(template.arrays(), other_seed.arrays()):
+            return "the uncertainties draw from the variant's seed"
+        slots: dict[str, tuple[Any, ...]] = {}
+        for key, column in plan.columns.items():
+            found: set[tuple[Any, ...]] = set()
+            for value in _probe_values(column, first[key]):
+                changed = changed_positions(template, probe.template({**first, key: value}, seed), first[key], value)
+                if isinstance(changed, str):
+                    return f"{key}: {changed}"
+                found.add(tuple(changed))
+            if len(found) > 1:
+                return f"{key}: its values land in different places"
+            slots[key] = found.pop() if found else ()
+        for corner in _corners(plan.columns):
+            corner_template = probe.template({**first, **corner}, seed)
+            if corner_template.structure() != template.structure() or not same_arrays(
+                corner_template.arrays(), substituted(template, slots, {**first, **corner})
+            ):
+                return "the varied values act on the loops together, not each as itself"
+    except NlcxError as exc:
+        return f"a corner of the varied values is not valid ({str(exc).splitlines()[0]})"
+    prepared = template.prepared
+    width = len(prepared.plant.states) + len(prepared.plant.inputs)
+    return Packing(slots, len(template.items) * prepared.grid.t.size * width * 8)
+
+
+def batch_size(spec: SweepSection, n_variants: int, record_bytes: int) -> int:
+    """Variants per columnar batch: about :data:`TARGET_BATCHES` batches, at least the sweep's
+    ``batch_size``, at most what keeps a batch's records under :data:`BATCH_RECORD_BYTES`
+    (``record_bytes``: one variant's). Independent of the number of workers."""
+    size = max(spec.batch_size, -(-n_variants // TARGET_BATCHES))
+    return max(1, min(size, BATCH_RECORD_BYTES // max(record_bytes, 1)))
+
+
+@dataclass
+class ColumnBatch:
+    """Variants ``first`` .. ``first + n - 1`` of a columnar plan: their values and seeds."""
+
+    base_raw: dict[str, Any]
+    first: int
+    columns: dict[str, np.ndarray]
+    seeds: np.ndarray
+    #: The template's values and seed (the plan's first variant), from which a worker prepares it.
+    template: tuple[dict[str, Any], int]
+    packing: Packing
+    base_digest: str
+    out_dir: Path
+    metrics: tuple[str, ...] | None = None
+    part: str = field(default="")
+
+    def __post_init__(self) -> None:
+        digest = hashlib.sha256(self.base_digest.encode())
+        for key, column in self.columns.items():
+            digest.update(key.encode())
+            digest.update(np.ascontiguousarray(column).tobytes())
+        digest.update(np.ascontiguousarray(self.seeds).tobytes())
+        self.part = f"{self.first:09d}-{digest.hexdigest()[:10]}"
+
+    @property
+    def n(self) -> int:
+        return int(self.seeds.size)
+
+
+def column_batches(
+    base_raw: dict[str, Any], plan: ColumnPlan, found: Packing, digest: str, out: Path, size: int,
+    metrics: tuple[str, ...] | None,
+) -> list[ColumnBatch]:  # fmt: skip
+    """The plan cut into batches of ``size`` variants."""
+    template = (plan.values(0), int(plan.seeds[0]))
+    return [
+        ColumnBatch(base_raw, k, {key: c[k : k + size] for key, c in plan.columns.items()}, plan.seeds[k : k + size],
+                    template, found, digest, out, metrics)
+        for k in range(0, plan.n, size)
+    ]  # fmt: skip
+
+
+_TEMPLATES: dict[str, Any] = {}
+
+
+def _template(batch: ColumnBatch) -> Any:
+    """The batch's template, prepared once per process (kept for the batches that follow)."""
+    values, seed = batch.template
+    key = variant_hash(batch.base_digest, Variant(0, values, seed))
+    if key not in _TEMPLATES:
+        _TEMPLATES.clear()
+        _TEMPLATES[key] = _Probe(batch.base_raw).template(values, seed)
+    return _TEMPLATES[key]
+
+
+def _statuses(template: Any, rows: list[Any], n: int) -> tuple[np.ndarray, list[str | None]]:
+    """Each variant's status ("ok", or "unstable" when a loop stopped) and message (the first
+    stopped loop's label and reason), as :func:`nlcx.sweeps.batches.run_batch` records them."""
+    from nlcx.engine.simulate import _failure_reason
+
+    prepared = template.prepared
+    unstable = np.zeros(n, dtype=bool)
+    message: list[str | None] = [None] * n
+    for i, loop in enumerate(rows):
+        for e in np.flatnonzero((loop.status != 0) & ~unstable):
+            t_fail = float(prepared.grid.t[loop.n_valid[e] - 1] + prepared.grid.dt)
+            reason = _failure_reason(
+                prepared.plant, int(loop.status[e]), int(loop.fail_index[e]), t_fail, loop.bounds[e]
+            )
+            message[e] = f"{template.items[i].controller.label}: {reason}"
+        unstable |= loop.status != 0
+    return np.where(unstable, "unstable", "ok"), message
+
+
+def _text(values: Any) -> Any:
+    import pyarrow as pa
+
+    return pa.array(values, pa.string())
+
+
+def _coded(codes: np.ndarray, categories: list[str]) -> Any:
+    """A text column from codes into ``categories`` (-1: missing), dictionary-encoded."""
+    import pyarrow as pa
+
+    indices = pa.array(codes.astype(np.int32), mask=codes < 0)
+    return pa.DictionaryArray.from_arrays(indices, _text(categories))
+
+
+def _floats(values: np.ndarray) -> Any:
+    """Floats with NaN as a missing value (as metrics.csv writes them)."""
+    import pyarrow as pa
+
+    return pa.array(values, pa.float64(), mask=np.isnan(values))
+
+
+def variant_hashes(batch: ColumnBatch) -> list[str]:
+    """Each variant's :func:`~nlcx.sweeps.planning.variant_hash`, the text it hashes formatted
+    from the columns directly: JSON with sorted keys writes a finite float as its ``repr`` and
+    an integer as its digits (``tests/test_sweep_columnar.py`` holds the two to the same
+    hashes); a column with a non-finite value takes the JSON path."""
+    lists = {key: column.tolist() for key, column in batch.columns.items()}
+    seeds = batch.seeds.tolist()
+    if any(c.dtype.kind == "f" and not np.isfinite(c).all() for c in batch.columns.values()):
+        return [
+            variant_hash(batch.base_digest, Variant(batch.first + j, {k: lists[k][j] for k in lists}, seed))
+            for j, seed in enumerate(seeds)
+        ]
+    keys = sorted(lists)
+    texts = [[prefix + text for text in map(repr, lists[k])] for prefix, k in ((f"{json.dumps(k)}:", k) for k in keys)]
+    head = f'{{"base":{json.dumps(batch.base_digest)},"seed":'
+    return [
+        hashlib.sha256(f'{head}{seed},"values":{{{",".join(values)}}}}}'.encode()).hexdigest()[:16]
+        for seed, *values in zip(seeds, *texts, strict=True)
+    ]
+
+
+def _index_table(batch: ColumnBatch, status: np.ndarray, message: list[str | None]) -> Any:
+    """The batch's rows of sweep.csv: variant, seed, config hash, the values, status, message."""
+    import pyarrow as pa
+
+    variants = np.arange(batch.first, batch.first + batch.n, dtype=np.int64)
+    columns = {
+        "variant": pa.array(variants),
+        "seed": pa.array(batch.seeds.astype(np.int64)),
+        "config_hash": _text(variant_hashes(batch)),
+    }
+    for key, column in batch.columns.items():
+        columns[f"value:{key}"] = _floats(column) if column.dtype.kind == "f" else pa.array(column)
+    columns["status"] = _text(status.tolist())
+    columns["message"] = _text(message)
+    return pa.table(columns)
+
+
+def _metrics_table(batch: ColumnBatch, measured: Any) -> Any:
+    """The batch's rows of metrics.csv (those of ``batch.metrics`` when it names some)."""
+    import pyarrow as pa
+
+    keep = np.ones(measured.value.size, dtype=bool)
+    if batch.metrics is not None:
+        names = measured.categories["metric"]
+        wanted = [k for k, name in enumerate(names) if name in batch.metrics]
+        keep = np.isin(measured.codes["metric"], wanted)
+    codes = {k: c[keep] for k, c in measured.codes.items()}
+    cats = measured.categories
+    return pa.table({
+        "variant": pa.array(measured.variant[keep].astype(np.int64) + batch.first),
+        "controller": _coded(codes["controller"], cats["controller"]),
+        "signal": _coded(codes["signal"], cats["signal"]),
+        "metric": _coded(codes["metric"], cats["metric"]),
+        "value": _floats(measured.value[keep]),
+        "unit": _coded(codes["unit"], cats["unit"]),
+        "status": _coded(codes["status"], cats["status"]),
+        "note": _coded(codes["note"], cats["note"]),
+    })  # fmt: skip
+
+
+def write_parquet_table(path: Path, table: Any) -> None:
+    """``table`` as a Parquet file, zstd-compressed, its text columns dictionary-encoded, written atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from nlcx.drawing import atomic_write
+
+    text = [f.name for f in table.schema if pa.types.is_dictionary(f.type) or pa.types.is_string(f.type)]
+    atomic_write(path, lambda tmp: pq.write_table(table, str(tmp), compression="zstd", use_dictionary=text))
+
+
+def run_column_batch(batch: ColumnBatch) -> Any:
+    """Simulate and measure a columnar batch; write its part files (the metrics, then the index,
+    which marks the batch complete). Returns the batch's :class:`~nlcx.sweeps.batches.BatchResult`."""
+    from nlcx.engine.ensembles import loop_rows, measure_ensemble, simulate_ensemble
+    from nlcx.sweeps.batches import BatchResult, set_threads, settle_heap
+
+    set_threads()
+    try:
+        template = _template(batch)
+        calls = simulate_ensemble(template, batch.packing.slots, batch.columns, batch.n)
+        rows = loop_rows(calls, len(template.items), batch.n)
+        status, message = _statuses(template, rows, batch.n)
+        metrics = _metrics_table(batch, measure_ensemble(template, rows, batch.n))
+        parts = batch.out_dir / "parts"
+        write_parquet_table(parts / f"{batch.part}.metrics.parquet", metrics)
+        write_parquet_table(parts / f"{batch.part}.index.parquet", _index_table(batch, status, message))
+        counts = dict(zip(*np.unique(status, return_counts=True), strict=True))
+        return BatchResult(part=batch.part, variants=batch.n, statuses={str(k): int(v) for k, v in counts.items()})
+    finally:
+        settle_heap()
