@@ -144,6 +144,30 @@ def test_the_robustness_sweeps_page_is_its_metrics_aggregated(tmp_path: Path) ->
     assert "| conventional | x | rise_time |" in (out / "report.md").read_text()
 
 
+def test_a_large_sweep_s_profiles_come_from_every_kth_variant(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Above PROFILE_VARIANTS variants the profiles read every k-th variant (index a multiple of
+    k), the same numbers as the profiles of those variants' rows alone; the summary reads all."""
+    from nlcx.pages import render, sweep_charts
+
+    out = tmp_path / "sweep"
+    cfg = str(CONFIGS / "sweeps" / "robustness.yaml")
+    assert runner.invoke(app, ["sweep", cfg, "sweep.random.n=4", "--out", str(out), "--jobs", "1"]).exit_code == 0
+    full = pd.read_csv(out / "summary.csv")
+    monkeypatch.setattr(sweep_charts, "PROFILE_VARIANTS", 5)  # 12 variants: every 3rd
+    render.write_report(out)
+    profiles = pd.read_csv(out / "profiles.csv")
+    metrics, index = read_output_table(out, "metrics"), read_output_table(out, "sweep")
+    categories = {c: "category" for c in ("controller", "signal", "metric", "status")}
+    kept = metrics[metrics.variant % 3 == 0].astype(categories)
+    expected, _ = sweep_charts.profiles(kept, index, "value:plant.params.M")
+    mine = profiles[profiles.parameter == "plant.params.M"].reset_index(drop=True)
+    pd.testing.assert_frame_equal(mine, expected.astype({"bin": "int64"}), check_dtype=False)
+    ok = kept[(kept.status == "ok") & kept.value.notna()]
+    assert mine.n.sum() == len(ok) < len(metrics[(metrics.status == "ok") & metrics.value.notna()])
+    pd.testing.assert_frame_equal(pd.read_csv(out / "summary.csv"), full)
+    assert "Drawn from the variants whose index is a multiple of 3, one in 3" in (out / "report.html").read_text()
+
+
 def test_cells_are_judged_by_their_metrics_declared_tolerance() -> None:
     tolerances = load_tolerances(TOLERANCES)
     frame = pd.DataFrame(

@@ -85,33 +85,63 @@ def test_column_plan_is_the_variant_list_as_columns(tmp_path: Path) -> None:
     assert planning.expand_columns(spec, config.interpolate(base_raw)) is None
 
 
-def test_fast_variant_hashes_equal_the_planned_ones(tmp_path: Path) -> None:
+def test_a_columnar_config_hash_is_the_hash_of_the_variant_s_values_and_seed(tmp_path: Path) -> None:
+    """The same values and seed give the same hash whatever the batch and the index; a value one
+    ulp off, another seed or another base give another."""
     base_raw, spec, _ = sweep.load(write_sweep(tmp_path, MIXED))
-    _, hashes = sweep.plan(base_raw, spec)
     plan = planning.expand_columns(spec, config.interpolate(base_raw))
     assert plan is not None
     digest = planning.base_digest(base_raw, spec)
-    batches = columnar.column_batches(base_raw, plan, columnar.Packing({}, 1), digest, tmp_path, 5, None)
-    assert [h for b in batches for h in columnar.variant_hashes(b)] == hashes
-    odd = columnar.ColumnBatch(
-        {}, 3, {"a": np.array([np.inf, 1.0]), "b": np.array([2, 3])}, np.array([4, 5]), ({}, 0), None, "d", tmp_path
-    )  # a non-finite value takes the JSON path
-    expected = [sweep.variant_hash("d", sweep.Variant(3 + j, {"a": a, "b": b}, s))
-                for j, (a, b, s) in enumerate([(np.inf, 2, 4), (1.0, 3, 5)])]  # fmt: skip
-    assert columnar.variant_hashes(odd) == expected
+
+    def hashes(size: int, columns: dict, seeds: np.ndarray, base: str = digest) -> list[str]:
+        found = columnar.Packing({}, 1)
+        batches = columnar.column_batches(
+            base_raw, planning.ColumnPlan(columns, seeds), found, base, tmp_path, size, None
+        )
+        return [h for b in batches for h in columnar.variant_hashes(b)]
+
+    ours = hashes(5, plan.columns, plan.seeds)
+    assert ours == hashes(7, plan.columns, plan.seeds) and len(set(ours)) == plan.n
+    reordered = {k: c[::-1].copy() for k, c in plan.columns.items()}
+    assert hashes(3, reordered, plan.seeds[::-1].copy()) == ours[::-1]
+    nudged = {**plan.columns, "plant.params.M": np.nextafter(plan.columns["plant.params.M"], np.inf)}
+    assert not set(hashes(5, nudged, plan.seeds)) & set(ours)
+    assert not set(hashes(5, plan.columns, plan.seeds + 1)) & set(ours)
+    assert not set(hashes(5, plan.columns, plan.seeds, base="other")) & set(ours)
+
+
+def test_an_ensemble_runs_the_kernel_calls_of_its_variants_items(tmp_path: Path) -> None:
+    """ensemble_calls on one variant's loops equals kernel_calls on every variant's items."""
+    from nlcx.engine import ensembles
+    from nlcx.engine.batching import group_key, groups_of, kernel_calls
+
+    base_raw, spec, _ = sweep.load(write_sweep(tmp_path, MIXED, t_end=0.1))
+    plan = planning.expand_columns(spec, config.interpolate(base_raw))
+    assert plan is not None
+    items = columnar._Probe(base_raw).template(plan.values(0), int(plan.seeds[0])).items
+    assert len({id(item.controller.step) for item in items}) == 2  # a constant and an AGS PID
+    for n in (1, 3, 4, 8):
+        expected = kernel_calls(groups_of([group_key(item) for item in items] * n), items * n)
+        ours = ensembles.ensemble_calls(items, n)
+        assert len(ours) == len(expected)
+        for (pattern, step), call in zip(ours, expected, strict=True):
+            assert step is call.step
+            assert call.indices == [e * len(items) + i for e in range(n) for i in pattern]
 
 
 @pytest.mark.slow
 def test_columnar_and_per_variant_paths_give_the_same_bytes(tmp_path: Path) -> None:
-    """Statuses, messages and every metric, bit for bit: metrics.csv and sweep.csv compared byte
-    for byte, with runs that stop (a bound) among them."""
+    """Statuses, messages and every metric, bit for bit: metrics.csv compared byte for byte and
+    sweep.csv cell for cell, with runs that stop (a bound) among them."""
     path = write_sweep(tmp_path, {**MIXED, "format": "csv"})
     packed, configs = tmp_path / "packed", tmp_path / "configs"
     run(path, packed, "--jobs", "1")
     run(path, configs, "--jobs", "1", "sweep.columnar=false")
     assert how(packed) == "columnar" and how(configs) == "per-variant: sweep.columnar is false"
-    for name in ("metrics.csv", "sweep.csv"):
-        assert (packed / name).read_bytes() == (configs / name).read_bytes(), name
+    assert (packed / "metrics.csv").read_bytes() == (configs / "metrics.csv").read_bytes()
+    # sweep.csv: the same bytes but for the config hashes, which each path computes its own way
+    index = [pacsv.read_csv(out / "sweep.csv").drop_columns(["config_hash"]) for out in (packed, configs)]
+    assert index[0].equals(index[1])
     statuses = json.loads((packed / "manifest.json").read_text())["status"]
     assert statuses.get("unstable", 0) > 0 and statuses.get("ok", 0) > 0
 

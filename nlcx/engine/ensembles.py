@@ -18,12 +18,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from nlcx import metrics as m
-from nlcx.engine.batching import group_key, groups_of, kernel_calls
+from nlcx.controllers.base import ControllerInstance
+from nlcx.engine.batching import MIN_ROWS_PER_STEP, group_key, groups_of
 from nlcx.engine.measure import (
     _NAN_NOTES,
     _input_step,
@@ -183,15 +184,22 @@ def _expanded(base: np.ndarray, n_variants: int, n_rows: int) -> np.ndarray:
     return np.ascontiguousarray(np.tile(rows, (n_variants,) + (1,) * (rows.ndim - 1)))
 
 
-def _pattern(indices: list[int], n_items: int, n_variants: int) -> np.ndarray:
-    """The loops of a call for one variant, given the call's rows in the ensemble's item order
-    (variant-major): the same loops for every variant, in the same order."""
-    idx = np.asarray(indices)
-    pattern = idx[: idx.size // n_variants] % n_items
-    expected = (np.arange(n_variants)[:, None] * n_items + pattern[None, :]).ravel()
-    if not np.array_equal(idx, expected):  # pragma: no cover - groups_of keeps the item order
-        raise AssertionError("an ensemble's kernel call does not hold every variant's loops alike")
-    return pattern
+def ensemble_calls(items: list[Item], n_variants: int) -> list[tuple[np.ndarray, Any]]:
+    """The kernel calls of ``n_variants`` variants of the loops ``items`` (each variant's loops
+    in the same order): (the loops of one variant in the call, the controller step it runs).
+    The calls :func:`~nlcx.engine.batching.kernel_calls` makes for the variants' items, found on
+    one variant's: a group of loops splits into a call per step when each step has
+    :data:`~nlcx.engine.batching.MIN_ROWS_PER_STEP` rows over all the variants."""
+    calls: list[tuple[np.ndarray, Any]] = []
+    for group in groups_of([group_key(item) for item in items]):
+        by_step: dict[int, list[int]] = {}
+        for i in group:
+            by_step.setdefault(id(items[i].controller.step), []).append(i)
+        if len(by_step) == 1 or all(n_variants * len(rows) >= MIN_ROWS_PER_STEP for rows in by_step.values()):
+            calls += [(np.array(rows), items[rows[0]].controller.step) for rows in by_step.values()]
+        else:
+            calls.append((np.array(group), items[group[0]].controller.general_step))
+    return calls
 
 
 def _call_arguments(
@@ -240,11 +248,9 @@ def simulate_ensemble(
     tableau = TABLEAUS[sim.integrator]
     integration = Integration(method=method_of(sim.integrator), rk_a=tableau.a, rk_b=tableau.b, dt=grid.dt)
     items = template.items
-    keys = [group_key(item) for item in items]
     calls = []
-    for call in kernel_calls(groups_of(keys * n_variants), items * n_variants):
-        pattern = _pattern(call.indices, len(items), n_variants)
-        plant, controller, elements, forces = _call_arguments(template, pattern, call.step, n_variants, slots, columns)
+    for pattern, step in ensemble_calls(items, n_variants):
+        plant, controller, elements, forces = _call_arguments(template, pattern, step, n_variants, slots, columns)
         n_b = n_variants * pattern.size
         group = [items[i] for i in pattern]
         records = _records(group, grid.t.size, 1)
@@ -285,8 +291,9 @@ def loop_rows(calls: list[EnsembleCall], n_loops: int, n_variants: int) -> list[
         (call, rows), *rest = parts
         if rest:  # pragma: no cover - a loop runs in one call
             raise AssertionError("an ensemble's loop is split between kernel calls")
-        out.append(LoopRows(call.X[rows], call.U[rows], call.status[rows], call.n_valid[rows],
-                            call.fail_index[rows], call.bounds[rows]))  # fmt: skip
+        take: slice | np.ndarray = slice(None) if rows.size == call.loops.size else rows  # the whole call: views
+        out.append(LoopRows(call.X[take], call.U[take], call.status[take], call.n_valid[take],
+                            call.fail_index[take], call.bounds[take]))  # fmt: skip
     return out
 
 
@@ -326,7 +333,7 @@ def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> li
     plans = _metric_plans(p)
     t = p.grid.t
     n_samples = t.size
-    X, U = rows.X[ok], rows.U[ok]
+    X, U = (rows.X, rows.U) if ok.all() else (rows.X[ok], rows.U[ok])  # views when every run finished
     out: list[tuple[str, str, np.ndarray]] = []
 
     def blocked(fn: Callable[[np.ndarray], Mapping[str, np.ndarray]], signal: str, data: np.ndarray) -> None:
@@ -335,7 +342,7 @@ def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> li
         for name in pieces[0]:
             out.append((signal, name, np.concatenate([np.asarray(piece[name], dtype=float) for piece in pieces])))
 
-    followed = _measured_outputs(run, plant)  # type: ignore[arg-type]
+    followed = _measured_outputs(run, plant)
     ref = template.items[i].ref
     for s in followed:
         j = plant.output_names.index(s)
@@ -345,14 +352,14 @@ def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> li
             return _signal_metrics(t, y, r, plans[s], cfg)
 
         blocked(tracking, s, _output_rows(X, plant.C[j]))
-    step = _input_step(run, plant, plans)  # type: ignore[arg-type]
+    step = _input_step(run, plant, plans)
     if step is not None:
         for s in [s for s in plant.output_names if s not in followed]:
             j = plant.output_names.index(s)
 
             def info(y: np.ndarray, t_step: float = step.t_step) -> Mapping[str, np.ndarray]:
                 values = m.step_info(t, y, t_step=t_step, settling_band=cfg.settling_band, rise_limits=cfg.rise_limits)
-                return m.measured_from(values, t_step, _time_origin(t_step, cfg))  # type: ignore[arg-type]
+                return m.measured_from(cast(m.MetricDict, values), t_step, _time_origin(t_step, cfg))
 
             blocked(info, s, _output_rows(X, plant.C[j]))
     for j, name in enumerate(plant.input_names):
@@ -363,8 +370,12 @@ def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> li
 class _RunView:
     """The part of a :class:`~nlcx.engine.Run` the measuring helpers read: its controller."""
 
-    def __init__(self, controller: Any) -> None:
-        self.controller = controller
+    def __init__(self, controller: ControllerInstance) -> None:
+        self._controller = controller
+
+    @property
+    def controller(self) -> ControllerInstance:
+        return self._controller
 
 
 def _output_rows(X: np.ndarray, c_row: np.ndarray) -> np.ndarray:
@@ -388,7 +399,7 @@ def measure_ensemble(template: Template, rows: list[LoopRows], n_variants: int) 
         if ok.any():
             blocks.append(_ok_block(template, i, loop, ok, cats, label))
         if (~ok).any():
-            followed = _measured_outputs(_RunView(template.items[i].controller), plant)  # type: ignore[arg-type]
+            followed = _measured_outputs(_RunView(template.items[i].controller), plant)
             blocks.append(_failed_block(plant, grid, loop, ~ok, followed, cats, label, i))
     return _ordered(blocks, cats, n_variants, len(rows))
 

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any, cast
+from typing import Any, Protocol, cast
 
 import numpy as np
 
 from nlcx import metrics as m
 from nlcx.config import MetricsSection
+from nlcx.controllers.base import ControllerInstance
 from nlcx.engine.prepared import Prepared
 from nlcx.engine.results import MetricBlock, MetricTable, Run
 from nlcx.plants.base import Plant
@@ -104,12 +105,19 @@ def _per_run(
     return {(i, signal): {name: float(v[k]) for name, v in batch.items()} for k, i in enumerate(members)}
 
 
-def _measured_outputs(run: Run, plant: Plant) -> list[str]:
+class Controlled(Protocol):
+    """What the helpers below read of a run: its controller (a :class:`Run`, or an ensemble's loop)."""
+
+    @property
+    def controller(self) -> ControllerInstance: ...
+
+
+def _measured_outputs(run: Controlled, plant: Plant) -> list[str]:
     """Outputs of ``run`` that follow a reference (measured against it)."""
     return [s for s in dict.fromkeys(run.controller.reference_signals) if s in plant.output_names]
 
 
-def _input_step(run: Run, plant: Plant, plans: dict[str, MetricPlan]) -> MetricPlan | None:
+def _input_step(run: Controlled, plant: Plant, plans: dict[str, MetricPlan]) -> MetricPlan | None:
     """The earliest step on an input the controller applies (an open-loop step test), if any."""
     steps = [plans[s] for s in run.controller.reference_signals if s in plant.input_names and plans[s].kind == "step"]
     return min(steps, key=lambda plan: plan.t_step) if steps else None

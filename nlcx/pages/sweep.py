@@ -11,14 +11,11 @@ interquartile range per bin of the parameter; ``profiles.csv`` holds the numbers
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pandas as pd
 import yaml
-
-if TYPE_CHECKING:
-    import pyarrow as pa
 
 from nlcx import report
 from nlcx.pages import charts, sweep_charts
@@ -30,20 +27,26 @@ FILES = "report_files"
 def summary(metrics: pd.DataFrame, index: pd.DataFrame) -> pd.DataFrame:
     """controller, signal, metric, unit, n (variants that measured it), median, q25, q75, iqr,
     min, max, undefined (ran, but the metric is undefined: e.g. never settled), unstable (the
-    run stopped: diverged) and failed (the variant did not run)."""
+    run stopped: diverged) and failed (the variant did not run); a row per (controller,
+    signal, metric) in the order they first appear. ``metrics``: its text columns categories."""
     failed = int((index.status == "failed").sum()) if "status" in index else 0
+    groups, trios = sweep_charts.first_seen([metrics.controller, metrics.signal, metrics.metric])
+    value = metrics.value.to_numpy(dtype=float)
+    ok_status = (metrics.status == "ok").to_numpy()
+    units = metrics.unit if "unit" in metrics else None
     rows = []
-    keys = ["controller", "signal", "metric"]
-    for (controller, signal, metric), group in metrics.groupby(keys, sort=False, observed=True):
-        ran = group[group.status == "ok"].value.astype(float)
+    for g, (controller, signal, metric) in enumerate(trios):
+        members = np.flatnonzero(groups == g)
+        ran = value[members[ok_status[members]]]
         ok = ran[np.isfinite(ran)]
-        q25, median, q75 = (float(np.percentile(ok, q)) if len(ok) else np.nan for q in (25, 50, 75))
+        q25, median, q75 = (float(v) for v in np.percentile(ok, [25, 50, 75])) if len(ok) else (np.nan,) * 3
+        unit = units.iloc[members[0]] if units is not None else None
         rows.append({
             "controller": controller, "signal": signal, "metric": metric,
-            "unit": group.unit.iloc[0] if "unit" in group and pd.notna(group.unit.iloc[0]) else "",
+            "unit": unit if unit is not None and pd.notna(unit) else "",
             "n": len(ok), "median": median, "q25": q25, "q75": q75, "iqr": q75 - q25,
             "min": float(ok.min()) if len(ok) else np.nan, "max": float(ok.max()) if len(ok) else np.nan,
-            "undefined": int(ran.isna().sum()), "unstable": int((group.status != "ok").sum()), "failed": failed,
+            "undefined": int(np.isnan(ran).sum()), "unstable": int((~ok_status[members]).sum()), "failed": failed,
         })  # fmt: skip
     return pd.DataFrame(rows)
 
@@ -83,7 +86,6 @@ def read_tables(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     import pyarrow.parquet as pq
 
     files = sorted(path.glob(PART_FILES)) if path.is_dir() else [path]
-    metrics = pa.concat_tables([_coded(pq.read_table(f, columns=["variant", *CATEGORIES, "value"])) for f in files])
     index_path = table_path(directory, "sweep")
     assert index_path is not None
     index_files = sorted(index_path.glob(PART_FILES)) if index_path.is_dir() else [index_path]
@@ -93,23 +95,39 @@ def read_tables(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
         index = pa.concat_tables([pq.read_table(f, columns=columns) for f in index_files]).to_pandas()
     except pa.ArrowInvalid:  # parts of different column types: read as the CSV would be
         index = read_output_table(directory, "sweep")[columns]
-    return metrics.to_pandas(), index
+    return _metrics_frame(files), index
 
 
-def _coded(table: pa.Table) -> pa.Table:
-    """A metrics part with its :data:`CATEGORIES` dictionary-encoded (int32 codes into strings),
-    ``variant`` as int64 and ``value`` as float64: parts written apart then join as one table."""
+def _metrics_frame(files: list[Path]) -> pd.DataFrame:
+    """The metrics parts' columns the page reads, filled part by part into arrays of the whole
+    table's length: the numbers as they are, each text column as codes into the categories seen
+    so far. Memory: the frame and one part, never a second copy of the table."""
     import pyarrow as pa
+    import pyarrow.parquet as pq
 
-    category = pa.dictionary(pa.int32(), pa.string())
-    columns = []
-    for name, column in zip(table.column_names, table.columns, strict=True):
-        if name in CATEGORIES:
-            plain = column if pa.types.is_dictionary(column.type) else column.cast(pa.string()).dictionary_encode()
-            columns.append(plain.cast(category))
-        else:
-            columns.append(column.cast(pa.int64() if name == "variant" else pa.float64()))
-    return pa.table(columns, names=table.column_names)
+    total = sum(pq.ParquetFile(f).metadata.num_rows for f in files)
+    variant, value = np.empty(total, dtype=np.int64), np.empty(total)
+    codes = {name: np.empty(total, dtype=np.int16) for name in CATEGORIES}  # a few texts each
+    categories: dict[str, dict[str, int]] = {name: {} for name in CATEGORIES}
+    start = 0
+    for f in files:
+        table = pq.read_table(f, columns=["variant", *CATEGORIES, "value"])
+        stop = start + table.num_rows
+        variant[start:stop] = table.column("variant").to_numpy()
+        value[start:stop] = table.column("value").to_numpy(zero_copy_only=False)
+        for name in CATEGORIES:
+            column = table.column(name)
+            encoded = (column if pa.types.is_dictionary(column.type) else column.dictionary_encode()).combine_chunks()
+            seen = categories[name]
+            lookup = np.array([seen.setdefault(text, len(seen)) for text in encoded.dictionary.to_pylist()] + [-1])
+            indices = encoded.indices.fill_null(-1).to_numpy(zero_copy_only=False)
+            if len(seen) >= 2**15:
+                raise ValueError(f"the sweep's metrics hold more than {2**15 - 1} distinct {name} texts")
+            codes[name][start:stop] = lookup[indices]
+        start = stop
+    pa.default_memory_pool().release_unused()  # the parts' buffers, kept by Arrow's allocator
+    frame = {name: pd.Categorical.from_codes(codes.pop(name), pd.Index(list(categories[name]))) for name in CATEGORIES}
+    return pd.DataFrame({"variant": variant, **frame, "value": value}, copy=False)
 
 
 def context(directory: Path) -> dict[str, Any]:
@@ -121,12 +139,12 @@ def context(directory: Path) -> dict[str, Any]:
     colour = sweep_charts.controller_colours([str(c) for c in metrics.controller.unique()])
     distribution = sweep_charts.distribution_svg(table)
     report.write_text(files / "distributions.svg", str(distribution))
-    ok = metrics[(metrics.status == "ok") & metrics.value.notna()]
-    ok = ok.assign(value=ok.value.astype(float))
     params = varied(index)
+    stride = sweep_charts.profile_stride(len(index))
+    sampled = metrics if stride == 1 else metrics[metrics.variant.to_numpy() % stride == 0]
     plots, tables = [], []
     for i, column in enumerate(params):
-        profile, labels = sweep_charts.profiles(ok, index, column)
+        profile, labels = sweep_charts.profiles(sampled, index, column)
         chart = sweep_charts.profile_svg(profile, labels, colour)
         report.write_text(files / f"parameter_{i}.svg", str(chart))
         tables.append(profile)
@@ -147,6 +165,7 @@ def context(directory: Path) -> dict[str, Any]:
         "caption": str(raw.get("title") or ""),
         "summary": table.to_dict("records"),
         "variants": len(index),
+        "profile_stride": stride,
         "status": index.status.value_counts().to_dict() if "status" in index else {},
         "parameters": [c.removeprefix("value:") for c in params],
         "distribution": f"{FILES}/distributions.svg",

@@ -23,6 +23,16 @@ from markupsafe import Markup, escape
 
 #: Bins of a numeric parameter with more distinct values than this; fewer are shown each.
 BINS = 20
+#: The profiles of a sweep with more variants than this are drawn from every k-th variant, so
+#: that at most this many are read (:func:`profile_stride`); the summary always holds them all.
+PROFILE_VARIANTS = 100_000
+
+
+def profile_stride(n_variants: int) -> int:
+    """k such that every k-th variant (index a multiple of k) gives at most :data:`PROFILE_VARIANTS`."""
+    return max(1, -(-n_variants // PROFILE_VARIANTS))
+
+
 COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 WIDTH, HEIGHT, COLUMNS = 240, 150, 4
 LEFT, RIGHT, TOP, BOTTOM = 60, 8, 20, 26
@@ -130,28 +140,62 @@ def bins_of(values: pd.Series) -> tuple[pd.Series, list[str]]:
     return keys.map(position), [f"{v:.4g}" if numeric else str(v) for v in levels]
 
 
-def profiles(ok: pd.DataFrame, index: pd.DataFrame, column: str) -> tuple[pd.DataFrame, list[str]]:
+def first_seen(
+    columns: Sequence[pd.Series], rows: np.ndarray | None = None
+) -> tuple[np.ndarray, list[tuple[str, ...]]]:
+    """Each row's group, the groups being the distinct tuples of ``columns`` (categories), in the
+    order they first appear (among ``rows``, a mask, when given; other rows get -1); and the
+    groups' tuples. The tuples are combined into one small integer code per row, counted with
+    ``bincount``, and each code's first row found by a scan: a few passes over the rows, no sort."""
+    sizes = [len(column.cat.categories) + 1 for column in columns]
+    combined = np.zeros(len(columns[0]), dtype=np.int32 if np.prod(sizes, dtype=float) < 2**31 else np.int64)
+    for column, size in zip(columns, sizes, strict=True):  # in place: one array the size of the rows
+        combined *= size
+        combined += column.cat.codes.to_numpy()
+        combined += 1
+    if rows is not None:
+        combined[~rows] = 0  # no tuple has code 0 (every code above is shifted by one)
+    counts = np.bincount(combined) if combined.size else np.zeros(1, dtype=np.int64)
+    present = np.flatnonzero(counts[1:]) + 1
+    first = np.array([int(np.argmax(combined == code)) for code in present], dtype=np.int64)
+    by_appearance = np.argsort(first, kind="stable")
+    rank = np.full(counts.size, -1, dtype=combined.dtype)
+    rank[present[by_appearance]] = np.arange(present.size)
+    labels = [tuple(str(column.iloc[first[k]]) for column in columns) for k in by_appearance]
+    return rank[combined], labels
+
+
+def profiles(metrics: pd.DataFrame, index: pd.DataFrame, column: str) -> tuple[pd.DataFrame, list[str]]:
     """The metrics against one varied parameter: per (signal, metric, controller) and bin of
     the parameter (:func:`bins_of`), the number of variants that measured the metric, its
-    median and its quartiles (pandas' linear interpolation), in the order the metrics table
-    lists them; and the bins' labels. ``ok``: the metrics table's rows of runs that finished,
-    with a value."""
+    median and its quartiles (pandas' linear interpolation), in the order metrics.csv lists
+    them (among the rows of runs that finished, with a value); and the bins' labels. The
+    groups are integer codes, so the cost is a few passes over the rows. ``metrics`` may hold
+    the rows of some variants only (:func:`profile_stride`); the bins span every variant of ``index``."""
     codes, labels = bins_of(index[column])
-    bin_of = pd.Series(codes.to_numpy(), index=index.variant.to_numpy())
-    frame = ok.assign(bin=ok.variant.map(bin_of)).dropna(subset=["bin"])
-    grouped = frame.groupby(["signal", "metric", "controller", "bin"], sort=False, observed=True).value
+    variants = index.variant.to_numpy(dtype=np.int64)
+    bin_of_variant = np.full(int(variants.max()) + 1 if variants.size else 0, np.nan)
+    bin_of_variant[variants] = codes.to_numpy(dtype=float)
+    ok = (metrics.status == "ok").to_numpy() & metrics.value.notna().to_numpy()
+    row_bins = np.full(len(metrics), np.nan)
+    row_bins[ok] = bin_of_variant[metrics.variant.to_numpy(dtype=np.int64)[ok]]
+    ok &= ~np.isnan(row_bins)
+    groups, trios = first_seen([metrics.signal, metrics.metric, metrics.controller], ok)
+    n_bins = max(len(labels), 1)
+    key = groups[ok] * n_bins + row_bins[ok].astype(np.int64)
+    grouped = pd.Series(metrics.value.to_numpy(dtype=float)[ok]).groupby(key, sort=True)
     table = grouped.quantile([0.25, 0.5, 0.75]).unstack()
     table.columns = ["q25", "median", "q75"]
     table["n"] = grouped.size()
-    table = table.reset_index()
-    table["bin"] = table["bin"].astype(int)
+    keys = table.index.to_numpy(dtype=np.int64)
+    trio = [trios[k] for k in keys // n_bins]
+    table = table.reset_index(drop=True)
+    table.insert(0, "bin", keys % n_bins)
+    for position, name in enumerate(("signal", "metric", "controller")):
+        table.insert(position, name, [t[position] for t in trio])
     table["at"] = [labels[b] for b in table["bin"]]
     table.insert(0, "parameter", column.removeprefix("value:"))
-    listed = ok[["signal", "metric", "controller"]].drop_duplicates().itertuples(index=False, name=None)
-    first = {key: i for i, key in enumerate(listed)}
-    table["_order"] = [first[k] for k in zip(table.signal, table.metric, table.controller, strict=True)]
-    table = table.sort_values(["_order", "bin"], kind="stable").drop(columns="_order")
-    return table.reset_index(drop=True), labels
+    return table, labels
 
 
 def _profile_panel(title: str, rows: pd.DataFrame, n_bins: int, labels: list[str], colour: dict[str, str]) -> str:
