@@ -9,7 +9,7 @@ read, merged and written, the same bytes.
 from __future__ import annotations
 
 import json
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -260,12 +260,17 @@ def _csv_of_parts(target: Path, paths: Sequence[Path]) -> None:
 
 
 def assemble_columns(
-    out_dir: Path, parts: Sequence[tuple[int, str]], base_raw: dict[str, Any], spec: SweepSection
+    out_dir: Path,
+    parts: Sequence[tuple[int, str]],
+    base_raw: dict[str, Any],
+    spec: SweepSection,
+    known: Mapping[str, Mapping[str, int]] | None = None,
 ) -> dict[str, int]:
     """The tables of a columnar sweep from its part files (``parts``: each batch's first variant
     and part name, in plan order, every one complete): in Parquet, the part files themselves,
     linked into the datasets sweep.parquet/ and metrics.parquet/ (nothing is read again); in
-    CSV, their rows written out part by part. Returns the count of each status."""
+    CSV, their rows written out part by part. Returns the count of each status: ``known`` holds
+    those of the parts this run computed (their workers counted them); the others' are read."""
     import pyarrow.parquet as pq
 
     from nlcx import rundir
@@ -281,7 +286,11 @@ def assemble_columns(
     write_config(out_dir, base_raw, spec)
     counts: dict[str, int] = {}
     for _, part in parts:
-        status = pq.read_table(out_dir / "parts" / f"{part}.index.parquet", columns=["status"]).column(0)
-        for value in status.value_counts().to_pylist():
-            counts[value["values"]] = counts.get(value["values"], 0) + value["counts"]
-    return counts
+        if known is not None and part in known:
+            found = dict(known[part])
+        else:
+            status = pq.read_table(out_dir / "parts" / f"{part}.index.parquet", columns=["status"]).column(0)
+            found = {v["values"]: v["counts"] for v in status.value_counts().to_pylist()}
+        for key, count in found.items():
+            counts[key] = counts.get(key, 0) + count
+    return dict(sorted(counts.items()))

@@ -147,6 +147,8 @@ class _Tally:
     progress: Callable[[int, int, int], None] | None
     failures: int = 0
     written: set[str] = field(default_factory=set)
+    #: Each written part's statuses (status -> count).
+    statuses: dict[str, dict[str, int]] = field(default_factory=dict)
 
     def report(self) -> None:
         if self.progress is not None:
@@ -155,6 +157,7 @@ class _Tally:
     def add(self, result: BatchResult) -> None:
         """Count a finished batch, then report."""
         self.written.add(result.part)
+        self.statuses[result.part] = result.statuses
         self.finished += result.variants
         self.failures += result.statuses.get("failed", 0)
         self.report()
@@ -263,7 +266,8 @@ class _Job:
             tally = _Tally(plan.n, plan.n - sum(b.n for b in todo), self.progress)
             planned = self._run(todo, tally, columnar.run_column_batch)
             simulated = time.perf_counter()
-            statuses = assemble_columns(staging, [(b.first, b.part) for b in batches], self.base_raw, self.spec)
+            parts = [(b.first, b.part) for b in batches]
+            statuses = assemble_columns(staging, parts, self.base_raw, self.spec, tally.statuses)
             timings = {"plan": planned - self.start, "batches": simulated - planned}
             timings["assemble"] = time.perf_counter() - simulated
             computed = sum(b.n for b in todo)
