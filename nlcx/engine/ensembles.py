@@ -333,7 +333,8 @@ def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> li
     plans = _metric_plans(p)
     t = p.grid.t
     n_samples = t.size
-    X, U = (rows.X, rows.U) if ok.all() else (rows.X[ok], rows.U[ok])  # views when every run finished
+    X, U = rows.X, rows.U
+    take: slice | np.ndarray = slice(None) if ok.all() else np.flatnonzero(ok)  # the runs that finished
     out: list[tuple[str, str, np.ndarray]] = []
 
     def blocked(fn: Callable[[np.ndarray], Mapping[str, np.ndarray]], signal: str, data: np.ndarray) -> None:
@@ -351,7 +352,7 @@ def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> li
         def tracking(y: np.ndarray, s: str = s, r: np.ndarray = r) -> Mapping[str, np.ndarray]:
             return _signal_metrics(t, y, r, plans[s], cfg)
 
-        blocked(tracking, s, _output_rows(X, plant.C[j]))
+        blocked(tracking, s, _output_rows(X, take, plant.C[j]))
     step = _input_step(run, plant, plans)
     if step is not None:
         for s in [s for s in plant.output_names if s not in followed]:
@@ -361,9 +362,9 @@ def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> li
                 values = m.step_info(t, y, t_step=t_step, settling_band=cfg.settling_band, rise_limits=cfg.rise_limits)
                 return m.measured_from(cast(m.MetricDict, values), t_step, _time_origin(t_step, cfg))
 
-            blocked(info, s, _output_rows(X, plant.C[j]))
+            blocked(info, s, _output_rows(X, take, plant.C[j]))
     for j, name in enumerate(plant.input_names):
-        blocked(lambda u: m.input_metrics(t, u), name, np.ascontiguousarray(U[:, :, j]))
+        blocked(lambda u: m.input_metrics(t, u), name, np.ascontiguousarray(U[take, :, j]))
     return out
 
 
@@ -378,12 +379,13 @@ class _RunView:
         return self._controller
 
 
-def _output_rows(X: np.ndarray, c_row: np.ndarray) -> np.ndarray:
-    """y = x c of each run (rows), as :func:`nlcx.engine.measure._outputs` forms it."""
+def _output_rows(X: np.ndarray, take: slice | np.ndarray, c_row: np.ndarray) -> np.ndarray:
+    """y = x c of the runs ``take`` (rows), as :func:`nlcx.engine.measure._outputs` forms it: a
+    row of C that selects one state gathers that state's column alone."""
     (nonzero,) = np.nonzero(c_row)
     if nonzero.size == 1 and c_row[nonzero[0]] == 1.0:
-        return np.ascontiguousarray(X[:, :, nonzero[0]])
-    return np.stack([x @ c_row for x in X])
+        return np.ascontiguousarray(X[take, :, nonzero[0]])
+    return np.stack([x @ c_row for x in X[take]])
 
 
 def measure_ensemble(template: Template, rows: list[LoopRows], n_variants: int) -> MetricColumns:
