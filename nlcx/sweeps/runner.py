@@ -14,6 +14,7 @@ from typing import Any
 
 import pandas as pd
 
+import nlcx.sweeps.columnar as columnar
 from nlcx.errors import NlcxError
 from nlcx.sweeps.assembly import assemble, assemble_columns, write_manifest, write_report
 from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, run_batch, set_threads
@@ -183,7 +184,6 @@ def run(
     ``progress(finished, total, failed)`` is called before the first batch and after each;
     ``cluster`` (with ``executor="dask"``): where the workers run (:mod:`nlcx.sweeps.cluster`)."""
     from nlcx import config as cfg
-    from nlcx.sweeps import columnar
 
     start = time.perf_counter()
     base_raw, spec, base = load(path, overrides)
@@ -252,7 +252,6 @@ class _Job:
     def columnar(self, plan: ColumnPlan, found: Any, with_report: bool) -> SweepOutcome:
         """The variants packed from columns, in batches of :func:`~nlcx.sweeps.columnar.batch_size`."""
         from nlcx import engine, rundir
-        from nlcx.sweeps import columnar
 
         size = columnar.batch_size(self.spec, plan.n, found.record_bytes)
         engine.check_sweep_memory(self.base, min(size, plan.n) * self.workers)
