@@ -48,6 +48,25 @@ def test_the_memory_estimate_bounds_what_the_plan_allocates() -> None:
     assert peak <= size.memory <= 4 * peak  # an upper bound, not a wild one
 
 
+def test_the_memory_estimate_of_a_plan_as_columns_bounds_what_its_expansion_allocates() -> None:
+    from nlcx import config
+    from nlcx.sweeps import planning
+
+    base_raw, spec, base = sweep.load(ROBUSTNESS, ["~sweep.grid", "sweep.random.n=20000"])
+    assert planning.numeric(spec)
+    size = sizing.estimate(spec, base, columnar=True)
+    interpolated = config.interpolate(base_raw)
+    tracemalloc.start()
+    try:
+        plan = planning.expand_columns(spec, interpolated)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert plan is not None and plan.n == size.variants == 20_000
+    assert peak <= size.memory <= 4 * peak
+    assert size.memory * 10 < sizing.estimate(spec, base).memory  # as variants: ten times more and over
+
+
 def test_the_disk_estimate_bounds_what_the_sweep_writes(tmp_path: Path) -> None:
     out = tmp_path / "sweep"
     overrides = ["sweep.random.n=4", "simulation.t_end=2.0"]

@@ -235,11 +235,11 @@ def validate(config: ConfigArg, overrides: OverridesArg = None) -> None:
     from nlcx import config as cfg
     from nlcx import engine
     from nlcx import sweeps as sweep
-    from nlcx.sweeps import sizing
+    from nlcx.sweeps import planning, sizing
 
     if "sweep" in cfg.apply_overrides(cfg.read_config(config), overrides or []):
         _, spec, exp = sweep.load(config, overrides or [])
-        size = sizing.check(spec, exp, None)
+        size = sizing.check(spec, exp, None, columnar=spec.columnar and planning.numeric(spec))  # as a run sizes it
         planned = f"; a sweep of {size.variants:,} variants"
     else:
         exp, planned = cfg.load(config, overrides or []), ""

@@ -198,6 +198,15 @@ def _column(values: list[Any] | np.ndarray) -> np.ndarray | None:
     return None
 
 
+def numeric(spec: SweepSection) -> bool:
+    """Whether every value ``spec`` varies is a number (its plan can be expanded as columns,
+    :func:`expand_columns`), told from the section alone."""
+    listed = [*spec.grid.values(), *spec.zip.values()]
+    if spec.random is not None:
+        listed += [d.values or [] for d in spec.random.params.values() if d.dist == "choice"]
+    return all(_column(values) is not None for values in listed)
+
+
 @dataclass(frozen=True)
 class ColumnPlan:
     """A plan as columns: the values of each varied key and each variant's seed, by variant

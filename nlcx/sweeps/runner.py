@@ -20,7 +20,16 @@ from nlcx.sweeps.assembly import assemble, assemble_columns, write_manifest, wri
 from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, run_batch, set_threads
 from nlcx.sweeps.cluster import ClusterSpec
 from nlcx.sweeps.cluster import make as make_cluster
-from nlcx.sweeps.planning import ColumnPlan, SweepSection, Variant, base_digest, expand_columns, load, plan
+from nlcx.sweeps.planning import (
+    ColumnPlan,
+    SweepSection,
+    Variant,
+    base_digest,
+    expand_columns,
+    load,
+    numeric,
+    plan,
+)
 from nlcx.sweeps.resuming import completed, open_column_staging, open_staging
 from nlcx.sweeps.sizing import check as check_plan_size
 
@@ -188,8 +197,9 @@ def run(
     start = time.perf_counter()
     base_raw, spec, base = load(path, overrides)
     out_dir = Path(out_dir or base.section.outputs.dir or Path("results") / base.name)
-    check_plan_size(spec, base, out_dir)  # before anything is expanded
-    columns = expand_columns(spec, cfg.interpolate(base_raw)) if spec.columnar else None
+    as_columns = spec.columnar and numeric(spec)
+    check_plan_size(spec, base, out_dir, columnar=as_columns)  # before anything is expanded
+    columns = expand_columns(spec, cfg.interpolate(base_raw)) if as_columns else None
     found = columnar.packing(base_raw, spec, columns) if spec.columnar else "sweep.columnar is false"
     job = _Job(
         base_raw, spec, base, out_dir, executor, jobs, scheduler, force, progress, cluster, overrides or [], start
@@ -276,6 +286,7 @@ class _Job:
         """The variants one config each (:func:`~nlcx.sweeps.batches.run_batch`)."""
         from nlcx import engine, rundir
 
+        check_plan_size(self.spec, self.base, self.out_dir)  # as variants, before they are expanded
         variants, hashes = plan(self.base_raw, self.spec)
         engine.check_sweep_memory(self.base, min(self.spec.batch_size, len(variants)) * self.workers)
         with rundir.claim(self.out_dir):

@@ -28,6 +28,9 @@ PLAN_BYTES_PER_VALUE = 200
 ROWS_PER_OUTPUT, ROWS_PER_INPUT, BYTES_PER_ROW = 12, 3, 80
 #: Bytes of one variant's row of sweep.csv, and per value it sets.
 INDEX_BYTES, INDEX_BYTES_PER_VALUE = 160, 32
+#: Bytes the parent's expansion of a plan as columns takes at its peak per variant (its seed,
+#: and the words of the seeds' hashing), and per value (a column and a draw).
+COLUMN_BYTES_PER_VARIANT, COLUMN_BYTES_PER_VALUE = 64, 16
 
 
 @dataclass(frozen=True)
@@ -48,14 +51,18 @@ def variant_count(spec: SweepSection) -> int:
     return grid * zipped * (spec.random.n if spec.random is not None else 1)
 
 
-def estimate(spec: SweepSection, base: Any) -> PlanSize:
-    """The size of ``spec``'s plan over the validated base experiment ``base``."""
+def estimate(spec: SweepSection, base: Any, columnar: bool = False) -> PlanSize:
+    """The size of ``spec``'s plan over the validated base experiment ``base``, expanded as
+    columns (``columnar``: :func:`nlcx.sweeps.planning.expand_columns`) or as variants."""
     n = variant_count(spec)
     values = len(spec.grid) + len(spec.zip) + (len(spec.random.params) if spec.random is not None else 0)
     plant = base.plant_model
     rows = len(base.controllers) * (ROWS_PER_OUTPUT * len(plant.outputs) + ROWS_PER_INPUT * len(plant.inputs))
     per_variant_disk = 2 * rows * BYTES_PER_ROW + INDEX_BYTES + INDEX_BYTES_PER_VALUE * values
-    memory = n * (PLAN_BYTES_PER_VARIANT + PLAN_BYTES_PER_VALUE * values)
+    if columnar:
+        memory = n * (COLUMN_BYTES_PER_VARIANT + COLUMN_BYTES_PER_VALUE * values)
+    else:
+        memory = n * (PLAN_BYTES_PER_VARIANT + PLAN_BYTES_PER_VALUE * values)
     return PlanSize(n, values, memory, n * per_variant_disk)
 
 
@@ -92,13 +99,19 @@ def _size(n_bytes: float) -> str:
 
 
 def check(
-    spec: SweepSection, base: Any, out_dir: Path | None, memory: int | None = None, disk: int | None = None
+    spec: SweepSection,
+    base: Any,
+    out_dir: Path | None,
+    memory: int | None = None,
+    disk: int | None = None,
+    columnar: bool = False,
 ) -> PlanSize:
     """The plan's size, or a one-line :class:`~nlcx.errors.ConfigError` when its expansion
-    would take more than :data:`nlcx.preflight.MEMORY_SHARE` of the memory available or its
-    outputs more than the free space under ``out_dir`` (``None``: not written, e.g. a dry
-    run). ``memory`` and ``disk`` replace what the machine reports (tests)."""
-    size = estimate(spec, base)
+    (as columns with ``columnar``) would take more than :data:`nlcx.preflight.MEMORY_SHARE`
+    of the memory available or its outputs more than the free space under ``out_dir``
+    (``None``: not written, e.g. a dry run). ``memory`` and ``disk`` replace what the machine
+    reports (tests)."""
+    size = estimate(spec, base, columnar)
     memory = preflight.available_memory() if memory is None else memory
     disk = _free_disk(out_dir) if disk is None and out_dir is not None else disk
     over_memory = memory is not None and size.memory > preflight.MEMORY_SHARE * memory
