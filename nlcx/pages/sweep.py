@@ -28,7 +28,7 @@ def summary(metrics: pd.DataFrame, index: pd.DataFrame) -> pd.DataFrame:
     """controller, signal, metric, unit, n (variants that measured it), median, q25, q75, iqr,
     min, max, undefined (ran, but the metric is undefined: e.g. never settled), unstable (the
     run stopped: diverged) and failed (the variant did not run); a row per (controller,
-    signal, metric) in the order they first appear. ``metrics``: its text columns categories."""
+    signal, metric) in the order they first appear (categorical text columns read fastest)."""
     failed = int((index.status == "failed").sum()) if "status" in index else 0
     groups, trios = sweep_charts.first_seen([metrics.controller, metrics.signal, metrics.metric])
     value = metrics.value.to_numpy(dtype=float)

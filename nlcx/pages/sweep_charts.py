@@ -143,10 +143,11 @@ def bins_of(values: pd.Series) -> tuple[pd.Series, list[str]]:
 def first_seen(
     columns: Sequence[pd.Series], rows: np.ndarray | None = None
 ) -> tuple[np.ndarray, list[tuple[str, ...]]]:
-    """Each row's group, the groups being the distinct tuples of ``columns`` (categories), in the
+    """Each row's group, the groups being the distinct tuples of ``columns`` (as categories), in the
     order they first appear (among ``rows``, a mask, when given; other rows get -1); and the
     groups' tuples. The tuples are combined into one small integer code per row, counted with
     ``bincount``, and each code's first row found by a scan: a few passes over the rows, no sort."""
+    columns = [c if isinstance(c.dtype, pd.CategoricalDtype) else c.astype("category") for c in columns]
     sizes = [len(column.cat.categories) + 1 for column in columns]
     combined = np.zeros(len(columns[0]), dtype=np.int32 if np.prod(sizes, dtype=float) < 2**31 else np.int64)
     for column, size in zip(columns, sizes, strict=True):  # in place: one array the size of the rows
