@@ -125,7 +125,6 @@ def _metrics_frame(files: list[Path]) -> pd.DataFrame:
                 raise ValueError(f"the sweep's metrics hold more than {2**15 - 1} distinct {name} texts")
             codes[name][start:stop] = lookup[indices]
         start = stop
-    pa.default_memory_pool().release_unused()  # the parts' buffers, kept by Arrow's allocator
     frame = {name: pd.Categorical.from_codes(codes.pop(name), pd.Index(list(categories[name]))) for name in CATEGORIES}
     return pd.DataFrame({"variant": variant, **frame, "value": value}, copy=False)
 
