@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
@@ -31,29 +31,24 @@ from nlcx.engine.measure import (
     _measured_outputs,
     _metric_plans,
     _metric_unit,
+    _selected_state,
     _signal_metrics,
-    _time_origin,
+    _step_characteristics,
 )
 from nlcx.engine.prepared import TABLEAUS, Item, Prepared, items_of
 from nlcx.engine.simulate import (
     _controller_call,
     _failure_reason,
+    _has_friction,
     _loop_elements,
     _plant_call,
     _plant_forces,
     _records,
+    element_params,
+    element_states,
 )
-from nlcx.kernel.friction import FA, FRICTION_NONE, FRICTIONAL, FRICTIONLESS
+from nlcx.kernel.friction import FRICTIONAL, FRICTIONLESS
 from nlcx.kernel.structures import Integration, Outcome, method_of
-
-
-def _element_params(item: Item) -> np.ndarray:
-    return np.concatenate([np.zeros(0), *(e.params for e in item.elements)])
-
-
-def _element_states(item: Item) -> np.ndarray:
-    return np.concatenate([np.zeros(0), *(e.state for e in item.elements)])
-
 
 #: The per-loop arrays of an item, by name, and the kernel argument (structure, field) each becomes.
 ITEM_FIELDS: dict[str, tuple[Callable[[Item], np.ndarray | None], str, str]] = {
@@ -63,8 +58,8 @@ ITEM_FIELDS: dict[str, tuple[Callable[[Item], np.ndarray | None], str, str]] = {
     "cp": (lambda it: it.controller.cp, "controller", "cp"),
     "cs0": (lambda it: it.controller.cs0, "controller", "cs0"),
     "ref": (lambda it: it.ref, "controller", "ref"),
-    "ep": (_element_params, "elements", "ep"),
-    "es0": (_element_states, "elements", "es0"),
+    "ep": (element_params, "elements", "ep"),
+    "es0": (element_states, "elements", "es0"),
     "data": (lambda it: it.element_data, "elements", "data"),
     "dist": (lambda it: it.dist, "forces", "dist"),
     "friction": (lambda it: it.friction, "forces", "friction"),
@@ -252,16 +247,10 @@ def simulate_ensemble(
     for pattern, step in ensemble_calls(items, n_variants):
         plant, controller, elements, forces = _call_arguments(template, pattern, step, n_variants, slots, columns)
         n_b = n_variants * pattern.size
-        group = [items[i] for i in pattern]
-        records = _records(group, grid.t.size, 1)
-        records = records._replace(
-            **{name: np.empty((n_b, *getattr(records, name).shape[1:])) for name in records._fields}
-        )
+        records = _records([items[i] for i in pattern], grid.t.size, 1, n_rows=n_b)
         outcome = Outcome(*(np.zeros(n_b, dtype=np.int64) for _ in range(3)))
-        friction = forces.friction
-        frictional = bool(np.any(friction[..., FA.model].astype(np.int64) != FRICTION_NONE))
         simulate(integration, plant, controller, elements, forces, records, outcome,
-                 FRICTIONAL if frictional else FRICTIONLESS)  # fmt: skip
+                 FRICTIONAL if _has_friction(forces.friction) else FRICTIONLESS)  # fmt: skip
         calls.append(EnsembleCall(
             variants=np.repeat(np.arange(n_variants), pattern.size), loops=np.tile(pattern, n_variants),
             X=records.X, U=records.U, status=outcome.status, n_valid=outcome.n_valid,
@@ -280,20 +269,35 @@ class LoopRows:
     n_valid: np.ndarray
     fail_index: np.ndarray
     bounds: np.ndarray
+    #: The runs that stopped (variant positions), when (t_fail) and why (as a :class:`~nlcx.engine.Run` says it).
+    stopped: np.ndarray
+    t_fail: np.ndarray
+    reasons: list[str]
 
 
-def loop_rows(calls: list[EnsembleCall], n_loops: int, n_variants: int) -> list[LoopRows]:
-    """The runs of each loop of the template, gathered from the calls, in variant order."""
+def loop_rows(calls: list[EnsembleCall], template: Template) -> list[LoopRows]:
+    """The runs of each loop of the template, gathered from the calls, in variant order, with
+    the time and reason of each run that stopped."""
+    plant, grid = template.prepared.plant, template.prepared.grid
     out = []
-    for i in range(n_loops):
+    for i in range(len(template.items)):
         parts = [(c, np.flatnonzero(c.loops == i)) for c in calls]
         parts = [(c, rows) for c, rows in parts if rows.size]
         (call, rows), *rest = parts
         if rest:  # pragma: no cover - a loop runs in one call
             raise AssertionError("an ensemble's loop is split between kernel calls")
         take: slice | np.ndarray = slice(None) if rows.size == call.loops.size else rows  # the whole call: views
-        out.append(LoopRows(call.X[take], call.U[take], call.status[take], call.n_valid[take],
-                            call.fail_index[take], call.bounds[take]))  # fmt: skip
+        status, n_valid, fail_index, bounds = (
+            call.status[take],
+            call.n_valid[take],
+            call.fail_index[take],
+            call.bounds[take],
+        )
+        stopped = np.flatnonzero(status != 0)
+        t_fail = grid.t[n_valid[stopped] - 1] + grid.dt
+        reasons = [_failure_reason(plant, int(status[e]), int(fail_index[e]), float(tf), bounds[e])
+                   for e, tf in zip(stopped, t_fail, strict=True)]  # fmt: skip
+        out.append(LoopRows(call.X[take], call.U[take], status, n_valid, fail_index, bounds, stopped, t_fail, reasons))
     return out
 
 
@@ -359,8 +363,7 @@ def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> li
             j = plant.output_names.index(s)
 
             def info(y: np.ndarray, t_step: float = step.t_step) -> Mapping[str, np.ndarray]:
-                values = m.step_info(t, y, t_step=t_step, settling_band=cfg.settling_band, rise_limits=cfg.rise_limits)
-                return m.measured_from(cast(m.MetricDict, values), t_step, _time_origin(t_step, cfg))
+                return _step_characteristics(t, y, t_step, cfg)
 
             blocked(info, s, _output_rows(X, take, plant.C[j]))
     for j, name in enumerate(plant.input_names):
@@ -382,9 +385,9 @@ class _RunView:
 def _output_rows(X: np.ndarray, take: slice | np.ndarray, c_row: np.ndarray) -> np.ndarray:
     """y = x c of the runs ``take`` (rows), as :func:`nlcx.engine.measure._outputs` forms it: a
     row of C that selects one state gathers that state's column alone."""
-    (nonzero,) = np.nonzero(c_row)
-    if nonzero.size == 1 and c_row[nonzero[0]] == 1.0:
-        return np.ascontiguousarray(X[take, :, nonzero[0]])
+    state = _selected_state(c_row)
+    if state is not None:
+        return np.ascontiguousarray(X[take, :, state])
     return np.stack([x @ c_row for x in X[take]])
 
 
@@ -392,7 +395,7 @@ def measure_ensemble(template: Template, rows: list[LoopRows], n_variants: int) 
     """The metric rows of every variant's runs (:func:`nlcx.engine.measure_runs`'s rows, with
     the variant's position in the column ``variant``), as columns: by variant, then loop (the
     template's order), then row."""
-    plant, grid = template.prepared.plant, template.prepared.grid
+    plant = template.prepared.plant
     cats = _Categories(("controller", "signal", "metric", "unit", "status", "note"))
     blocks: list[_Block] = []
     for i, loop in enumerate(rows):
@@ -402,7 +405,7 @@ def measure_ensemble(template: Template, rows: list[LoopRows], n_variants: int) 
             blocks.append(_ok_block(template, i, loop, ok, cats, label))
         if (~ok).any():
             followed = _measured_outputs(_RunView(template.items[i].controller), plant)
-            blocks.append(_failed_block(plant, grid, loop, ~ok, followed, cats, label, i))
+            blocks.append(_failed_block(loop, followed, cats, label, i))
     return _ordered(blocks, cats, n_variants, len(rows))
 
 
@@ -436,17 +439,10 @@ def _ok_block(template: Template, i: int, loop: LoopRows, ok: np.ndarray, cats: 
     return _Block(variants, i, len(values), codes, value)
 
 
-def _failed_block(plant: Any, grid: Any, loop: LoopRows, failed: np.ndarray, followed: list[str],
-                  cats: _Categories, label: str, i: int) -> _Block:  # fmt: skip
+def _failed_block(loop: LoopRows, followed: list[str], cats: _Categories, label: str, i: int) -> _Block:
     """The rows of the runs that stopped: t_fail, and a missing settling time per followed output."""
-    variants = np.flatnonzero(failed)
-    t_fail = grid.t[loop.n_valid[variants] - 1] + grid.dt
-    reasons = [
-        cats.code(
-            "note", _failure_reason(plant, int(loop.status[e]), int(loop.fail_index[e]), float(tf), loop.bounds[e])
-        )
-        for e, tf in zip(variants, t_fail, strict=True)
-    ]
+    variants, t_fail = loop.stopped, loop.t_fail
+    reasons = [cats.code("note", reason) for reason in loop.reasons]
     n_rows = 1 + len(followed)
     value = np.full((variants.size, n_rows), math.nan)
     value[:, 0] = t_fail

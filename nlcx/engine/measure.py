@@ -69,12 +69,18 @@ _NAN_NOTES = {
 }
 
 
+def _selected_state(c_row: np.ndarray) -> int | None:
+    """The state a row of C selects (one entry 1, the others 0), or None (a combination)."""
+    (nonzero,) = np.nonzero(c_row)
+    return int(nonzero[0]) if nonzero.size == 1 and c_row[nonzero[0]] == 1.0 else None
+
+
 def _outputs(xs: list[np.ndarray], c_row: np.ndarray) -> np.ndarray:
     """y = x c for each state trajectory x, stacked (B, T); a row of C that selects one state
     (the usual case) is a gather, not a product."""
-    (nonzero,) = np.nonzero(c_row)
-    if nonzero.size == 1 and c_row[nonzero[0]] == 1.0:
-        return np.stack([x[:, nonzero[0]] for x in xs])
+    state = _selected_state(c_row)
+    if state is not None:
+        return np.stack([x[:, state] for x in xs])
     return np.stack([x @ c_row for x in xs])
 
 
@@ -142,6 +148,13 @@ def _tracking_values(
     return values
 
 
+def _step_characteristics(t: np.ndarray, y: np.ndarray, t_step: float, cfg: MetricsSection) -> m.MetricDict:
+    """:func:`nlcx.metrics.step_info` of the rows ``y`` after a step at ``t_step``, its event
+    times measured from ``cfg.time_origin``: (B,) arrays."""
+    info = m.step_info(t, y, t_step=t_step, settling_band=cfg.settling_band, rise_limits=cfg.rise_limits)
+    return m.measured_from(cast(m.MetricDict, info), t_step, _time_origin(t_step, cfg))
+
+
 def _open_loop_values(
     plant: Plant, runs: list[Run], plans: list[dict[str, MetricPlan]], ok: list[int], cfg: MetricsSection
 ) -> dict[tuple[int, str], dict[str, float]]:
@@ -160,11 +173,7 @@ def _open_loop_values(
     for (s, t_step, n_samples), group in groups.items():
         for members in _blocks(group, n_samples):
             y = _outputs([runs[i].x for i in members], plant.C[plant.output_names.index(s)])
-            info = m.step_info(
-                runs[members[0]].t, y, t_step=t_step, settling_band=cfg.settling_band, rise_limits=cfg.rise_limits
-            )
-            moved = m.measured_from(cast(m.MetricDict, info), t_step, _time_origin(t_step, cfg))  # (B,) arrays
-            values.update(_per_run(moved, members, s))
+            values.update(_per_run(_step_characteristics(runs[members[0]].t, y, t_step, cfg), members, s))
     return values
 
 

@@ -129,10 +129,20 @@ def _loop_elements(group: list[Item]) -> LoopElements:
     return LoopElements(
         functions=element_slots(functions),
         table=table,
-        ep=_pad_rows([np.concatenate([np.zeros(0), *(e.params for e in g.elements)]) for g in group]),
-        es0=_pad_rows([np.concatenate([np.zeros(0), *(e.state for e in g.elements)]) for g in group]),
+        ep=_pad_rows([element_params(g) for g in group]),
+        es0=_pad_rows([element_states(g) for g in group]),
         data=_stack([g.element_data for g in group], (1, d_off)),
     )
+
+
+def element_params(item: Item) -> np.ndarray:
+    """An item's loop elements' parameters, side by side (the row of ``LoopElements.ep``)."""
+    return np.concatenate([np.zeros(0), *(e.params for e in item.elements)])
+
+
+def element_states(item: Item) -> np.ndarray:
+    """An item's loop elements' initial states, side by side (the row of ``LoopElements.es0``)."""
+    return np.concatenate([np.zeros(0), *(e.state for e in item.elements)])
 
 
 def _plant_forces(group: list[Item]) -> PlantForces:
@@ -149,11 +159,11 @@ def _friction_path(group: list[Item]) -> FrictionPath:
     return FRICTIONAL if any(_has_friction(g.friction) for g in group) else FRICTIONLESS
 
 
-def _records(group: list[Item], n_k: int, n_rec: int) -> Records:
-    """The records of a group of items: states and inputs at the n_k samples, controller logs
-    and friction forces at n_rec (1: not recorded). The kernel writes every sample up to where
-    a run stops; the rest is never read."""
-    plant, n_b = group[0].plant, len(group)
+def _records(group: list[Item], n_k: int, n_rec: int, n_rows: int | None = None) -> Records:
+    """The records of a group of items (``n_rows`` of them, by default one a member): states and
+    inputs at the n_k samples, controller logs and friction forces at n_rec (1: not recorded).
+    The kernel writes every sample up to where a run stops; the rest is never read."""
+    plant, n_b = group[0].plant, len(group) if n_rows is None else n_rows
     n_u = len(plant.inputs)
     return Records(
         X=np.empty((n_b, n_k, len(plant.states))), U=np.empty((n_b, n_k, n_u)),
@@ -216,6 +226,7 @@ def _stack(arrays: list[np.ndarray | None], empty_shape: tuple[int, ...]) -> np.
 
 
 def _has_friction(axes: np.ndarray | None) -> bool:
-    """Whether an item's friction axes (FRICTION_AXIS rows) hold a friction model (as the kernel's
-    :func:`nlcx.kernel.friction.has_friction` decides which rows take the friction path)."""
-    return axes is not None and bool(np.any(axes[:, FA.model].astype(np.int64) != FRICTION_NONE))
+    """Whether friction axes (FRICTION_AXIS rows: an item's, or a call's with a leading row axis)
+    hold a friction model (as the kernel's :func:`nlcx.kernel.friction.has_friction` decides
+    which rows take the friction path)."""
+    return axes is not None and bool(np.any(axes[..., FA.model].astype(np.int64) != FRICTION_NONE))

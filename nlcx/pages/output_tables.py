@@ -137,9 +137,10 @@ def _typed(frame: pd.DataFrame) -> pd.DataFrame:
     return frame.assign(**fixed) if fixed else frame
 
 
-def _part_files(dataset: Path) -> list[Path]:
-    """The files of a Parquet dataset directory that hold its rows, in name order."""
-    return sorted(dataset.glob(PART_FILES), key=lambda p: p.name)
+def part_files(path: Path) -> list[Path]:
+    """The files that hold a Parquet table's rows, in order: a dataset directory's part files in
+    name order, or the file itself."""
+    return sorted(path.glob(PART_FILES), key=lambda p: p.name) if path.is_dir() else [path]
 
 
 def _read_parquet(path: Path) -> pa.Table:
@@ -154,7 +155,7 @@ def _read_parquet(path: Path) -> pa.Table:
 
     if path.is_file():
         return pq.read_table(path)
-    files = [str(p) for p in _part_files(path)]
+    files = [str(p) for p in part_files(path)]
     if not files:
         return pa.table({})
     try:

@@ -19,7 +19,7 @@ import yaml
 
 from nlcx import report
 from nlcx.pages import charts, sweep_charts
-from nlcx.pages.output_tables import PART_FILES, STEMS, read_output_table, table_path
+from nlcx.pages.output_tables import STEMS, part_files, read_output_table, table_path
 
 FILES = "report_files"
 
@@ -85,10 +85,10 @@ def read_tables(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    files = sorted(path.glob(PART_FILES)) if path.is_dir() else [path]
+    files = part_files(path)
     index_path = table_path(directory, "sweep")
     assert index_path is not None
-    index_files = sorted(index_path.glob(PART_FILES)) if index_path.is_dir() else [index_path]
+    index_files = part_files(index_path)
     names = pq.read_schema(index_files[0]).names
     columns = [c for c in names if c in ("variant", "status") or c.startswith("value:")]
     try:

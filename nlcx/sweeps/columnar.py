@@ -193,19 +193,13 @@ def _template(batch: ColumnBatch) -> Any:
 def _statuses(template: Any, rows: list[Any], n: int) -> tuple[np.ndarray, list[str | None]]:
     """Each variant's status ("ok", or "unstable" when a loop stopped) and message (the first
     stopped loop's label and reason), as :func:`nlcx.sweeps.batches.run_batch` records them."""
-    from nlcx.engine.simulate import _failure_reason
-
-    prepared = template.prepared
     unstable = np.zeros(n, dtype=bool)
     message: list[str | None] = [None] * n
     for i, loop in enumerate(rows):
-        for e in np.flatnonzero((loop.status != 0) & ~unstable):
-            t_fail = float(prepared.grid.t[loop.n_valid[e] - 1] + prepared.grid.dt)
-            reason = _failure_reason(
-                prepared.plant, int(loop.status[e]), int(loop.fail_index[e]), t_fail, loop.bounds[e]
-            )
-            message[e] = f"{template.items[i].controller.label}: {reason}"
-        unstable |= loop.status != 0
+        for e, reason in zip(loop.stopped, loop.reasons, strict=True):
+            if not unstable[e]:
+                message[e] = f"{template.items[i].controller.label}: {reason}"
+        unstable[loop.stopped] = True
     return np.where(unstable, "unstable", "ok"), message
 
 
@@ -313,7 +307,7 @@ def run_column_batch(batch: ColumnBatch) -> Any:
     try:
         template = _template(batch)
         calls = simulate_ensemble(template, batch.packing.slots, batch.columns, batch.n)
-        rows = loop_rows(calls, len(template.items), batch.n)
+        rows = loop_rows(calls, template)
         status, message = _statuses(template, rows, batch.n)
         metrics = _metrics_table(batch, measure_ensemble(template, rows, batch.n))
         parts = batch.out_dir / "parts"
