@@ -10,7 +10,7 @@ JOBS ?= 2
 BASELINE_TABLES := table-2.3,table-2.5,table-3.2,table-3.7,table-4.2,table-4.4,table-5.1,table-5.8
 
 .PHONY: install dev-install run test lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
-	baseline baseline-diff sweep-demo bench docs clean typecheck
+	baseline baseline-diff sweep-demo bench bench-gpu docs clean typecheck
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -91,6 +91,12 @@ sweep-demo: install
 ## bench: the speed benchmarks (writes benchmarks/latest.txt)
 bench: install
 	$(BIN)/python benchmarks/run.py | tee benchmarks/latest.txt
+
+## bench-gpu: nlcx on one CUDA GPU against a hand-written CUDA kernel (needs nlcx[cuda] and a GPU; writes
+## benchmarks/gpu_latest.txt)
+bench-gpu: install
+	$(BIN)/pip install -q '.[cuda]'
+	$(BIN)/python benchmarks/gpu.py | tee benchmarks/gpu_latest.txt
 
 ## identify: the identification studies and docs/fidelity.md (every number on it): fit every loop hypothesis on
 ## the train tables, reproduce under the literal and selected profiles, ask of each printed conventional column

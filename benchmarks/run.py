@@ -753,6 +753,15 @@ def table_rows(f: dict[str, Any]) -> list[tuple[str, str, str, str]]:
                      "≥ 100×"))  # fmt: skip
     if "e_make_run_s" in f:
         rows.append(("e", "`make run` in a fresh clone, pip's cache off", f"{f['e_make_run_s']:.0f} s", "≤ 90 s"))
+    if "gpu_sweep_s" in f:
+        rows += [
+            ("gpu", f"`nlcx sweep --device cuda` of 1 000 000 variants of (b)'s loop on one {f['gpu_name']}, its "
+             "kernels kept from an earlier process: plan, simulate, measure, write the metrics; then the report",
+             f"{f['gpu_sweep_s']:.1f} s; "
+             f"{f['gpu_report_s']:.1f} s", "≤ 10 s"),
+            ("gpu", "nlcx's GPU kernel over a hand-written CUDA kernel of the same loop, 1 000 000 variants "
+             "(`benchmarks/gpu.py`)", f"{f['gpu_kernel_ratio']:.2f}×", "≤ 2×"),
+        ]  # fmt: skip
     if "f_wall_s" in f:
         rows += [
             ("f", "`nlcx sweep` of 1 000 000 x-pendulum variants over 0.1 s, `--jobs 2`, report on: wall time, "
@@ -769,6 +778,8 @@ def speed_table(figures: dict[str, Any], kept: Sequence[str] = ()) -> str:
     lines = [f"| ({bench}) | {what} | {value} | {target} |" for bench, what, value, target in table_rows(figures)]
     lines = sorted([*lines, *kept], key=lambda line: line[:5])
     machine_text = f" on {figures['machine']}" if figures.get("machine") else ""
+    if "machine" not in figures and "previous_machine" in figures:  # only GPU rows measured: the CPU rows' machine
+        machine_text = f" on {figures['previous_machine']}"
     return (
         f"Measured by `make bench`{machine_text} (`benchmarks/latest.txt` holds the whole output; "
         "docs/performance.md describes each benchmark).\n\n"
@@ -784,8 +795,12 @@ def write_speed_table(figures: dict[str, Any], readme: Path = README) -> bool:
     if start < 0 or end < start:
         return False
     measured = {bench for bench, *_ in table_rows(figures)}
-    rows = (re.match(r"^\| \(([a-g])\) \|", line) for line in text[start + len(TABLE_START) : end].splitlines())
+    body = text[start + len(TABLE_START) : end]
+    rows = (re.match(r"^\| \(([a-g]|gpu)\) \|", line) for line in body.splitlines())
     kept = [row.string for row in rows if row and row.group(1) not in measured]
+    before = re.search(r"Measured by `make bench` on (.*?) \(`benchmarks", body)
+    if before and "machine" not in figures:
+        figures = {**figures, "previous_machine": before.group(1)}
     table = speed_table(figures, kept)
     new = f"{text[: start + len(TABLE_START)]}\n{table}{text[end:]}"
     if new != text:

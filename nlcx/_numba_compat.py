@@ -62,6 +62,14 @@ def hot_njit(*args: Any, **kwargs: Any) -> Any:
     return private(*args, _nrt=False, **kwargs)
 
 
+def is_numba_function(value: Any) -> bool:
+    """Whether ``value`` is a function numba compiled or will compile (a dispatcher, whose
+    ``py_func`` is its Python source; numba's ``numba.core.dispatcher.Dispatcher``)."""
+    from numba.core.dispatcher import Dispatcher
+
+    return isinstance(value, Dispatcher)
+
+
 def register_typeof(cls: type, typer: Callable[[Any, Any], Any]) -> None:
     """Type instances of ``cls`` with ``typer(value, context)`` when a compiled function is called
     (numba's private ``typeof_impl``)."""
@@ -135,3 +143,81 @@ def _locked(operation: Callable[..., Any]) -> Callable[..., Any]:
 
     run.serialized = True  # type: ignore[attr-defined]  # a mark on the function: patched once
     return run
+
+
+def cuda_without_fma() -> None:
+    """Compile numba-cuda's GPU code without fused multiply-add contraction (libNVVM's
+    ``-fma=0``) unless a function asks for fast math: every product and sum then rounds as on
+    the CPU. numba-cuda passes its own NVVM options only (``fastmath``, ``opt``), so this wraps
+    its private ``nvvm.compile_ir`` (numba-cuda 0.30) once per process."""
+    from numba.cuda.cudadrv import nvvm
+
+    compile_ir = nvvm.compile_ir
+    if getattr(compile_ir, "without_fma", False):
+        return
+
+    @functools.wraps(compile_ir)
+    def strict(llvmir: Any, **options: Any) -> Any:
+        if not options.get("fastmath", False):
+            options.setdefault("fma", False)
+        return compile_ir(llvmir, **options)
+
+    strict.without_fma = True  # type: ignore[attr-defined]  # a mark on the function: wrapped once
+    nvvm.compile_ir = strict
+
+
+def keep_compiled_kernels(dispatcher: Any, directory: Any, key: str) -> None:
+    """Keep the kernels ``dispatcher`` (a numba-cuda kernel) compiles in files of ``directory``
+    named by ``key`` and the signature, and load them from there in later processes.
+
+    numba-cuda's own disk cache keys a kernel on its closure's pickled contents, which for a
+    kernel built at run time around other device functions differ in every process, so it never
+    hits; nlcx builds its kernels that way and knows a key that does not change
+    (:func:`nlcx.kernel.device.source_key`). This sets the dispatcher's private ``_cache`` to a
+    store with numba-cuda's ``load_overload``/``save_overload``, whose files hold what numba-cuda's
+    cache holds (``_Kernel._reduce_states()``: the PTX and cubin); numba-cuda 0.30. A file that
+    is missing or unreadable means a compilation; one that cannot be written is skipped."""
+    dispatcher._cache = _KernelFiles(directory, key)
+
+
+class _KernelFiles:
+    """numba-cuda's cache interface over one file per kernel signature (:func:`keep_compiled_kernels`)."""
+
+    def __init__(self, directory: Any, key: str) -> None:
+        self.directory, self.key = directory, key
+
+    def _path(self, sig: Any) -> Any:
+        import hashlib
+
+        name = hashlib.sha256(f"{self.key}|{sig}".encode()).hexdigest()[:32]
+        return self.directory / f"{name}.kernel"
+
+    def load_overload(self, sig: Any, target_context: Any) -> Any:
+        import pickle
+
+        from numba.cuda.dispatcher import _Kernel
+
+        try:
+            payload = pickle.loads(self._path(sig).read_bytes())
+        except Exception:  # missing, partly written by another process, or from another numba-cuda
+            return None
+        target_context.refresh()
+        return _Kernel._rebuild(**payload)
+
+    def save_overload(self, sig: Any, kernel: Any) -> None:
+        import os
+
+        from numba.cuda.serialize import dumps
+
+        try:
+            data = dumps(kernel._reduce_states())
+            self.directory.mkdir(parents=True, exist_ok=True)
+            path = self._path(sig)
+            tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+            tmp.write_bytes(data)
+            tmp.replace(path)
+        except Exception:  # a kernel that cannot be kept is compiled again next time
+            return
+
+    def flush(self) -> None:
+        return

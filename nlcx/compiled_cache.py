@@ -45,8 +45,10 @@ def source_digest(root: Path = PACKAGE) -> str:
 
 
 def cache_files(root: Path = PACKAGE) -> list[Path]:
-    """numba's index and data files in the package's ``__pycache__`` folders."""
-    return [p for pattern in ("*.nbi", "*.nbc") for p in root.rglob(f"__pycache__/{pattern}")]
+    """numba's index and data files in the package's ``__pycache__`` folders, and the GPU
+    kernels kept there (:func:`nlcx.kernel.device.kept`)."""
+    patterns = ("*.nbi", "*.nbc", "cuda-kernels/*.kernel")
+    return [p for pattern in patterns for p in root.rglob(f"__pycache__/{pattern}")]
 
 
 def ensure_consistent(root: Path = PACKAGE, stamp: Path | None = None, depends: tuple[Path, ...] = ()) -> bool:

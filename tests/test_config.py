@@ -33,7 +33,7 @@ CASES = [
         ["simulation.t_edn=5"],
         "simulation.t_edn",
         "5",
-        "unknown key; allowed keys: bounds, dt, integrator, t_end (did you mean 't_end'?)",
+        "unknown key; allowed keys: bounds, device, dt, integrator, t_end (did you mean 't_end'?)",
     ),
     (["simulation.dt=abc"], "simulation.dt", "'abc'", "must be a valid number"),
     (["simulation.dt=-0.001"], "simulation.dt", "-0.001", "must be greater than 0"),

@@ -56,6 +56,35 @@ def _summary(result: Any) -> str:
     return "\n".join(lines)
 
 
+DeviceOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--device", help="cpu or cuda: where the closed loops run (sets simulation.device; docs/guide/gpu.md)."
+    ),
+]
+
+
+def _on_device(device: str | None, overrides: list[str] | None) -> list[str]:
+    """The overrides with ``simulation.device`` set to ``device`` (checked, and for cuda a GPU
+    found, before any work), or unchanged without ``--device``."""
+    from nlcx.kernel.device import DEVICES, cuda
+
+    if device is None:
+        return list(overrides or [])
+    if device not in DEVICES:
+        raise NlcxError(f"--device = {device!r}: allowed values: {', '.join(DEVICES)}")
+    if device == "cuda":
+        cuda()
+    return [*(overrides or []), f"++simulation.device={device}"]
+
+
+def _checked_device(device: str | None) -> str | None:
+    """``device`` checked (for cuda: a GPU found) before any work; None without ``--device``."""
+    if device is not None:
+        _on_device(device, [])
+    return device
+
+
 @app.command()
 @one_line_errors
 def run(
@@ -64,10 +93,12 @@ def run(
     out: Annotated[Path | None, typer.Option("--out", help="Run directory (default results/<name>).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only the run directory.")] = False,
     no_report: NoReport = False,
+    device: DeviceOpt = None,
 ) -> None:
     """Run an experiment: every controller of CONFIG on its plant, then write the run directory."""
     from nlcx import config as cfg
 
+    overrides = _on_device(device, overrides)
     raw = cfg.apply_overrides(cfg.read_config(config), overrides or [])
     if "sweep" in raw:
         _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report)
@@ -210,6 +241,7 @@ def sweep_command(
     force: Annotated[bool, typer.Option("--force", help="Recompute variants that already have results.")] = False,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Print the expansion and stop.")] = False,
     no_report: NoReport = False,
+    device: DeviceOpt = None,
     cluster: Annotated[
         Path | None,
         typer.Option(
@@ -222,6 +254,7 @@ def sweep_command(
     """Run the sweep of CONFIG (its sweep: section); a rerun resumes where it stopped."""
     if executor not in ("process", "serial", "dask"):
         raise NlcxError(f"--executor = {executor!r}: allowed values: process, serial, dask")
+    overrides = _on_device(device, overrides)
     if cluster is not None and (scheduler or executor not in ("process", "dask")):
         raise NlcxError("--cluster: runs on Dask workers of its own; leave out --scheduler and --executor")
     _sweep(config, overrides or [], out, executor, jobs, scheduler, force, dry_run, not no_report, cluster)
@@ -407,6 +440,7 @@ def identify(
     out: Annotated[
         Path | None, typer.Option("--out", help="Output directory (default results/identify/<name>).")
     ] = None,
+    device: DeviceOpt = None,
 ) -> None:
     """Fit loop hypotheses to the train tables, rank them on validation (resumable).
     A spec with ``chapter: 5`` is chapter 5's study (Table 5.8), ranked by train loss; one with
@@ -433,7 +467,7 @@ def identify(
         elif raw.get("chapter") == 5:
             table = identify_cstr(spec, out_dir, jobs=jobs, progress=progress)
         else:
-            table = run_identify(spec, out_dir, jobs=jobs, progress=progress)
+            table = run_identify(spec, out_dir, jobs=jobs, progress=progress, device=_checked_device(device))
     if raw.get("kind") == "consistency":
         shown = table[["table", "definition", "loops", "most_cells_hit", "cells", "reproduced"]]
         typer.echo(shown.to_string(index=False))

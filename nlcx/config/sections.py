@@ -55,6 +55,13 @@ class SimulationSection(Section):
         json_schema_extra={"unit": "s"},
     )
     integrator: Literal["rk4", "heun", "euler"] = Field("rk4", description="Fixed-step explicit Runge-Kutta method.")
+    device: Literal["cpu", "cuda"] = Field(
+        "cpu",
+        description=(
+            "Where the closed loops are integrated: on the CPU, or one GPU thread a loop with numba-cuda "
+            "(pip install 'nlcx[cuda]'; docs/guide/gpu.md)."
+        ),
+    )
     bounds: dict[str, float] = Field(
         default={},
         description=(

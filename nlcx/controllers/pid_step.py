@@ -190,6 +190,15 @@ def _loop_options(structure, cp, row, h, i):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, inline="always", error_model="numpy")
+def via_slot(callbacks, slot, t, e, edot, p, row, offset):  # pragma: no cover - compiled
+    """The gains of the schedule in slot ``slot`` of the callback table (a registered schedule
+    that is not built in): ``callbacks[slot](t, e, edot, p, row, offset)``. The GPU, which has
+    no function values, replaces this function by a branch over the schedules in use
+    (:mod:`nlcx.kernel.device`)."""
+    return callbacks[slot](t, e, edot, p, row, offset)
+
+
+@hot_njit(cache=True, inline="always", error_model="numpy")
 def _loop_update(structure, i, t, period, y_i, r_i, cp, cs, log, row, h, c, callbacks):  # pragma: no cover - compiled
     """Loop i's sample (see :func:`pid_step`), its options by :func:`_loop_options`: its state
     updated, its gains logged; returns its signed contribution to its input."""
@@ -213,7 +222,7 @@ def _loop_update(structure, i, t, period, y_i, r_i, cp, cs, log, row, h, c, call
     elif direct == DIRECT_CONSTANT:
         kp, ki, kd = constant_gains(t, e, d, cp, row, off)
     else:
-        kp, ki, kd = callbacks[slot](t, e, d, cp, row, off)
+        kp, ki, kd = via_slot(callbacks, slot, t, e, d, cp, row, off)
     if form != 0:  # ideal: k_p (1, k_i, k_d); series: k_p (1 + k_i k_d, k_i, k_d)
         kp, ki, kd = (kp * (1.0 + ki * kd) if form == 2 else kp), kp * ki, kp * kd
     step = ki * e * period if inside else e * period

@@ -278,7 +278,6 @@ class LoopRows:
 def loop_rows(calls: list[EnsembleCall], template: Template) -> list[LoopRows]:
     """The runs of each loop of the template, gathered from the calls, in variant order, with
     the time and reason of each run that stopped."""
-    plant, grid = template.prepared.plant, template.prepared.grid
     out = []
     for i in range(len(template.items)):
         parts = [(c, np.flatnonzero(c.loops == i)) for c in calls]
@@ -287,18 +286,24 @@ def loop_rows(calls: list[EnsembleCall], template: Template) -> list[LoopRows]:
         if rest:  # pragma: no cover - a loop runs in one call
             raise AssertionError("an ensemble's loop is split between kernel calls")
         take: slice | np.ndarray = slice(None) if rows.size == call.loops.size else rows  # the whole call: views
-        status, n_valid, fail_index, bounds = (
-            call.status[take],
-            call.n_valid[take],
-            call.fail_index[take],
-            call.bounds[take],
-        )
-        stopped = np.flatnonzero(status != 0)
-        t_fail = grid.t[n_valid[stopped] - 1] + grid.dt
-        reasons = [_failure_reason(plant, int(status[e]), int(fail_index[e]), float(tf), bounds[e])
-                   for e, tf in zip(stopped, t_fail, strict=True)]  # fmt: skip
-        out.append(LoopRows(call.X[take], call.U[take], status, n_valid, fail_index, bounds, stopped, t_fail, reasons))
+        status, n_valid, fail_index = call.status[take], call.n_valid[take], call.fail_index[take]
+        outcome = failure_rows(template, status, n_valid, fail_index, call.bounds[take])
+        outcome.X, outcome.U = call.X[take], call.U[take]
+        out.append(outcome)
     return out
+
+
+def failure_rows(
+    template: Template, status: np.ndarray, n_valid: np.ndarray, fail_index: np.ndarray, bounds: np.ndarray
+) -> LoopRows:
+    """One loop's outcome rows (no records), with the time and reason of each run that stopped."""
+    plant, grid = template.prepared.plant, template.prepared.grid
+    stopped = np.flatnonzero(status != 0)
+    t_fail = grid.t[n_valid[stopped] - 1] + grid.dt
+    reasons = [_failure_reason(plant, int(status[e]), int(fail_index[e]), float(tf), bounds[e])
+               for e, tf in zip(stopped, t_fail, strict=True)]  # fmt: skip
+    empty = np.empty((status.size, 0, 0))
+    return LoopRows(empty, empty, status, n_valid, fail_index, bounds, stopped, t_fail, reasons)
 
 
 @dataclass
@@ -391,10 +396,18 @@ def _output_rows(X: np.ndarray, take: slice | np.ndarray, c_row: np.ndarray) -> 
     return np.stack([x @ c_row for x in X[take]])
 
 
-def measure_ensemble(template: Template, rows: list[LoopRows], n_variants: int) -> MetricColumns:
+#: (signal, metric, values over the runs that finished) of a loop, in measure_runs's order.
+OkValues = Callable[[Template, int, LoopRows, np.ndarray], list[tuple[str, str, np.ndarray]]]
+
+
+def measure_ensemble(
+    template: Template, rows: list[LoopRows], n_variants: int, ok_values: OkValues | None = None
+) -> MetricColumns:
     """The metric rows of every variant's runs (:func:`nlcx.engine.measure_runs`'s rows, with
     the variant's position in the column ``variant``), as columns: by variant, then loop (the
-    template's order), then row."""
+    template's order), then row. ``ok_values``: where the values of the runs that finished
+    come from (default: measured here from the rows' records; the GPU's, measured there:
+    :func:`nlcx.engine.gpu.simulate_measure`)."""
     plant = template.prepared.plant
     cats = _Categories(("controller", "signal", "metric", "unit", "status", "note"))
     blocks: list[_Block] = []
@@ -402,7 +415,7 @@ def measure_ensemble(template: Template, rows: list[LoopRows], n_variants: int) 
         label = template.items[i].controller.label
         ok = loop.status == 0
         if ok.any():
-            blocks.append(_ok_block(template, i, loop, ok, cats, label))
+            blocks.append(_ok_block(template, i, loop, ok, cats, label, ok_values or _ok_values))
         if (~ok).any():
             followed = _measured_outputs(_RunView(template.items[i].controller), plant)
             blocks.append(_failed_block(loop, followed, cats, label, i))
@@ -420,9 +433,11 @@ class _Block:
     value: np.ndarray
 
 
-def _ok_block(template: Template, i: int, loop: LoopRows, ok: np.ndarray, cats: _Categories, label: str) -> _Block:
+def _ok_block(
+    template: Template, i: int, loop: LoopRows, ok: np.ndarray, cats: _Categories, label: str, ok_values: OkValues
+) -> _Block:
     plant = template.prepared.plant
-    values = _ok_values(template, i, loop, ok)
+    values = ok_values(template, i, loop, ok)
     variants = np.flatnonzero(ok)
     value = np.stack([v for _, _, v in values], axis=1).reshape(-1)  # variant-major
     signal = np.array([cats.code("signal", s) for s, _, _ in values])

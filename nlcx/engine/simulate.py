@@ -44,12 +44,12 @@ def simulate_experiments(
     grids: dict[tuple[Any, ...], list[int]] = {}
     for e, p in enumerate(prepared):
         sim = p.experiment.section.simulation
-        grids.setdefault((sim.dt, p.grid.n_steps, sim.integrator), []).append(e)
+        grids.setdefault((sim.dt, p.grid.n_steps, sim.integrator, sim.device), []).append(e)
     for members in grids.values():
         start = time.perf_counter()
         items = [(e, item) for e in members for item in items_of(prepared[e])]
-        grid, integrator = prepared[members[0]].grid, prepared[members[0]].experiment.section.simulation.integrator
-        done = simulate_items([item for _, item in items], grid, integrator, record_logs)
+        grid, sim = prepared[members[0]].grid, prepared[members[0]].experiment.section.simulation
+        done = simulate_items([item for _, item in items], grid, sim.integrator, record_logs, sim.device)
         for (e, _), run in zip(items, done, strict=True):
             runs[e].append(run)
         for e in members:
@@ -57,13 +57,16 @@ def simulate_experiments(
     return runs
 
 
-def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_logs: bool = True) -> list[Run]:
+def simulate_items(
+    items: list[Item], grid: TimeGrid, integrator: str, record_logs: bool = True, device: str = "cpu"
+) -> list[Run]:
     """Integrate every item; items sharing plant equations and controller kind go through one
     batched kernel call (per-item parameters, states, references and perturbations). The
     trajectories are read-only views of the call's records.
 
     ``record_logs=False`` skips the controller logs and friction forces (``Run.log`` and
-    ``Run.friction`` are None): a sweep that keeps only metrics does not need them."""
+    ``Run.friction`` are None): a sweep that keeps only metrics does not need them.
+    ``device="cuda"``: on the GPU (:mod:`nlcx.kernel.cuda_loop`), the same calls."""
     from nlcx.kernel.integrator import simulate  # loaded (or compiled) on first use: see load_kernel
 
     tableau = TABLEAUS[integrator]
@@ -77,15 +80,32 @@ def simulate_items(items: list[Item], grid: TimeGrid, integrator: str, record_lo
             status=np.zeros(len(group), dtype=np.int64), n_valid=np.zeros(len(group), dtype=np.int64),
             fail_index=np.zeros(len(group), dtype=np.int64),
         )  # fmt: skip
-        simulate(
-            integration, _plant_call(group), _controller_call(group, call.step), _loop_elements(group),
-            _plant_forces(group), records, outcome, _friction_path(group),
-        )  # fmt: skip
+        plant, controller = _plant_call(group), _controller_call(group, call.step)
+        arguments = (plant, controller, _loop_elements(group), _plant_forces(group))
+        if device == "cuda":
+            on_gpu(integration, *arguments, records, outcome, friction=_friction_path(group) is FRICTIONAL)
+        else:
+            simulate(integration, *arguments, records, outcome, _friction_path(group))
         for array in records:
             array.flags.writeable = False
         for j, i in enumerate(call.indices):
             runs[i] = _run(group[j], j, records, outcome, grid, record_logs)
     return [run for run in runs if run is not None]
+
+
+def on_gpu(
+    integration: Integration, plant: PlantCall, controller: ControllerCall, elements: LoopElements,
+    forces: PlantForces, records: Records, outcome: Outcome, friction: bool,
+) -> None:  # fmt: skip
+    """A kernel call on the GPU (:func:`nlcx.kernel.cuda_loop.simulate`), or a one-line
+    ConfigError naming what cannot run there."""
+    from nlcx.kernel import cuda_loop
+    from nlcx.kernel.device import refused
+
+    why = cuda_loop.unsupported(plant, controller, elements, friction)
+    if why is not None:
+        raise refused(f"{why}; use device: cpu")
+    cuda_loop.simulate(integration, plant, controller, elements, forces, records, outcome)
 
 
 def _plant_call(group: list[Item]) -> PlantCall:

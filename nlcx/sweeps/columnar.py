@@ -47,6 +47,9 @@ MAX_BATCH_VARIANTS = 2000
 #: A plan is cut into about this many batches (fewer when a batch would be smaller than the
 #: sweep's batch_size), whatever the number of workers, so that the outputs do not depend on it.
 TARGET_BATCHES = 64
+#: Variants per batch of a sweep on the GPU: its metrics and index come back batch by batch,
+#: and the GPU runs each in as few chunks as its memory allows.
+GPU_BATCH_VARIANTS = 250_000
 
 
 @dataclass(frozen=True)
@@ -127,10 +130,14 @@ def packing(base_raw: dict[str, Any], spec: SweepSection, plan: ColumnPlan | Non
     return Packing(slots, len(template.items) * prepared.grid.t.size * width * 8)
 
 
-def batch_size(spec: SweepSection, n_variants: int, record_bytes: int) -> int:
+def batch_size(spec: SweepSection, n_variants: int, record_bytes: int, device: str = "cpu") -> int:
     """Variants per columnar batch: about :data:`TARGET_BATCHES` batches, at least the sweep's
     ``batch_size``, at most :data:`MAX_BATCH_VARIANTS` and what keeps a batch's records under
-    :data:`BATCH_RECORD_BYTES` (``record_bytes``: one variant's). Independent of the number of workers."""
+    :data:`BATCH_RECORD_BYTES` (``record_bytes``: one variant's). Independent of the number of workers.
+    On the GPU (``device="cuda"``), where records stay on the device, :data:`GPU_BATCH_VARIANTS`
+    (a batch larger than the GPU's memory holds runs in chunks there)."""
+    if device == "cuda":
+        return max(1, min(n_variants, GPU_BATCH_VARIANTS))
     size = max(spec.batch_size, -(-n_variants // TARGET_BATCHES))
     return max(1, min(size, MAX_BATCH_VARIANTS, BATCH_RECORD_BYTES // max(record_bytes, 1)))
 
@@ -306,10 +313,15 @@ def run_column_batch(batch: ColumnBatch) -> Any:
     set_threads()
     try:
         template = _template(batch)
-        calls = simulate_ensemble(template, batch.packing.slots, batch.columns, batch.n)
-        rows = loop_rows(calls, template)
+        if template.prepared.experiment.section.simulation.device == "cuda":
+            from nlcx.engine.gpu import simulate_measure
+
+            rows, ok_values = simulate_measure(template, batch.packing.slots, batch.columns, batch.n)
+        else:
+            calls = simulate_ensemble(template, batch.packing.slots, batch.columns, batch.n)
+            rows, ok_values = loop_rows(calls, template), None
         status, message = _statuses(template, rows, batch.n)
-        metrics = _metrics_table(batch, measure_ensemble(template, rows, batch.n))
+        metrics = _metrics_table(batch, measure_ensemble(template, rows, batch.n, ok_values))
         parts = batch.out_dir / "parts"
         write_parquet_table(parts / f"{batch.part}.metrics.parquet", metrics)
         write_parquet_table(parts / f"{batch.part}.index.parquet", _index_table(batch, status, message))

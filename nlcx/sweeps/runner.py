@@ -238,7 +238,9 @@ class _Job:
         if batches:
             engine.load_kernel()
         planned = time.perf_counter()
-        _run_batches(batches, self.executor, self.jobs, self.scheduler, tally.add, self.cluster, task)
+        # one process holds the GPU: its batches run one after another there
+        executor = "serial" if self.base.section.simulation.device == "cuda" else self.executor
+        _run_batches(batches, executor, self.jobs, self.scheduler, tally.add, self.cluster, task)
         return planned
 
     def _finish(self, staging: Path, statuses: dict[str, int], timings: dict[str, float], variants: int,
@@ -263,8 +265,10 @@ class _Job:
         """The variants packed from columns, in batches of :func:`~nlcx.sweeps.columnar.batch_size`."""
         from nlcx import engine, rundir
 
-        size = columnar.batch_size(self.spec, plan.n, found.record_bytes)
-        engine.check_sweep_memory(self.base, min(size, plan.n) * self.workers)
+        device = self.base.section.simulation.device
+        size = columnar.batch_size(self.spec, plan.n, found.record_bytes, device)
+        if device == "cpu":  # on the GPU the records stay there, chunked to its memory
+            engine.check_sweep_memory(self.base, min(size, plan.n) * self.workers)
         metrics = tuple(self.spec.metrics) if self.spec.metrics is not None else None
         with rundir.claim(self.out_dir):
             staging = open_column_staging(self.out_dir, self.force)

@@ -45,7 +45,7 @@ import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -99,6 +99,9 @@ class IdentifySpec(BaseModel):
     claims_top: int | None = Field(5, ge=0)
     #: Screen the families on train before combining them (None: combine every family).
     screen: Screen | None = None
+    #: Where every candidate's closed loops run (``simulation.device`` of each experiment):
+    #: a generation's loops in one kernel call on the CPU, or on the GPU (docs/guide/gpu.md).
+    device: Literal["cpu", "cuda"] = "cpu"
 
     @field_validator("families")
     @classmethod
@@ -124,10 +127,13 @@ class IdentifySpec(BaseModel):
 class TableRuns:
     """The experiment of each thesis table, with candidate values and a hypothesis applied."""
 
-    def __init__(self, root: Path, tables: list[str], controllers: tuple[str, ...] | None = None) -> None:
-        """``controllers``: keep only these controllers of each experiment (default: all)."""
+    def __init__(
+        self, root: Path, tables: list[str], controllers: tuple[str, ...] | None = None, device: str = "cpu"
+    ) -> None:
+        """``controllers``: keep only these controllers of each experiment (default: all);
+        ``device``: where their loops run (``simulation.device``)."""
         paths = {t.table: t.configs[0] for t in catalog.tables(root) if t.kind == "metrics"}
-        self.raw = {table: _keep(cfg.read_config(paths[table]), controllers) for table in tables}
+        self.raw = {table: _on(_keep(cfg.read_config(paths[table]), controllers), device) for table in tables}
         self.inputs = {table: profiles.plant_inputs(raw) for table, raw in self.raw.items()}
 
     def experiment(
@@ -136,6 +142,11 @@ class TableRuns:
         """Table ``table``'s experiment with the free values set and the hypothesis applied
         (the same path as a reproduction profile, :func:`nlcx.thesis.profiles.apply`)."""
         return profiles.apply(self.raw[table], hyp, values, self.inputs[table], metrics)
+
+
+def _on(raw: dict[str, Any], device: str) -> dict[str, Any]:
+    """``raw`` with its loops on ``device`` (unchanged on the CPU, the default)."""
+    return raw if device == "cpu" else {**raw, "simulation": {**raw.get("simulation", {}), "device": device}}
 
 
 def _keep(raw: dict[str, Any], controllers: tuple[str, ...] | None) -> dict[str, Any]:
@@ -190,8 +201,10 @@ def train_loss(ours: np.ndarray, cells: pd.DataFrame) -> np.ndarray:
 class Objective:
     """Train loss of a population of candidates (rows of X: the free values in ``keys`` order)."""
 
-    def __init__(self, root: Path, hyp: hypotheses.Hypothesis, keys: list[str], cells: pd.DataFrame) -> None:
-        self.root, self.hyp, self.keys, self.cells = root, hyp, keys, cells
+    def __init__(
+        self, root: Path, hyp: hypotheses.Hypothesis, keys: list[str], cells: pd.DataFrame, device: str = "cpu"
+    ) -> None:
+        self.root, self.hyp, self.keys, self.cells, self.device = root, hyp, keys, cells, device
         self._runs: TableRuns | None = None
 
     def __getstate__(self) -> dict[str, Any]:
@@ -199,7 +212,7 @@ class Objective:
 
     def __call__(self, X: np.ndarray) -> np.ndarray:
         if self._runs is None:
-            self._runs = TableRuns(self.root, list(dict.fromkeys(self.cells.table)))
+            self._runs = TableRuns(self.root, list(dict.fromkeys(self.cells.table)), device=self.device)
         candidates = [dict(zip(self.keys, map(float, x), strict=True)) for x in np.atleast_2d(X)]
         return train_loss(measure_cells(self._runs, self.hyp, candidates, self.cells), self.cells)
 
@@ -264,17 +277,18 @@ def fit_hypothesis(
     bounds = {**spec.free, **hyp.free()}
     keys = list(bounds)
     train = cells[cells.part == "train"].reset_index(drop=True)
-    objective = Objective(root, hyp, keys, train)
+    objective = Objective(root, hyp, keys, train, spec.device)
     lower, upper = (np.array([b[i] for b in bounds.values()]) for i in (0, 1))
     seed = None if start is None else np.array([[{**start, **hyp.neutral()}[k] for k in keys]])
     t0 = time.perf_counter()
     if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=_context(spec.device)) as pool:
             result = evolve(objective, lower, upper, spec.optimiser, pool, jobs, start=seed)
     else:
         result = evolve(objective, lower, upper, spec.optimiser, start=seed)
     values = dict(zip(keys, map(float, result.x), strict=True))
-    ours = measure_cells(TableRuns(root, list(dict.fromkeys(cells.table))), hyp, [values], cells)[:, 0]
+    tables = TableRuns(root, list(dict.fromkeys(cells.table)), device=spec.device)
+    ours = measure_cells(tables, hyp, [values], cells)[:, 0]
     fit = cells.rename(columns={"value": "thesis"}).assign(nlcx=ours)
     fit["rel_error"] = relative_errors(fit)
     summary = {
@@ -297,15 +311,20 @@ def spec_digest(spec: BaseModel, spec_split: split.Split) -> str:
     """What a finished fit depends on: the spec (but ``only``; ``warm_start`` and ``screen``
     when set, so the fits of a spec written before they existed stay valid) and the split."""
     unset = {key for key in ("warm_start", "screen") if getattr(spec, key, None) is None}
+    unset |= {"device"} if getattr(spec, "device", "cpu") == "cpu" else set()  # the fits of before it existed
     exclude = {"only", "claims_top"} | unset
     text = json.dumps([spec.model_dump(exclude=exclude), spec_split.model_dump()], sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def identify(path: Path, out_dir: Path, jobs: int = 1, root: Path | None = None, progress: Any = None) -> pd.DataFrame:
+def identify(
+    path: Path, out_dir: Path, jobs: int = 1, root: Path | None = None, progress: Any = None, device: str | None = None
+) -> pd.DataFrame:
     """Fit every hypothesis of spec ``path`` (resuming; screening the families first if the
-    spec says so), write ranking.csv and the figure."""
+    spec says so), write ranking.csv and the figure. ``device``: the spec's ``device`` replaced."""
     spec = load_spec(path)
+    if device is not None:
+        spec = spec.model_copy(update={"device": device})
     spec_split = split.load((path.parent / spec.split).resolve())
     root = root or Path("configs") / "thesis"
     cells = all_cells(spec_split)
@@ -471,10 +490,18 @@ def _fits(
         for hyp in todo:
             yield fit_hypothesis(spec, root, hyp, cells, jobs, start)
         return
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=_context(spec.device)) as pool:
         futures = [pool.submit(fit_hypothesis, spec, root, hyp, cells, 1, start) for hyp in todo]
         for future in as_completed(futures):
             yield future.result()
+
+
+def _context(device: str) -> Any:
+    """The workers' start method: forked on the CPU; started afresh for the GPU, which a
+    process that forks after using CUDA cannot hand on (each worker opens its own context)."""
+    import multiprocessing
+
+    return None if device == "cpu" else multiprocessing.get_context("spawn")
 
 
 #: Measurement-side definitions, reported beside the fits and never part of a hypothesis.

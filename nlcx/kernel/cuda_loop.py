@@ -1,0 +1,460 @@
+"""The closed loop on the GPU: one thread a variant, the plugins' own source compiled for it.
+
+:func:`simulate` takes the structures the CPU kernel takes (:mod:`nlcx.kernel.structures`)
+and integrates every row of the batch on the GPU, one CUDA thread per row, in the order of
+:func:`nlcx.kernel.integrator.simulate`: at t_k = k dt
+
+    y_k = C x_k -> SENSOR elements -> controller -> u_k -> ACTUATOR elements,
+
+u_k held while the method of ``integration`` (the classic RK4 written out, or any explicit
+tableau) integrates to t_{k+1}, disturbances at the stage times; a row whose input or state is
+not finite, or whose state is past its bound, stops with the same status, failing index and
+number of valid samples as on the CPU. The plant's right-hand side, the controller's step, its
+gain schedules and the loop elements are the plugins' numba functions compiled as device
+functions (:class:`nlcx.kernel.device.Retarget`), called with the thread's row or column of
+the ABI's arrays (:mod:`nlcx.kernel.abi`: a plant sees a batch of one column, a controller
+and an element a batch of one row).
+
+What the kernel keeps of a run is chosen by ``recorded``: per sample and row, a list of
+signals (a state, an output y_i = C_i x, an input), stored time-major (K+1, signals, B) so
+that the threads of a warp write neighbouring addresses. :func:`simulate` records every state
+and input and copies them back as the CPU kernel's :class:`~nlcx.kernel.structures.Records`;
+:mod:`nlcx.engine.gpu` keeps outputs and inputs on the GPU and measures them there.
+
+Not on the GPU: friction (the stick-slip path of :mod:`nlcx.kernel.friction`), and any
+controller or element whose source numba-cuda cannot compile; :func:`unsupported` names them
+before any work.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from nlcx._numba_compat import is_numba_function
+from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, STATUS_OK, FunctionTable
+from nlcx.kernel.device import Retarget, cuda, kept, refused
+from nlcx.kernel.structures import CLASSIC_RK4
+
+EE = ELEMENT_ENTRY.at
+#: What a recorded signal is (column 0 of ``recorded``): a state, an output (row of C), an input.
+STATE, OUTPUT, INPUT = 0, 1, 2
+#: Threads per block of the closed-loop and metric kernels.
+THREADS = 128
+
+
+class LoopShape(NamedTuple):
+    """What a compiled closed-loop kernel is specialised to: the plugins' functions (CPU forms),
+    the element table's order and offsets, and the sizes of the thread's local arrays."""
+
+    rhs: Any
+    step: Any
+    schedules: tuple[tuple[int, Any], ...]  # (slot, schedule function) of the callback table
+    elements: tuple[tuple[int, Any, int, int, int], ...]  # (hook, function, p_off, s_off, d_off)
+    n_x: int
+    n_u: int
+    n_y: int
+    n_r: int
+    n_log: int
+    n_cp: int
+    n_cs: int
+    method: int
+    n_stages: int
+
+
+def shape_of(plant: Any, controller: Any, elements: Any, n_u: int, n_log: int, integration: Any) -> LoopShape:
+    """The :class:`LoopShape` of a kernel call's structures (``n_u`` inputs, ``n_log`` logged values)."""
+    schedules = tuple((slot, fn) for slot, fn in enumerate(controller.callbacks) if is_numba_function(fn))
+    table = tuple(
+        (int(row[EE.hook]), elements.functions[int(row[EE.slot])], int(row[EE.param_offset]),
+         int(row[EE.state_offset]), int(row[EE.data_offset]))
+        for row in elements.table
+    )  # fmt: skip
+    return LoopShape(
+        rhs=plant.rhs, step=controller.step, schedules=schedules, elements=table,
+        n_x=plant.x0.shape[1], n_u=n_u, n_y=plant.C.shape[0], n_r=controller.ref.shape[2], n_log=n_log,
+        n_cp=controller.cp.shape[1], n_cs=controller.cs0.shape[1], method=integration.method,
+        n_stages=integration.rk_b.shape[0],
+    )  # fmt: skip
+
+
+def unsupported(plant: Any, controller: Any, elements: Any, friction: bool) -> str | None:
+    """Why a kernel call cannot run on the GPU (one line naming what), or None."""
+    if friction:
+        return "friction (the stick-slip path) runs on the CPU only"
+    for what, fn in (("plant right-hand side", plant.rhs), ("controller step", controller.step)):
+        if not is_numba_function(fn):
+            return f"the {what} {getattr(fn, '__name__', fn)!r} is not a numba function"
+    for fn in elements.functions:
+        if isinstance(fn, FunctionTable) or not (is_numba_function(fn) or getattr(fn, "_home", None)):
+            return f"the loop element {getattr(fn, '__name__', fn)!r} is not a numba function"
+    return None
+
+
+# ----------------------------------------------------------------------------- device functions
+
+
+def _via_slot(retarget: Retarget, schedules: tuple[tuple[int, Any], ...]) -> Any:
+    """The GPU's :func:`nlcx.controllers.pid_step.via_slot`: a branch over the slots in use."""
+    gpu = cuda()
+
+    @gpu.jit(device=True)
+    def none(callbacks, slot, t, e, edot, p, row, offset):  # pragma: no cover - device
+        return 0.0, 0.0, 0.0
+
+    chain = none
+    for slot, fn in reversed(schedules):
+        chain = _slot_branch(slot, retarget.device(fn), chain)
+    return chain
+
+
+def _slot_branch(slot: int, gains: Any, rest: Any) -> Any:
+    @cuda().jit(device=True)
+    def branch(callbacks, s, t, e, edot, p, row, offset):  # pragma: no cover - device
+        if s == slot:
+            return gains(t, e, edot, p, row, offset)
+        return rest(callbacks, s, t, e, edot, p, row, offset)
+
+    return branch
+
+
+def _element_chain(retarget: Retarget, entries: tuple[tuple[int, Any, int, int, int], ...], hook: int) -> Any:
+    """One device function calling the elements at ``hook`` in table order."""
+    gpu = cuda()
+
+    @gpu.jit(device=True)
+    def nothing(t, dt, k, signal, vid, ep, es, data):  # pragma: no cover - device
+        return
+
+    chain = nothing
+    for h, fn, p_off, s_off, d_off in reversed(entries):
+        if h == hook:
+            chain = _element_link(retarget.device(fn), p_off, s_off, d_off, chain)
+    return chain
+
+
+def _element_link(fn: Any, p_off: int, s_off: int, d_off: int, rest: Any) -> Any:
+    @cuda().jit(device=True)
+    def link(t, dt, k, signal, vid, ep, es, data):  # pragma: no cover - device
+        fn(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off)
+        rest(t, dt, k, signal, vid, ep, es, data)
+
+    return link
+
+
+def _devices(shape: LoopShape) -> tuple[Any, Any, Any, Any]:
+    """(rhs, controller step, sensor chain, actuator chain) compiled for the GPU."""
+    from nlcx.controllers.pid_step import via_slot
+    from nlcx.kernel.abi import no_element
+
+    retarget = Retarget()
+    retarget = Retarget({via_slot: _via_slot(retarget, shape.schedules)})
+    entries = tuple(e for e in shape.elements if e[1] is not no_element)
+    return (
+        retarget.device(shape.rhs), retarget.device(shape.step),
+        _element_chain(retarget, entries, SENSOR), _element_chain(retarget, entries, ACTUATOR),
+    )  # fmt: skip
+
+
+# ----------------------------------------------------------------------------- the kernel
+
+_KERNELS: dict[LoopShape, Any] = {}
+
+
+def loop_kernel(shape: LoopShape) -> Any:
+    """The closed-loop kernel of ``shape``, compiled on its first launch (one per shape and process)."""
+    if shape not in _KERNELS:
+        _KERNELS[shape] = kept(_build(shape, *_devices(shape)), loop_kernel, shape)
+    return _KERNELS[shape]
+
+
+#: numba's CUDA module as a global of this module: the kernel reads ``cuda_module.grid`` and
+#: ``cuda_module.local`` through it, where numba's simulator finds and replaces it.
+cuda_module: Any = None
+
+
+def _stage_device(rhs: Any) -> Any:
+    """f(t, x, u) of one stage for the thread's column, plus the disturbance terms at the stage
+    time, dx += dist_map @ d (as :func:`nlcx.kernel.integrator._add_disturbances`)."""
+
+    @cuda().jit(device=True)
+    def stage(t, x, uc, pc, dx, dist, bd, kd, s, dist_map):  # pragma: no cover - device
+        rhs(t, x, uc, pc, dx, 1)
+        n_d = dist.shape[3]
+        if n_d == 0:
+            return
+        for i in range(dx.shape[0]):
+            acc = 0.0
+            for j in range(n_d):
+                acc += dist_map[i, j] * dist[bd, kd, s, j]
+            dx[i, 0] += acc
+
+    return stage
+
+
+def _advance_device(classic: bool, stage: Any) -> Any:
+    """One step of the thread's state x to xn: the classic RK4 written out as the CPU kernel
+    writes it, or any explicit tableau (rk_a, rk_b, nodes rk_c), the same operations in the
+    same order (:func:`nlcx.kernel.integrator._step_batch`)."""
+
+    @cuda().jit(device=True)
+    def advance(t, dt, x, xs, xn, ks, uc, pc, dist, bd, kd, dist_map, rk_a, rk_b, rk_c):  # pragma: no cover - device
+        n = x.shape[0]
+        if classic:
+            k1, k2, k3, k4 = ks[0], ks[1], ks[2], ks[3]
+            stage(t, x, uc, pc, k1, dist, bd, kd, 0, dist_map)
+            for i in range(n):
+                xs[i, 0] = x[i, 0] + 0.5 * dt * k1[i, 0]
+            stage(t + 0.5 * dt, xs, uc, pc, k2, dist, bd, kd, 1, dist_map)
+            for i in range(n):
+                xs[i, 0] = x[i, 0] + 0.5 * dt * k2[i, 0]
+            stage(t + 0.5 * dt, xs, uc, pc, k3, dist, bd, kd, 2, dist_map)
+            for i in range(n):
+                xs[i, 0] = x[i, 0] + dt * k3[i, 0]
+            stage(t + dt, xs, uc, pc, k4, dist, bd, kd, 3, dist_map)
+            for i in range(n):
+                xn[i, 0] = x[i, 0] + dt / 6.0 * (k1[i, 0] + 2.0 * (k2[i, 0] + k3[i, 0]) + k4[i, 0])
+            return
+        for s in range(rk_b.shape[0]):
+            for i in range(n):
+                acc = x[i, 0]
+                for j in range(s):
+                    if rk_a[s, j] != 0.0:
+                        acc += dt * rk_a[s, j] * ks[j, i, 0]
+                xs[i, 0] = acc
+            stage(t + rk_c[s] * dt, xs, uc, pc, ks[s], dist, bd, kd, s, dist_map)
+        for i in range(n):
+            acc = x[i, 0]
+            for s in range(rk_b.shape[0]):
+                acc += dt * rk_b[s] * ks[s, i, 0]
+            xn[i, 0] = acc
+
+    return advance
+
+
+@functools.cache
+def _loop_signals() -> tuple[Any, Any, Any]:
+    """(sample, hold, accept): the signal path's steps of one thread (see the module docstring)."""
+    jit = cuda().jit(device=True)
+
+    @jit
+    def sample(x, xrow, y, r, u, C, picked, ref, br, kr):  # pragma: no cover - device
+        """x_k into the controller's row, y_k = C x_k, r_k, u cleared (:func:`nlcx.kernel.integrator._sample`)."""
+        for i in range(x.shape[0]):
+            xrow[0, i] = x[i, 0]
+        for i in range(C.shape[0]):
+            if picked[i] >= 0:
+                y[0, i] = x[picked[i], 0]
+            else:
+                acc = 0.0
+                for j in range(x.shape[0]):
+                    acc += C[i, j] * x[j, 0]
+                y[0, i] = acc
+        for i in range(ref.shape[2]):
+            r[0, i] = ref[br, kr, i]
+        for j in range(u.shape[1]):
+            u[0, j] = 0.0
+
+    @jit
+    def hold(u, uc):  # pragma: no cover - device
+        """u_k held over the step (by column); the first input that is not finite, or -1."""
+        bad = -1
+        for j in range(u.shape[1]):
+            uc[j, 0] = u[0, j]
+            if bad < 0 and not math.isfinite(u[0, j]):
+                bad = j
+        return bad
+
+    @jit
+    def accept(x, xn, bounds, bb):  # pragma: no cover - device
+        """x_{k+1} taken; the first state not finite or past its bound, or -1."""
+        bad = -1
+        for i in range(x.shape[0]):
+            x[i, 0] = xn[i, 0]
+            if bad < 0 and not (math.isfinite(x[i, 0]) and abs(x[i, 0]) <= bounds[bb, i]):
+                bad = i
+        return bad
+
+    return sample, hold, accept
+
+
+def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any) -> Any:
+    """The kernel of ``shape``: the thread's closed loop from t_0 to t_K (the module docstring).
+    Its arguments are the arrays of a kernel call's structures (:func:`launch` passes them by
+    name); the thread's own state, signals and rows live in its local memory."""
+    global cuda_module
+    gpu = cuda_module = cuda()
+    from numba import float64, int64
+
+    N, NU, NY, NR = shape.n_x, max(shape.n_u, 1), max(shape.n_y, 1), max(shape.n_r, 1)
+    NLOG, NST, NCP, NCS = max(shape.n_log, 1), max(shape.n_stages, 1), max(shape.n_cp, 1), max(shape.n_cs, 1)
+    record, advance = _recorder(), _advance_device(shape.method == CLASSIC_RK4, _stage_device(rhs))
+    sample, hold, accept = _loop_signals()
+
+    @gpu.jit
+    def kernel(x0, params, C, picked, bounds, cp, cs, ref, ep, es, data, dist, dist_map, rk_a, rk_b, rk_c,
+               dt, n_steps, n_u, recorded, REC, LOGS, status, n_valid, fail_index):  # pragma: no cover  # fmt: skip
+        v = cuda_module.grid(1)
+        if v >= x0.shape[0]:
+            return
+        x = cuda_module.local.array((N, 1), float64)
+        xs = cuda_module.local.array((N, 1), float64)
+        xn = cuda_module.local.array((N, 1), float64)
+        ks = cuda_module.local.array((NST, N, 1), float64)
+        xrow = cuda_module.local.array((1, N), float64)
+        y = cuda_module.local.array((1, NY), float64)
+        r = cuda_module.local.array((1, NR), float64)
+        u = cuda_module.local.array((1, NU), float64)
+        uc = cuda_module.local.array((NU, 1), float64)
+        logged = cuda_module.local.array((1, NLOG), float64)
+        vid = cuda_module.local.array(1, int64)
+        cp_row = cuda_module.local.array((1, NCP), float64)
+        cs_row = cuda_module.local.array((1, NCS), float64)
+        for i in range(cp.shape[1]):  # the thread's rows, in its own memory
+            cp_row[0, i] = cp[v, i]
+        for i in range(cs.shape[1]):
+            cs_row[0, i] = cs[v, i]
+        for i in range(N):
+            x[i, 0] = x0[v, i]
+        vid[0] = v
+        pv = v if params.shape[1] > 1 else 0
+        pc = params[:, pv : pv + 1]
+        bb, br, bd = (v if bounds.shape[0] > 1 else 0), (v if ref.shape[0] > 1 else 0), (v if dist.shape[0] > 1 else 0)
+        cpv, csv, logv = cp_row[:, : cp.shape[1]], cs_row[:, : cs.shape[1]], logged[:, : LOGS.shape[1]]
+        yv, rv, uv, ucv = y[:, : C.shape[0]], r[:, : ref.shape[2]], u[:, :n_u], uc[:n_u, :]
+        status[v], fail_index[v], n_valid[v] = STATUS_OK, -1, n_steps + 1
+        for k in range(n_steps + 1):
+            t = k * dt
+            sample(x, xrow, yv, rv, uv, C, picked, ref, br, k if ref.shape[1] > 1 else 0)
+            sensor(t, dt, k, yv, vid, ep, es, data)
+            step(t, dt, xrow, yv, rv, cpv, csv, uv, logv, 0)
+            actuator(t, dt, k, uv, vid, ep, es, data)
+            bad_u = hold(uv, ucv)
+            record(recorded, REC, k, v, x, y, u, C)
+            if LOGS.shape[0] > 1:
+                for i in range(LOGS.shape[1]):
+                    LOGS[k, i, v] = logv[0, i]
+            if bad_u >= 0:
+                status[v], fail_index[v], n_valid[v] = STATUS_NONFINITE, N + bad_u, k + 1
+                return
+            if k == n_steps:
+                return
+            kd = k if dist.shape[1] > 1 else 0
+            advance(t, dt, x, xs, xn, ks, ucv, pc, dist, bd, kd, dist_map, rk_a, rk_b, rk_c)
+            bad = accept(x, xn, bounds, bb)
+            if bad >= 0:
+                status[v] = STATUS_NONFINITE if not math.isfinite(x[bad, 0]) else STATUS_BOUND
+                fail_index[v], n_valid[v] = bad, k + 1
+                return
+
+    return kernel
+
+
+@functools.cache
+def _recorder() -> Callable[..., Any]:
+    """The device function that stores a thread's recorded signals of sample k."""
+
+    @cuda().jit(device=True)
+    def record(recorded, REC, k, v, x, y, u, C):  # pragma: no cover - device
+        for q in range(recorded.shape[0]):
+            kind, i = recorded[q, 0], recorded[q, 1]
+            if kind == STATE:
+                REC[k, q, v] = x[i, 0]
+            elif kind == INPUT:
+                REC[k, q, v] = u[0, i]
+            else:
+                acc = 0.0
+                for j in range(C.shape[1]):
+                    acc += C[i, j] * x[j, 0]
+                REC[k, q, v] = acc
+
+    return record
+
+
+# ----------------------------------------------------------------------------- launching
+
+
+class Launch(NamedTuple):
+    """What a launch leaves on the GPU: the recorded signals (K+1, signals, B), the controller
+    logs (K+1|1, n_log, B) and each row's outcome (status, n_valid, fail_index)."""
+
+    REC: Any
+    LOG: Any
+    status: Any
+    n_valid: Any
+    fail_index: Any
+
+
+def launch(
+    integration: Any, plant: Any, controller: Any, elements: Any, forces: Any,
+    n_u: int, n_log: int, n_samples: int, recorded: np.ndarray, record_logs: bool,
+) -> Launch:  # fmt: skip
+    """Run the kernel call's rows on the GPU, recording the signals ``recorded`` ((kind, index)
+    rows: :data:`STATE`, :data:`OUTPUT`, :data:`INPUT`) at each of the ``n_samples`` samples; the
+    results stay on the GPU."""
+    from nlcx.kernel.integrator import _output_picks, _stage_nodes
+
+    gpu = cuda()
+    shape = shape_of(plant, controller, elements, n_u, n_log, integration)
+    kernel = loop_kernel(shape)
+    n_rows = plant.x0.shape[0]
+    dev = gpu.to_device
+    REC = gpu.device_array((n_samples, recorded.shape[0], n_rows))
+    LOG = gpu.device_array((n_samples if record_logs else 1, max(n_log, 0), n_rows if record_logs else 1))
+    out = Launch(REC, LOG, *(gpu.device_array(n_rows, dtype=np.int64) for _ in range(3)))
+    rk_a = np.ascontiguousarray(integration.rk_a)
+    args = (
+        dev(plant.x0), dev(np.ascontiguousarray(plant.p.T)), dev(plant.C), dev(_output_picks(plant.C)),
+        dev(plant.bounds), dev(controller.cp), dev(np.array(controller.cs0, copy=True)), dev(controller.ref),
+        dev(elements.ep), dev(np.array(elements.es0, copy=True)), dev(elements.data), dev(forces.dist),
+        dev(forces.dist_map), dev(rk_a), dev(np.ascontiguousarray(integration.rk_b)), dev(_stage_nodes(rk_a)),
+        float(integration.dt), n_samples - 1, n_u, dev(recorded), REC, LOG, out.status, out.n_valid, out.fail_index,
+    )  # fmt: skip
+    blocks = (n_rows + THREADS - 1) // THREADS
+    try:  # compiled at its first launch, before any thread runs
+        kernel[blocks, THREADS](*args)
+    except Exception as exc:
+        from numba.core.errors import NumbaError
+
+        if not isinstance(exc, NumbaError):
+            raise
+        raise refused(f"{_names(shape)} do not compile for the GPU ({_first_line(exc)}); use device: cpu") from None
+    return out
+
+
+def _names(shape: LoopShape) -> str:
+    """The plugins of a closed loop, by name: what a compilation error on the GPU concerns."""
+    names = [getattr(shape.rhs, "__name__", "the plant"), getattr(shape.step, "__name__", "the controller")]
+    names += [getattr(fn, "__name__", "an element") for _, fn, *_ in shape.elements]
+    return "the plant, controller and elements " + ", ".join(repr(n) for n in names)
+
+
+def _first_line(exc: BaseException) -> str:
+    """The first line of numba's message, without its terminal colours."""
+    text = re.sub(r"\x1b\[[0-9;]*m", "", str(exc))
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    return lines[0][:200] if lines else type(exc).__name__
+
+
+def simulate(
+    integration: Any, plant: Any, controller: Any, elements: Any, forces: Any, records: Any, outcome: Any
+) -> None:
+    """:func:`nlcx.kernel.integrator.simulate` on the GPU (no friction): the same structures in,
+    ``records`` (every state and input; the logs where recorded) and ``outcome`` written."""
+    _, n_k, n = records.X.shape
+    n_u, n_log = records.U.shape[2], records.LOG.shape[2]
+    recorded = np.array([[STATE, i] for i in range(n)] + [[INPUT, j] for j in range(n_u)], dtype=np.int64)
+    done = launch(integration, plant, controller, elements, forces, n_u, n_log, n_k, recorded, records.LOG.shape[1] > 1)
+    rec = done.REC.copy_to_host()
+    records.X[...] = rec[:, :n, :].transpose(2, 0, 1)
+    records.U[...] = rec[:, n:, :].transpose(2, 0, 1)
+    if records.LOG.shape[1] > 1:
+        records.LOG[...] = done.LOG.copy_to_host().transpose(2, 0, 1)
+    outcome.status[...] = done.status.copy_to_host()
+    outcome.n_valid[...] = done.n_valid.copy_to_host()
+    outcome.fail_index[...] = done.fail_index.copy_to_host()

@@ -1,0 +1,233 @@
+"""The GPU path (``simulation.device: cuda``) on numba-cuda's simulator, against the CPU path.
+
+Each test runs nlcx in a child process with ``NUMBA_ENABLE_CUDASIM=1``, where numba-cuda runs
+the GPU kernels as Python on the CPU: the same kernel code, the same retargeted plugin source,
+the same device metrics. Runs are short (the simulator steps a thread in Python). What must
+hold: the same statuses, and every metric within 1e-9 relative of the CPU's.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from nlcx.results import read_output_table
+
+ROOT = Path(__file__).resolve().parent.parent
+RTOL = 1e-9
+
+
+def _nlcx(*args: str, simulator: bool = True, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1" if simulator else "0", "CUDA_VISIBLE_DEVICES": ""}
+    return subprocess.run([sys.executable, "-m", "nlcx.cli", *args], capture_output=True, text=True, env=env, cwd=cwd)
+
+
+def _close(cpu: pd.DataFrame, gpu: pd.DataFrame) -> None:
+    """The same rows (every column but ``value`` equal) and values within RTOL (NaN where NaN)."""
+    assert len(cpu) == len(gpu) > 0
+    text = [c for c in cpu.columns if c != "value"]
+    pd.testing.assert_frame_equal(cpu[text].fillna(""), gpu[text].fillna(""))
+    a, b = cpu["value"].to_numpy(float), gpu["value"].to_numpy(float)
+    assert np.array_equal(np.isnan(a), np.isnan(b))
+    finite = ~np.isnan(a)
+    np.testing.assert_allclose(b[finite], a[finite], rtol=RTOL, atol=0.0)
+
+
+def _config(tmp_path: Path, t_end: float, **extra: object) -> Path:
+    raw = yaml.safe_load((ROOT / "configs" / "x_error_ags.yaml").read_text())
+    raw["simulation"]["t_end"] = t_end
+    raw["outputs"] = {"figure": False, "timeseries": False, "gains_figure": False}
+    raw.update(extra)
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+def test_run_on_gpu_matches_cpu(tmp_path: Path) -> None:
+    """`nlcx run --device cuda`: both controllers, every metric of the run, as on the CPU."""
+    config = _config(tmp_path, 0.06)
+    for device in ("cpu", "cuda"):
+        done = _nlcx("run", str(config), "--device", device, "--out", str(tmp_path / device), "--no-report")
+        assert done.returncode == 0, done.stderr
+    _close(pd.read_csv(tmp_path / "cpu" / "metrics.csv"), pd.read_csv(tmp_path / "cuda" / "metrics.csv"))
+    resolved = yaml.safe_load((tmp_path / "cuda" / "config.yaml").read_text())
+    assert resolved["simulation"]["device"] == "cuda"
+
+
+def test_sweep_on_gpu_matches_cpu(tmp_path: Path) -> None:
+    """A columnar sweep measured on the device: step (x), regulation (theta) and input (F)
+    metrics, with a bound on theta that stops some variants, as on the CPU."""
+    sweep = {"seed": 3, "random": {"n": 4, "params": {"plant.params.l": {"dist": "uniform", "relative": 0.3},
+                                                        "simulation.bounds.theta": {"dist": "uniform", "low": 0.004,
+                                                                                    "high": 0.02}}}}  # fmt: skip
+    config = _config(tmp_path, 0.05, sweep={**sweep, "format": "csv"})
+    for device in ("cpu", "cuda"):
+        done = _nlcx("sweep", str(config), "--device", device, "--out", str(tmp_path / device), "--no-report")
+        assert done.returncode == 0, done.stderr
+    cpu_index, gpu_index = (read_output_table(tmp_path / d, "sweep") for d in ("cpu", "cuda"))
+    assert list(cpu_index.status) == list(gpu_index.status)
+    assert {"ok", "unstable"} <= set(cpu_index.status)  # both kinds of run are compared
+    _close(read_output_table(tmp_path / "cpu", "metrics"), read_output_table(tmp_path / "cuda", "metrics"))
+
+
+def test_no_gpu_is_one_line(tmp_path: Path) -> None:
+    """Without a GPU (and without the simulator), --device cuda is refused in one line, before any work."""
+    config = _config(tmp_path, 0.05)
+    done = _nlcx("run", str(config), "--device", "cuda", "--out", str(tmp_path / "out"), simulator=False)
+    assert done.returncode != 0
+    lines = [line for line in (done.stdout + done.stderr).splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("config error: simulation.device = 'cuda':"), lines
+    assert not (tmp_path / "out").exists()
+
+
+def test_unknown_device_is_one_line(tmp_path: Path) -> None:
+    done = _nlcx("run", str(_config(tmp_path, 0.05)), "--device", "tpu")
+    assert done.returncode != 0
+    assert "--device = 'tpu': allowed values: cpu, cuda" in done.stdout + done.stderr
+
+
+def test_friction_is_refused_by_name(tmp_path: Path) -> None:
+    """Friction runs on the CPU only: the GPU path says so in one line naming it."""
+    friction = {"friction": {"kind": "friction", "model": "simple", "mu_s": 0.2, "mu_c": 0.15, "viscous": 0.1}}
+    config = _config(tmp_path, 0.05, uncertainty=friction)
+    done = _nlcx("run", str(config), "--device", "cuda", "--out", str(tmp_path / "o"))
+    assert done.returncode != 0
+    text = (done.stdout + done.stderr).strip()
+    assert text.startswith("config error: simulation.device = 'cuda': friction") and "\n" not in text, text
+    assert not (tmp_path / "o").exists()
+
+
+CASES = {
+    # loop elements at both hooks (noise on the measurement, lag and saturation on the input),
+    # a disturbance at the stage times, and Heun's tableau instead of the written-out RK4
+    "elements-heun": ("configs/x_error_ags.yaml", [
+        "++simulation.integrator=heun",
+        "+uncertainty={noise: {kind: noise, power: 1.0e-7, sample_time: 0.01, injection: measurement}, "
+        "disturbance: {kind: disturbance, amplitude: 20.0, frequency: 10.0}, "
+        "lag: {kind: actuator_lag, tau: 0.02}, sat: {kind: actuator_saturation, limit: 3.0}}",
+    ]),
+    # the transfer-function plant under a fuzzy schedule (a registered schedule, through the
+    # GPU's branch over the callback slots in use)
+    "fuzzy-tf": ("configs/thesis/ch5/fig_5_10.yaml", []),
+    # four states per axis and three loops (time-AGS PID of the x-y-z pendulum)
+    "xyz": ("configs/xyz_error_ags.yaml", []),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_plugins_on_gpu_match_cpu(tmp_path: Path, case: str) -> None:
+    """Plants, schedules, loop elements and integrators, retargeted from their source, as on the CPU."""
+    config, overrides = CASES[case]
+    for device in ("cpu", "cuda"):
+        out = tmp_path / device
+        args = ["run", str(ROOT / config), *overrides, "++simulation.t_end=0.1", "--device", device, "--no-report"]
+        done = _nlcx(*args, "--out", str(out))
+        assert done.returncode == 0, done.stderr
+    _close(pd.read_csv(tmp_path / "cpu" / "metrics.csv"), pd.read_csv(tmp_path / "cuda" / "metrics.csv"))
+
+
+def test_identify_puts_its_loops_on_the_device() -> None:
+    """`nlcx identify --device cuda`: every table's experiment runs on the GPU; a CPU study's
+    resume digest is the one of the spec without the setting (its earlier fits stay valid)."""
+    import hashlib
+    import json
+
+    from nlcx.thesis import identify, split
+
+    root = ROOT / "configs" / "thesis"
+    assert all(
+        raw["simulation"]["device"] == "cuda" for raw in identify.TableRuns(root, ["2.3"], device="cuda").raw.values()
+    )
+    assert "device" not in identify.TableRuns(root, ["2.3"]).raw["2.3"].get("simulation", {})
+    spec = identify.load_spec(ROOT / "configs" / "identify" / "pendulum_all.yaml")
+    spec_split = split.load(ROOT / "configs" / "identify" / "split.yaml")
+    before = json.dumps(
+        [spec.model_dump(exclude={"only", "claims_top", "device"}), spec_split.model_dump()], sort_keys=True
+    )
+    assert identify.spec_digest(spec, spec_split) == hashlib.sha256(before.encode()).hexdigest()[:16]
+    on_gpu = spec.model_copy(update={"device": "cuda"})
+    assert identify.spec_digest(on_gpu, spec_split) != identify.spec_digest(spec, spec_split)
+
+
+def _key_in_a_process(code: str) -> str:
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    return done.stdout.strip()
+
+
+def test_kept_kernels_are_keyed_by_their_source() -> None:
+    """A kept GPU kernel's key is the same in every process and changes with any code or
+    constant the kernel reaches (here: the PID step of a structure, through its schedules)."""
+    code = (
+        "import yaml\nfrom nlcx import config, engine\nfrom nlcx.kernel import cuda_loop\n"
+        "from nlcx.kernel.device import source_key\n"
+        "raw = yaml.safe_load(open('configs/x_error_ags.yaml'))\n"
+        "p = engine.prepare(config.build(config.Interpolated.of(raw).resolved))\n"
+        "print(*(source_key(cuda_loop.loop_kernel, i.controller.step, i.plant.rhs) for i in engine.items_of(p)))\n"
+    )
+    first, second = _key_in_a_process(code).split(), _key_in_a_process(code).split()
+    assert first == second  # the same in another process
+    assert first[0] != first[1]  # the conventional and the AGS PID differ
+
+
+def test_source_key_follows_constants_and_callees() -> None:
+    from numba import njit
+
+    from nlcx.kernel.device import source_key
+
+    def make(scale: float):
+        @njit
+        def inner(x):  # pragma: no cover - compiled
+            return scale * x
+
+        @njit
+        def outer(x):  # pragma: no cover - compiled
+            return inner(x) + 1.0
+
+        return outer
+
+    assert source_key(make(2.0)) == source_key(make(2.0))
+    assert source_key(make(2.0)) != source_key(make(3.0))  # a constant of a function it calls
+
+
+def test_kept_kernel_files_round_trip(tmp_path: Path) -> None:
+    """What numba-cuda's cache keeps of a kernel (its reduced state) is written atomically and
+    read back as a kernel; a missing or damaged file means a compilation (None)."""
+    from numba.cuda.dispatcher import _Kernel
+
+    from nlcx._numba_compat import _KernelFiles
+
+    class Reduced:
+        def _reduce_states(self) -> dict[str, object]:
+            return dict(cooperative=False, name="loop", signature=None, codelibrary=None, debug=False,
+                        lineinfo=False, call_helper=None, extensions=[], shared_memory_carveout=None,
+                        launch_config_sensitive=False)  # fmt: skip
+
+    class Context:
+        def refresh(self) -> None:
+            return None
+
+    files = _KernelFiles(tmp_path / "kernels", "key")
+    assert files.load_overload("(float64,)", Context()) is None
+    files.save_overload("(float64,)", Reduced())
+    loaded = files.load_overload("(float64,)", Context())
+    assert isinstance(loaded, _Kernel) and loaded.entry_name == "loop"
+    assert files.load_overload("(int64,)", Context()) is None  # another signature, another file
+    (kept,) = (tmp_path / "kernels").iterdir()
+    kept.write_bytes(b"damaged")
+    assert files.load_overload("(float64,)", Context()) is None
+
+
+def test_kept_kernels_go_with_numbas_cache(tmp_path: Path) -> None:
+    from nlcx import compiled_cache
+
+    kept = tmp_path / "__pycache__" / "cuda-kernels" / "abc.kernel"
+    kept.parent.mkdir(parents=True)
+    kept.write_bytes(b"x")
+    assert kept in compiled_cache.cache_files(tmp_path)
