@@ -8,6 +8,7 @@ hold: the same statuses, and every metric within 1e-9 relative of the CPU's.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -71,6 +72,7 @@ def test_sweep_on_gpu_matches_cpu(tmp_path: Path) -> None:
     for device in ("cpu", "cuda"):
         done = _nlcx("sweep", str(config), "--device", device, "--out", str(tmp_path / device), "--no-report")
         assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "cuda" / "manifest.json").read_text())["path"] == "columnar"  # measured there
     cpu_index, gpu_index = (read_output_table(tmp_path / d, "sweep") for d in ("cpu", "cuda"))
     assert list(cpu_index.status) == list(gpu_index.status)
     assert {"ok", "unstable"} <= set(cpu_index.status)  # both kinds of run are compared
@@ -137,7 +139,6 @@ def test_identify_puts_its_loops_on_the_device() -> None:
     """`nlcx identify --device cuda`: every table's experiment runs on the GPU; a CPU study's
     resume digest is the one of the spec without the setting (its earlier fits stay valid)."""
     import hashlib
-    import json
 
     from nlcx.thesis import identify, split
 
@@ -231,3 +232,28 @@ def test_kept_kernels_go_with_numbas_cache(tmp_path: Path) -> None:
     kept.parent.mkdir(parents=True)
     kept.write_bytes(b"x")
     assert kept in compiled_cache.cache_files(tmp_path)
+
+
+def test_open_loop_step_sweep_on_gpu_matches_cpu(tmp_path: Path) -> None:
+    """A step on the plant's input (open loop): the outputs no loop follows get their step
+    characteristics against their own last sample (nlcx.metrics.step_info), measured on the
+    device as on the CPU."""
+    raw = {
+        "name": "open_loop_step",
+        "plant": {"name": "x_pendulum", "params": {"M": 1.0, "m": 0.1, "l": 0.3, "g": 9.8}},
+        "controllers": {"open": {"kind": "open_loop"}},
+        "reference": {"F_x": {"kind": "step", "initial": 0.0, "final": 1.0, "time": 0.01}},
+        "simulation": {"t_end": 0.05, "dt": 1e-3, "bounds": {"theta": 1e9}},
+        "outputs": {"figure": False, "timeseries": False, "gains_figure": False},
+        "sweep": {"seed": 1, "format": "csv", "random": {"n": 3, "params": {"plant.params.M": {"dist": "uniform",
+                                                                                           "relative": 0.2}}}},
+    }  # fmt: skip
+    config = tmp_path / "open.yaml"
+    config.write_text(yaml.safe_dump(raw))
+    for device in ("cpu", "cuda"):
+        done = _nlcx("sweep", str(config), "--device", device, "--out", str(tmp_path / device), "--no-report")
+        assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "cuda" / "manifest.json").read_text())["path"] == "columnar"  # measured there
+    cpu = read_output_table(tmp_path / "cpu", "metrics")
+    assert {"steady_state_value", "settling_min", "peak"} <= set(cpu.metric)  # step_info's rows are compared
+    _close(cpu, read_output_table(tmp_path / "cuda", "metrics"))

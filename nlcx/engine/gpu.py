@@ -52,10 +52,6 @@ def _blocks(template: Template, i: int, recorded: list[tuple[int, int]]) -> list
         return recorded.index((kind, index))
 
     followed = _measured_outputs(run, plant)
-    if _input_step(run, plant, plans) is not None and any(s not in followed for s in plant.output_names):
-        raise refused(
-            "the step characteristics of outputs no loop follows are measured on the CPU only; use device: cpu"
-        )
     blocks = []
     for s in followed:
         j = plant.output_names.index(s)
@@ -69,6 +65,16 @@ def _blocks(template: Template, i: int, recorded: list[tuple[int, int]]) -> list
         elif plan.kind == "regulation":
             block = block._replace(abs_tol=cfg.regulation_abs_tol)
         blocks.append(block)
+    step = _input_step(run, plant, plans)
+    others = [s for s in plant.output_names if s not in followed] if step is not None else []
+    t_step = 0.0 if step is None else step.t_step
+    for s in others:
+        j = plant.output_names.index(s)
+        state = _selected_state(plant.C[j])
+        q = signal(STATE, state) if state is not None else signal(OUTPUT, j)
+        lo, hi = cfg.rise_limits
+        origin = _time_origin(t_step, cfg)
+        blocks.append(Block("info", q, -1, t_step, band=cfg.settling_band, rise_low=lo, rise_high=hi, origin=origin))
     for j in range(len(plant.input_names)):
         blocks.append(Block("input", signal=signal(INPUT, j), ref_row=-1))
     return blocks
@@ -82,7 +88,7 @@ def _references(template: Template, i: int, blocks: list[Any]) -> tuple[list[Any
     rows: list[np.ndarray] = []
     out: list[Any] = []
     for b in blocks:
-        if b.kind == "input":
+        if b.kind in ("input", "info"):
             out.append(b)
             continue
         s = followed[len(rows)]
@@ -182,7 +188,11 @@ def simulate_measure(
 
 
 def _labelled(template: Template, i: int, blocks: list[Any]) -> list[tuple[str, Any]]:
-    """(signal name, block) of loop i's blocks: the followed outputs, then the inputs."""
+    """(signal name, block) of loop i's blocks: the followed outputs, the others after an input
+    step, then the inputs."""
     plant = template.prepared.plant
-    followed = _measured_outputs(_RunView(template.items[i].controller), plant)
-    return list(zip([*followed, *plant.input_names], blocks, strict=True))
+    run = _RunView(template.items[i].controller)
+    followed = _measured_outputs(run, plant)
+    others = [s for s in plant.output_names if s not in followed]
+    stepped = others if _input_step(run, plant, _metric_plans(template.prepared)) is not None else []
+    return list(zip([*followed, *stepped, *plant.input_names], blocks, strict=True))

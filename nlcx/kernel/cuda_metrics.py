@@ -10,6 +10,8 @@ list of :class:`Block` (one a measured signal):
   :func:`nlcx.metrics.measured_from`), then :func:`nlcx.metrics.error_integrals` of r - y;
 - ``regulation``: :func:`nlcx.metrics.regulation_metrics`, then the error integrals;
 - ``tracking``: the error integrals;
+- ``info``: :func:`nlcx.metrics.step_info` against the run's own last sample (an output no
+  loop follows, after a step on an input), event times moved as for ``step``;
 - ``input``: :func:`nlcx.metrics.input_metrics`.
 
 The definitions are those functions' (their docstrings give the formulas); where they locate
@@ -29,7 +31,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 
 from nlcx.kernel.device import cuda, device_function, kept
-from nlcx.metrics.names import ERROR_METRICS, INPUT_METRICS, REGULATION_METRICS, STEP_METRICS
+from nlcx.metrics.names import ERROR_METRICS, INPUT_METRICS, REGULATION_METRICS, STEP_INFO_METRICS, STEP_METRICS
 from nlcx.metrics.scans import _clip01
 
 #: Values a block writes, by kind.
@@ -37,6 +39,7 @@ BLOCK_NAMES = {
     "step": STEP_METRICS + ERROR_METRICS,
     "regulation": REGULATION_METRICS + ERROR_METRICS,
     "tracking": ERROR_METRICS,
+    "info": STEP_INFO_METRICS,
     "input": INPUT_METRICS,
 }
 
@@ -238,6 +241,61 @@ def _step_block(f: dict[str, Any], b: Block, t: np.ndarray) -> Any:
     return block
 
 
+def _info_block(f: dict[str, Any], b: Block, t: np.ndarray) -> Any:
+    """The device function of an ``info`` block (see :func:`nlcx.metrics.step_info`, against
+    the run's last sample, from y(t_step))."""
+    ts, lo, hi, band, q = b.t_step, b.rise_low, b.rise_high, b.band, b.signal
+    i0 = _search(t, ts, "left")
+    j = _search(t, ts, "right") - 1
+    on_grid = j < 0 or t[j] == ts
+    a = 0.0 if on_grid else (ts - t[j]) / (t[j + 1] - t[j])
+    shift = float(ts) - float(b.origin)
+    sign, first_crossing, last_exit, extremes = f["sign"], f["first_crossing"], f["last_exit"], f["extremes"]
+
+    @cuda().jit(device=True)
+    def block(t, REC, REF, out, o, v):  # pragma: no cover - device
+        y = REC[:, q, v]
+        n = y.shape[0]
+        final = y[n - 1]
+        initial = y[j] if on_grid else y[j] + a * (y[j + 1] - y[j])
+        delta = final - initial
+        s = sign(delta)
+        mag = abs(delta)
+        valid = delta != 0
+        t_lo, _ = first_crossing(t, y, i0, n, ts, s, s * (initial + lo * delta))
+        t_hi, hi_index = first_crossing(t, y, i0, n, ts, s, s * (initial + hi * delta))
+        settling = last_exit(t, y, i0, n, ts, final, band * mag)
+        over, under, _ = extremes(y, i0, n, s, s * final, s * initial)
+        o_max = over if (over != over or over > 0.0) else 0.0
+        u_max = under if (under != under or under > 0.0) else 0.0
+        out[o] = t_hi - t_lo if valid else math.nan
+        out[o + 1] = (settling + shift if shift != 0.0 else settling) if valid else math.nan
+        out[o + 2] = 100.0 * o_max / mag if valid else math.nan
+        out[o + 3] = 100.0 * u_max / mag if valid else math.nan
+        best, at = abs(y[i0]), i0  # the first largest |y| (or first NaN), as np.argmax
+        if best == best:
+            for i in range(i0 + 1, n):
+                d = abs(y[i])
+                if d != d:
+                    at = i
+                    break
+                if d > best:
+                    best, at = d, i
+        out[o + 4] = abs(y[at])
+        out[o + 5] = (t[at] - ts) + shift if shift != 0.0 else t[at] - ts
+        out[o + 6] = final
+        low, high, nan = math.inf, -math.inf, False
+        for i in range(i0 + hi_index, n):
+            nan = nan or y[i] != y[i]
+            low = y[i] if y[i] < low else low
+            high = y[i] if y[i] > high else high
+        risen = valid and t_hi == t_hi
+        out[o + 7] = (math.nan if nan else min(low, final)) if risen else math.nan
+        out[o + 8] = (math.nan if nan else max(high, final)) if risen else math.nan
+
+    return block
+
+
 def _regulation_block(f: dict[str, Any], b: Block, t: np.ndarray) -> Any:
     """The device function of a ``regulation`` block (see :func:`nlcx.metrics.regulation_metrics`)."""
     reference, band, tol, window, q, ref_row = b.final, b.band, b.abs_tol, b.window, b.signal, b.ref_row
@@ -301,7 +359,13 @@ def _input_block(f: dict[str, Any], b: Block, t: np.ndarray) -> Any:
     return block
 
 
-_MAKERS = {"step": _step_block, "regulation": _regulation_block, "tracking": _tracking_block, "input": _input_block}
+_MAKERS = {
+    "step": _step_block,
+    "regulation": _regulation_block,
+    "tracking": _tracking_block,
+    "info": _info_block,
+    "input": _input_block,
+}
 
 
 def _link(block: Any, width: int, rest: Any) -> Any:
