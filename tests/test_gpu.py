@@ -257,3 +257,13 @@ def test_open_loop_step_sweep_on_gpu_matches_cpu(tmp_path: Path) -> None:
     cpu = read_output_table(tmp_path / "cpu", "metrics")
     assert {"steady_state_value", "settling_min", "peak"} <= set(cpu.metric)  # step_info's rows are compared
     _close(cpu, read_output_table(tmp_path / "cuda", "metrics"))
+
+
+def test_identify_refuses_the_gpu_where_it_does_not_use_it(tmp_path: Path) -> None:
+    """--device cuda on a study that runs on the CPU only is one line, not silently ignored."""
+    done = _nlcx("identify", str(ROOT / "configs" / "identify" / "cstr.yaml"), "--device", "cuda", "--out",
+                 str(tmp_path / "o"))  # fmt: skip
+    assert done.returncode != 0
+    text = (done.stdout + done.stderr).strip()
+    assert text == "--device = 'cuda': a consistency or chapter 5 study runs on the cpu only", text
+    assert not (tmp_path / "o").exists()

@@ -457,6 +457,9 @@ def identify(
     if not isinstance(raw, dict) or not isinstance(raw.get("name"), str):
         raise ConfigError("spec", str(spec), "an identification spec: a YAML mapping with a name")
     out_dir = out or Path("results/identify") / raw["name"]
+    pendulum_study = raw.get("kind") != "consistency" and raw.get("chapter") != 5
+    if device not in (None, "cpu") and not pendulum_study:
+        raise NlcxError(f"--device = {device!r}: a consistency or chapter 5 study runs on the cpu only")
 
     def progress(done: int, total: int, name: str) -> None:
         typer.echo(f"  [{done}/{total}] {name}")
