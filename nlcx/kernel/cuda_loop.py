@@ -21,9 +21,10 @@ that the threads of a warp write neighbouring addresses. :func:`simulate` record
 and input and copies them back as the CPU kernel's :class:`~nlcx.kernel.structures.Records`;
 :mod:`nlcx.engine.gpu` keeps outputs and inputs on the GPU and measures them there.
 
-Not on the GPU: friction (the stick-slip path of :mod:`nlcx.kernel.friction`), and any
-controller or element whose source numba-cuda cannot compile; :func:`unsupported` names them
-before any work.
+Not on the GPU: friction (the stick-slip path of :mod:`nlcx.kernel.friction`) and plugins that
+are not numba functions, which :func:`unsupported` names before any work; and any plugin whose
+source numba-cuda cannot compile, which :func:`launch` names with numba's reason when the
+kernel compiles, before any thread runs.
 """
 
 from __future__ import annotations
