@@ -69,8 +69,9 @@ class Block(NamedTuple):
 @functools.cache
 def _scans() -> dict[str, Any]:
     """The device functions the blocks are made of (compiled on first use)."""
-    basic = _arithmetic()
-    return {**basic, **_searches(basic["clip01"]), "errors": _errors()}
+    scans = {**_arithmetic(), "errors": _errors()}
+    scans |= _searches(scans["clip01"])
+    return {**scans, "step_core": _step_core(scans)}
 
 
 def _arithmetic() -> dict[str, Any]:
@@ -162,7 +163,52 @@ def _searches(clip01: Any) -> dict[str, Any]:
                     best, at = v, i
         return (math.nan if hi_nan else hi), (math.nan if lo_nan else lo), at
 
-    return {"first_crossing": first_crossing, "last_exit": last_exit, "extremes": extremes}
+    @jit
+    def deviation_peak(y, first, n, center):  # pragma: no cover - device
+        """The first sample from ``first`` of largest |y - center|, or the first NaN (np.argmax)."""
+        best, at = abs(y[first] - center), first
+        if best != best:
+            return at
+        for i in range(first + 1, n):
+            d = abs(y[i] - center)
+            if d != d:
+                return i
+            if d > best:
+                best, at = d, i
+        return at
+
+    return {
+        "first_crossing": first_crossing, "last_exit": last_exit, "extremes": extremes,
+        "deviation_peak": deviation_peak,
+    }  # fmt: skip
+
+
+def _step_core(f: dict[str, Any]) -> Any:
+    """What a step response and a step's characteristics share (nlcx.metrics.step._step_core):
+    rise time, settling time, overshoot and undershoot written to out[o:o + 4]; returns whether
+    the step is not zero, the time and index (from ``first``) of the upper rise level, and the
+    first peak of s*y."""
+    sign, first_crossing, last_exit, extremes = f["sign"], f["first_crossing"], f["last_exit"], f["extremes"]
+
+    @cuda().jit(device=True)
+    def core(t, y, first, n, t_step, initial, final, lo, hi, band, shift, out, o):  # pragma: no cover - device
+        delta = final - initial
+        s = sign(delta)
+        mag = abs(delta)
+        valid = delta != 0
+        t_lo, _ = first_crossing(t, y, first, n, t_step, s, s * (initial + lo * delta))
+        t_hi, hi_index = first_crossing(t, y, first, n, t_step, s, s * (initial + hi * delta))
+        settling = last_exit(t, y, first, n, t_step, final, band * mag)
+        over, under, ipk = extremes(y, first, n, s, s * final, s * initial)
+        o_max = over if (over != over or over > 0.0) else 0.0
+        u_max = under if (under != under or under > 0.0) else 0.0
+        out[o] = t_hi - t_lo if valid else math.nan
+        out[o + 1] = (settling + shift if shift != 0.0 else settling) if valid else math.nan
+        out[o + 2] = 100.0 * o_max / mag if valid else math.nan
+        out[o + 3] = 100.0 * u_max / mag if valid else math.nan
+        return valid, t_hi, hi_index, ipk
+
+    return core
 
 
 def _errors() -> Any:
@@ -200,43 +246,34 @@ def _search(t: np.ndarray, value: float, side: Literal["left", "right"]) -> int:
     return int(np.searchsorted(t, value, side=side))
 
 
+def _step_at(t: np.ndarray, t_step: float) -> tuple[int, int, bool, float]:
+    """Where a step at ``t_step`` lies on ``t`` (nlcx.metrics.step._step_grid): the first sample
+    at or after it, the sample j at or before it, whether it is on the grid, and the weight of
+    sample j + 1 in y(t_step)."""
+    i0 = _search(t, t_step, "left")
+    j = _search(t, t_step, "right") - 1
+    on_grid = j < 0 or t[j] == t_step
+    return i0, j, on_grid, 0.0 if on_grid else (t_step - t[j]) / (t[j + 1] - t[j])
+
+
 def _step_block(f: dict[str, Any], b: Block, t: np.ndarray) -> Any:
     """The device function of a ``step`` block (see :func:`nlcx.metrics.step_response_metrics`)."""
     ts, final, lo, hi, band, window = b.t_step, b.final, b.rise_low, b.rise_high, b.band, b.window
-    i0 = _search(t, ts, "left")
-    j = _search(t, ts, "right") - 1
-    on_grid = j < 0 or t[j] == ts
-    a = 0.0 if on_grid else (ts - t[j]) / (t[j + 1] - t[j])
+    i0, j, on_grid, a = _step_at(t, ts)
     shift = float(ts) - float(b.origin)
-    e0 = _search(t, ts, "left")
-    q, ref_row = b.signal, b.ref_row
-    sign, first_crossing, last_exit, extremes = f["sign"], f["first_crossing"], f["last_exit"], f["extremes"]
-    window_mean, errors = f["window_mean"], f["errors"]
+    q, ref_row, core, window_mean, errors = b.signal, b.ref_row, f["step_core"], f["window_mean"], f["errors"]
 
     @cuda().jit(device=True)
     def block(t, REC, REF, out, o, v):  # pragma: no cover - device
         y = REC[:, q, v]
         n = y.shape[0]
         initial = y[j] if on_grid else y[j] + a * (y[j + 1] - y[j])
-        delta = final - initial
-        s = sign(delta)
-        mag = abs(delta)
-        valid = delta != 0
-        t_lo, _ = first_crossing(t, y, i0, n, ts, s, s * (initial + lo * delta))
-        t_hi, _ = first_crossing(t, y, i0, n, ts, s, s * (initial + hi * delta))
-        settling = last_exit(t, y, i0, n, ts, final, band * mag)
-        over, under, ipk = extremes(y, i0, n, s, s * final, s * initial)
-        o_max = over if (over != over or over > 0.0) else 0.0
-        u_max = under if (under != under or under > 0.0) else 0.0
-        out[o] = t_hi - t_lo if valid else math.nan
-        out[o + 1] = (settling + shift if shift != 0.0 else settling) if valid else math.nan
-        out[o + 2] = 100.0 * o_max / mag if valid else math.nan
-        out[o + 3] = 100.0 * u_max / mag if valid else math.nan
+        valid, _, _, ipk = core(t, y, i0, n, ts, initial, final, lo, hi, band, shift, out, o)
         out[o + 4] = y[ipk] if valid else math.nan
         peak_time = t[ipk] - ts
         out[o + 5] = (peak_time + shift if shift != 0.0 else peak_time) if valid else math.nan
         out[o + 6] = final - window_mean(t, y, i0, n, window)
-        errors(t, y, REF[ref_row], e0, n, ts, out, o + 7)
+        errors(t, y, REF[ref_row], i0, n, ts, out, o + 7)
 
     return block
 
@@ -245,12 +282,9 @@ def _info_block(f: dict[str, Any], b: Block, t: np.ndarray) -> Any:
     """The device function of an ``info`` block (see :func:`nlcx.metrics.step_info`, against
     the run's last sample, from y(t_step))."""
     ts, lo, hi, band, q = b.t_step, b.rise_low, b.rise_high, b.band, b.signal
-    i0 = _search(t, ts, "left")
-    j = _search(t, ts, "right") - 1
-    on_grid = j < 0 or t[j] == ts
-    a = 0.0 if on_grid else (ts - t[j]) / (t[j + 1] - t[j])
+    i0, j, on_grid, a = _step_at(t, ts)
     shift = float(ts) - float(b.origin)
-    sign, first_crossing, last_exit, extremes = f["sign"], f["first_crossing"], f["last_exit"], f["extremes"]
+    core, deviation_peak = f["step_core"], f["deviation_peak"]
 
     @cuda().jit(device=True)
     def block(t, REC, REF, out, o, v):  # pragma: no cover - device
@@ -258,29 +292,8 @@ def _info_block(f: dict[str, Any], b: Block, t: np.ndarray) -> Any:
         n = y.shape[0]
         final = y[n - 1]
         initial = y[j] if on_grid else y[j] + a * (y[j + 1] - y[j])
-        delta = final - initial
-        s = sign(delta)
-        mag = abs(delta)
-        valid = delta != 0
-        t_lo, _ = first_crossing(t, y, i0, n, ts, s, s * (initial + lo * delta))
-        t_hi, hi_index = first_crossing(t, y, i0, n, ts, s, s * (initial + hi * delta))
-        settling = last_exit(t, y, i0, n, ts, final, band * mag)
-        over, under, _ = extremes(y, i0, n, s, s * final, s * initial)
-        o_max = over if (over != over or over > 0.0) else 0.0
-        u_max = under if (under != under or under > 0.0) else 0.0
-        out[o] = t_hi - t_lo if valid else math.nan
-        out[o + 1] = (settling + shift if shift != 0.0 else settling) if valid else math.nan
-        out[o + 2] = 100.0 * o_max / mag if valid else math.nan
-        out[o + 3] = 100.0 * u_max / mag if valid else math.nan
-        best, at = abs(y[i0]), i0  # the first largest |y| (or first NaN), as np.argmax
-        if best == best:
-            for i in range(i0 + 1, n):
-                d = abs(y[i])
-                if d != d:
-                    at = i
-                    break
-                if d > best:
-                    best, at = d, i
+        valid, t_hi, hi_index, _ = core(t, y, i0, n, ts, initial, final, lo, hi, band, shift, out, o)
+        at = deviation_peak(y, i0, n, 0.0)  # the first largest |y|
         out[o + 4] = abs(y[at])
         out[o + 5] = (t[at] - ts) + shift if shift != 0.0 else t[at] - ts
         out[o + 6] = final
@@ -300,21 +313,13 @@ def _regulation_block(f: dict[str, Any], b: Block, t: np.ndarray) -> Any:
     """The device function of a ``regulation`` block (see :func:`nlcx.metrics.regulation_metrics`)."""
     reference, band, tol, window, q, ref_row = b.final, b.band, b.abs_tol, b.window, b.signal, b.ref_row
     e0, ts = _search(t, b.t_step, "left"), b.t_step
-    last_exit, window_mean, errors = f["last_exit"], f["window_mean"], f["errors"]
+    last_exit, window_mean, errors, deviation_peak = f["last_exit"], f["window_mean"], f["errors"], f["deviation_peak"]
 
     @cuda().jit(device=True)
     def block(t, REC, REF, out, o, v):  # pragma: no cover - device
         y = REC[:, q, v]
         n = y.shape[0]
-        best, at = abs(y[0] - reference), 0
-        if best == best:
-            for i in range(1, n):
-                d = abs(y[i] - reference)
-                if d != d:
-                    at = i
-                    break
-                if d > best:
-                    best, at = d, i
+        at = deviation_peak(y, 0, n, reference)
         peak = abs(y[at] - reference)
         band_abs = band * peak
         band_abs = band_abs if (band_abs != band_abs or band_abs > tol) else tol
