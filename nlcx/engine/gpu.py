@@ -36,67 +36,66 @@ from nlcx.kernel.structures import Integration, method_of
 MEMORY_SHARE = 0.6
 
 
-def _blocks(template: Template, i: int, recorded: list[tuple[int, int]]) -> list[Any]:
-    """The metric blocks of loop i (:class:`nlcx.kernel.cuda_metrics.Block`), in the order of
-    :func:`nlcx.engine.measure_runs`, adding the signals they read to ``recorded``."""
+def _blocks(template: Template, i: int, recorded: list[tuple[int, int]]) -> list[tuple[str, Any]]:
+    """(signal, metric block) of loop i (:class:`nlcx.kernel.cuda_metrics.Block`), in the order
+    of :func:`nlcx.engine.measure_runs`: the outputs the loop follows, the others after a step on
+    an input, the inputs; the signals they read are added to ``recorded``."""
     from nlcx.kernel.cuda_loop import INPUT, OUTPUT, STATE
     from nlcx.kernel.cuda_metrics import Block
 
     p = template.prepared
     plant, cfg, run = p.plant, p.experiment.section.metrics, _RunView(template.items[i].controller)
     plans = _metric_plans(p)
+    lo, hi = cfg.rise_limits
 
     def signal(kind: int, index: int) -> int:
         if (kind, index) not in recorded:
             recorded.append((kind, index))
         return recorded.index((kind, index))
 
+    def output(s: str) -> int:
+        """The record of output s: its state where its row of C selects one, else y = C x."""
+        j = plant.output_names.index(s)
+        state = _selected_state(plant.C[j])
+        return signal(STATE, state) if state is not None else signal(OUTPUT, j)
+
     followed = _measured_outputs(run, plant)
     blocks = []
     for s in followed:
-        j = plant.output_names.index(s)
-        state = _selected_state(plant.C[j])
-        q = signal(STATE, state) if state is not None else signal(OUTPUT, j)
         plan = plans[s]
-        block = Block(plan.kind, q, -1, plan.t_step, plan.final, cfg.settling_band, window=cfg.ss_window)
+        block = Block(plan.kind, output(s), -1, plan.t_step, plan.final, cfg.settling_band, window=cfg.ss_window)
         if plan.kind == "step":
-            lo, hi = cfg.rise_limits
             block = block._replace(rise_low=lo, rise_high=hi, origin=_time_origin(plan.t_step, cfg))
         elif plan.kind == "regulation":
             block = block._replace(abs_tol=cfg.regulation_abs_tol)
-        blocks.append(block)
+        blocks.append((s, block))
     step = _input_step(run, plant, plans)
-    others = [s for s in plant.output_names if s not in followed] if step is not None else []
-    t_step = 0.0 if step is None else step.t_step
-    for s in others:
-        j = plant.output_names.index(s)
-        state = _selected_state(plant.C[j])
-        q = signal(STATE, state) if state is not None else signal(OUTPUT, j)
-        lo, hi = cfg.rise_limits
-        origin = _time_origin(t_step, cfg)
-        blocks.append(Block("info", q, -1, t_step, band=cfg.settling_band, rise_low=lo, rise_high=hi, origin=origin))
-    for j in range(len(plant.input_names)):
-        blocks.append(Block("input", signal=signal(INPUT, j), ref_row=-1))
+    if step is not None:
+        origin = _time_origin(step.t_step, cfg)
+        blocks += [
+            (s, Block("info", output(s), -1, step.t_step, band=cfg.settling_band, rise_low=lo, rise_high=hi,
+                      origin=origin))
+            for s in plant.output_names if s not in followed
+        ]  # fmt: skip
+    blocks += [(s, Block("input", signal(INPUT, j), -1)) for j, s in enumerate(plant.input_names)]
     return blocks
 
 
-def _references(template: Template, i: int, blocks: list[Any]) -> tuple[list[Any], np.ndarray]:
+def _references(template: Template, i: int, blocks: list[tuple[str, Any]]) -> tuple[tuple[Any, ...], np.ndarray]:
     """The blocks with their reference rows, and the reference table (rows of K+1 samples)."""
-    item, plant = template.items[i], template.prepared.plant
+    item = template.items[i]
     n_k = template.prepared.grid.t.size
-    followed = _measured_outputs(_RunView(item.controller), plant)
     rows: list[np.ndarray] = []
     out: list[Any] = []
-    for b in blocks:
+    for s, b in blocks:
         if b.kind in ("input", "info"):
             out.append(b)
             continue
-        s = followed[len(rows)]
         column = item.ref[:, item.controller.reference_signals.index(s)]
         rows.append(np.broadcast_to(column, (n_k,)))
         out.append(b._replace(ref_row=len(rows) - 1))
     table = np.ascontiguousarray(np.stack(rows)) if rows else np.zeros((1, n_k))
-    return out, table
+    return tuple(out), table
 
 
 def chunk_rows(n_rows: int, bytes_per_row: int) -> int:
@@ -148,7 +147,13 @@ def simulate_measure(
         if why is not None:
             raise refused(f"{why}; use device: cpu")
         recorded: list[tuple[int, int]] = []
-        per_loop = {int(i): _references(template, int(i), _blocks(template, int(i), recorded)) for i in pattern}
+        labelled = {int(i): _blocks(template, int(i), recorded) for i in pattern}
+        measuring = {}  # each loop's metric kernel, references on the GPU and number of values
+        for i, blocks in labelled.items():
+            refs, table = _references(template, i, blocks)
+            width = sum(len(cuda_metrics.BLOCK_NAMES[b.kind]) for b in refs)
+            measuring[i] = (cuda_metrics.metrics_kernel(refs, grid.t), gpu.to_device(table), width)
+            names[i] = [(s, name) for s, b in blocks for name in cuda_metrics.BLOCK_NAMES[b.kind]]
         n_rows = n_variants * pattern.size
         n_u, n_log = len(p.plant.inputs), len(items[int(pattern[0])].controller.log_names)
         rec = np.array(recorded, dtype=np.int64).reshape(-1, 2)
@@ -163,19 +168,15 @@ def simulate_measure(
             )
             status[rows], n_valid[rows] = done.status.copy_to_host(), done.n_valid.copy_to_host()
             fail_index[rows] = done.fail_index.copy_to_host()
-            for i, (blocks, refs) in per_loop.items():
-                width = sum(len(cuda_metrics.BLOCK_NAMES[b.kind]) for b in blocks)
+            for i, (kernel, refs, width) in measuring.items():
                 OUT = gpu.device_array((rows.stop - rows.start, width))
-                kernel = cuda_metrics.metrics_kernel(tuple(blocks), grid.t)
-                kernel[(OUT.shape[0] + 127) // 128, 128](t_dev, done.REC, gpu.to_device(refs), OUT)
+                kernel[(OUT.shape[0] + 127) // 128, 128](t_dev, done.REC, refs, OUT)
                 out[i].append(OUT.copy_to_host())
             del done
         loops = np.tile(pattern, n_variants)
         bounds = np.broadcast_to(plant.bounds, (n_rows, plant.bounds.shape[-1]))
-        for i, (blocks, _) in per_loop.items():
+        for i in labelled:
             mine = loops == i
-            names[i] = [(b_signal, name) for b_signal, b in _labelled(template, i, blocks)
-                        for name in cuda_metrics.BLOCK_NAMES[b.kind]]  # fmt: skip
             values[i] = np.concatenate(out[i])[mine]
             outcomes[i] = (status[mine], n_valid[mine], fail_index[mine], bounds[mine])
     rows_out = [failure_rows(template, *outcomes[i]) for i in range(len(items))]
@@ -185,14 +186,3 @@ def simulate_measure(
         return [(s, name, taken[:, c]) for c, (s, name) in enumerate(names[i])]
 
     return rows_out, ok_values
-
-
-def _labelled(template: Template, i: int, blocks: list[Any]) -> list[tuple[str, Any]]:
-    """(signal name, block) of loop i's blocks: the followed outputs, the others after an input
-    step, then the inputs."""
-    plant = template.prepared.plant
-    run = _RunView(template.items[i].controller)
-    followed = _measured_outputs(run, plant)
-    others = [s for s in plant.output_names if s not in followed]
-    stepped = others if _input_step(run, plant, _metric_plans(template.prepared)) is not None else []
-    return list(zip([*followed, *stepped, *plant.input_names], blocks, strict=True))
