@@ -38,7 +38,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from nlcx._numba_compat import is_numba_function
-from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, STATUS_OK, FunctionTable
+from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, STATUS_OK, no_element
 from nlcx.kernel.device import Retarget, cuda, kept, refused
 from nlcx.kernel.structures import CLASSIC_RK4
 
@@ -92,7 +92,7 @@ def unsupported(plant: Any, controller: Any, elements: Any, friction: bool) -> s
         if not is_numba_function(fn):
             return f"the {what} {getattr(fn, '__name__', fn)!r} is not a numba function"
     for fn in elements.functions:
-        if isinstance(fn, FunctionTable) or not (is_numba_function(fn) or getattr(fn, "_home", None)):
+        if fn is not no_element and not is_numba_function(fn):  # no_element: the table's padding
             return f"the loop element {getattr(fn, '__name__', fn)!r} is not a numba function"
     return None
 
@@ -151,10 +151,9 @@ def _element_link(fn: Any, p_off: int, s_off: int, d_off: int, rest: Any) -> Any
 def _devices(shape: LoopShape) -> tuple[Any, Any, Any, Any]:
     """(rhs, controller step, sensor chain, actuator chain) compiled for the GPU."""
     from nlcx.controllers.pid_step import via_slot
-    from nlcx.kernel.abi import no_element
 
-    retarget = Retarget()
-    retarget = Retarget({via_slot: _via_slot(retarget, shape.schedules)})
+    retarget = Retarget()  # one for the schedules and the step that calls them: each compiled once
+    retarget.stand_in(via_slot, _via_slot(retarget, shape.schedules))
     entries = tuple(e for e in shape.elements if e[1] is not no_element)
     return (
         retarget.device(shape.rhs), retarget.device(shape.step),

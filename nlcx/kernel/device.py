@@ -115,6 +115,11 @@ class Retarget:
     def __init__(self, overrides: Mapping[Any, Any] | None = None) -> None:
         self._done: dict[Any, Any] = dict(overrides or {})
 
+    def stand_in(self, function: Any, device: Any) -> None:
+        """Let ``device`` stand for ``function`` in whatever is compiled from here on (an
+        override made with device functions this :class:`Retarget` compiled)."""
+        self._done[function] = device
+
     def device(self, function: Any) -> Any:
         """The device function compiled from ``function`` (a numba function) for the GPU."""
         if function in self._done:
