@@ -64,25 +64,22 @@ DeviceOpt = Annotated[
 ]
 
 
-def _on_device(device: str | None, overrides: list[str] | None) -> list[str]:
-    """The overrides with ``simulation.device`` set to ``device`` (checked, and for cuda a GPU
-    found, before any work), or unchanged without ``--device``."""
+def _checked_device(device: str | None) -> str | None:
+    """``--device`` checked (for cuda: a GPU found) before any work; None without it."""
     from nlcx.kernel.device import DEVICES, cuda
 
-    if device is None:
-        return list(overrides or [])
-    if device not in DEVICES:
+    if device is not None and device not in DEVICES:
         raise NlcxError(f"--device = {device!r}: allowed values: {', '.join(DEVICES)}")
     if device == "cuda":
         cuda()
-    return [*(overrides or []), f"++simulation.device={device}"]
-
-
-def _checked_device(device: str | None) -> str | None:
-    """``device`` checked (for cuda: a GPU found) before any work; None without ``--device``."""
-    if device is not None:
-        _on_device(device, [])
     return device
+
+
+def _on_device(device: str | None, overrides: list[str] | None) -> list[str]:
+    """The overrides with ``simulation.device`` set to ``--device`` (checked), or unchanged without it."""
+    if _checked_device(device) is None:
+        return list(overrides or [])
+    return [*(overrides or []), f"++simulation.device={device}"]
 
 
 @app.command()
