@@ -146,6 +146,21 @@ def test_columnar_and_per_variant_paths_give_the_same_bytes(tmp_path: Path) -> N
     assert statuses.get("unstable", 0) > 0 and statuses.get("ok", 0) > 0
 
 
+def test_a_disturbance_no_column_varies_reaches_every_variant(tmp_path: Path) -> None:
+    """The disturbance is held a row per loop; every variant's loops get it, as on the
+    per-variant path (metrics.csv the same bytes; all runs finish)."""
+    length = {"plant.params.l": {"dist": "uniform", "relative": 0.2}}
+    section = {"seed": 5, "format": "csv", "random": {"n": 3, "params": length}}
+    load = {"disturbance": {"kind": "disturbance", "amplitude": 20.0, "frequency": 10.0}}
+    path = write_sweep(tmp_path, section, t_end=0.5, uncertainty=load)
+    packed, configs = tmp_path / "packed", tmp_path / "configs"
+    run(path, packed, "--jobs", "1")
+    run(path, configs, "--jobs", "1", "sweep.columnar=false")
+    assert how(packed) == "columnar"
+    assert (packed / "metrics.csv").read_bytes() == (configs / "metrics.csv").read_bytes()
+    assert json.loads((packed / "manifest.json").read_text())["status"] == {"ok": 3}
+
+
 @pytest.mark.slow
 def test_parquet_tables_hold_the_csv_rows_and_do_not_depend_on_the_workers(tmp_path: Path) -> None:
     path = write_sweep(tmp_path, {**MIXED, "batch_size": 2})

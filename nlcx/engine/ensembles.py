@@ -226,7 +226,20 @@ def _call_arguments(
         for name in names:  # the per-loop states and rows the kernel writes or reads per row
             if (part, name) not in filled:
                 parts[part] = parts[part]._replace(**{name: _expanded(getattr(parts[part], name), n_variants, n_rows)})
+    for _, part, name in ITEM_FIELDS.values():  # held per loop, filled by no column: per row of the call
+        array = getattr(parts[part], name)
+        if (part, name) not in filled and n_variants > 1 and n_rows > 1 and array.shape[0] == n_rows:
+            parts[part] = parts[part]._replace(**{name: _per_call_row(array, n_variants, n_rows)})
     return parts["plant"], parts["controller"], parts["elements"], parts["forces"]
+
+
+def _per_call_row(array: np.ndarray, n_variants: int, n_rows: int) -> np.ndarray:
+    """An array of one row per loop of the pattern (the disturbance, the friction axes) as the
+    kernel indexes it: per row of the call, or one shared row when every loop's row is the same
+    (the kernel reads row v of an array of more than one row, v the call's row)."""
+    if all(np.array_equal(array[0], array[j], equal_nan=True) for j in range(1, n_rows)):
+        return np.ascontiguousarray(array[:1])
+    return _expanded(array, n_variants, n_rows)
 
 
 def simulate_ensemble(
