@@ -95,15 +95,79 @@ def test_unknown_device_is_one_line(tmp_path: Path) -> None:
     assert "--device = 'tpu': allowed values: cpu, cuda" in done.stdout + done.stderr
 
 
-def test_friction_is_refused_by_name(tmp_path: Path) -> None:
-    """Friction runs on the CPU only: the GPU path says so in one line naming it."""
-    friction = {"friction": {"kind": "friction", "model": "simple", "mu_s": 0.2, "mu_c": 0.15, "viscous": 0.1}}
-    config = _config(tmp_path, 0.05, uncertainty=friction)
-    done = _nlcx("run", str(config), "--device", "cuda", "--out", str(tmp_path / "o"))
-    assert done.returncode != 0
-    text = (done.stdout + done.stderr).strip()
-    assert text.startswith("config error: simulation.device = 'cuda': friction") and "\n" not in text, text
-    assert not (tmp_path / "o").exists()
+#: Each loop of a config on the CPU and on the GPU, through the Python API: the largest relative
+#: difference of the states, inputs and friction forces, the statuses, and how often an axis
+#: sticks (its velocity exactly zero after t_0) and breaks away again.
+FRICTION_RUNS = """
+import json, sys
+import numpy as np
+from nlcx import config, engine
+from nlcx.engine.simulate import simulate_items
+from nlcx.kernel.friction import FA
+exp = config.load(sys.argv[1], sys.argv[2:])
+p = engine.prepare(exp)
+items = engine.items_of(p)
+runs = {d: simulate_items(items, p.grid, exp.section.simulation.integrator, device=d) for d in ("cpu", "cuda")}
+def rel(a, b):
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), 1e-300))
+out = []
+for cpu, gpu in zip(runs["cpu"], runs["cuda"]):
+    axes = items[0].friction
+    v = cpu.x[1:, [int(i) for i in axes[:, FA.velocity_index]]]
+    stuck = v == 0.0
+    out.append({"status": [cpu.status, gpu.status], "samples": [len(cpu.t), len(gpu.t)],
+                "rel": [rel(cpu.x, gpu.x), rel(cpu.u, gpu.u), rel(cpu.friction, gpu.friction)],
+                "stuck": int(stuck.sum()), "breakaway": int((stuck[:-1] & ~stuck[1:]).sum())})
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.parametrize(
+    ("config", "overrides"),
+    [
+        # simple friction on both axes of the x-y pendulum (Figure 3.7): the AGS loop sticks and breaks away
+        ("configs/thesis/ch3/fig_3_07.yaml", ["simulation.t_end=0.5"]),
+        # the exponential (Stribeck) model with a disturbance (interpolated inside a split step)
+        # and measurement noise, under Heun's tableau
+        ("configs/x_error_ags.yaml", [
+            "simulation.t_end=0.4", "simulation.integrator=heun",
+            "+uncertainty={friction: {kind: friction, model: exponential, mu_s: 0.2, mu_c: 0.15, viscous: 0.1, "
+            "stribeck_velocity: 0.105, form_factor: 2.0}, disturbance: {kind: disturbance, amplitude: 20.0, "
+            "frequency: 10.0}, noise: {kind: noise, power: 1.0e-7, sample_time: 0.01, injection: measurement}}",
+        ]),
+    ],
+)  # fmt: skip
+def test_friction_on_gpu_matches_cpu(config: str, overrides: list[str]) -> None:
+    """Stick-slip friction (Appendix A) on the GPU: the CPU's friction path compiled for each
+    thread. States, inputs and the friction forces at each sample as on the CPU, through
+    sticking (the step split where an axis stops) and breakaway."""
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1", "CUDA_VISIBLE_DEVICES": ""}
+    done = subprocess.run(
+        [sys.executable, "-c", FRICTION_RUNS, str(ROOT / config), *overrides],
+        capture_output=True, text=True, env=env, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    loops = json.loads(done.stdout)
+    assert len(loops) == 2
+    for loop in loops:
+        assert loop["status"][0] == loop["status"][1] and loop["samples"][0] == loop["samples"][1]
+        assert max(loop["rel"]) <= RTOL, loop
+    assert sum(loop["stuck"] for loop in loops) > 0 and sum(loop["breakaway"] for loop in loops) > 0, loops
+
+
+def test_friction_sweep_on_gpu_matches_cpu(tmp_path: Path) -> None:
+    """A columnar sweep of the friction coefficients, measured on the device as on the CPU."""
+    friction = {"friction": {"kind": "friction", "model": "exponential", "mu_s": 0.2, "mu_c": 0.15, "viscous": 0.1,
+                             "stribeck_velocity": 0.105, "form_factor": 2.0}}  # fmt: skip
+    params = {"uncertainty.friction.mu_s": {"dist": "uniform", "low": 0.18, "high": 0.4},
+              "uncertainty.friction.viscous": {"dist": "uniform", "low": 0.0, "high": 2.0}}  # fmt: skip
+    config = _config(tmp_path, 0.3, uncertainty=friction, sweep={"seed": 2, "format": "csv",
+                                                                  "random": {"n": 3, "params": params}})  # fmt: skip
+    for device in ("cpu", "cuda"):
+        done = _nlcx("sweep", str(config), "--device", device, "--out", str(tmp_path / device), "--no-report")
+        assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "cuda" / "manifest.json").read_text())["path"] == "columnar"  # measured there
+    _close(read_output_table(tmp_path / "cpu", "metrics"), read_output_table(tmp_path / "cuda", "metrics"))
 
 
 CASES = {
@@ -120,6 +184,8 @@ CASES = {
     "fuzzy-tf": ("configs/thesis/ch5/fig_5_10.yaml", []),
     # four states per axis and three loops (time-AGS PID of the x-y-z pendulum)
     "xyz": ("configs/xyz_error_ags.yaml", []),
+    # chapter 5's H2 and H-infinity preview controllers (sampled at 0.1 s, previewing a step)
+    "preview": ("configs/thesis/ch5/fig_5_19.yaml", ["reference.C_B.time=0.3", "++simulation.t_end=1.0"]),
 }  # fmt: skip
 
 
@@ -129,7 +195,7 @@ def test_plugins_on_gpu_match_cpu(tmp_path: Path, case: str) -> None:
     config, overrides = CASES[case]
     for device in ("cpu", "cuda"):
         out = tmp_path / device
-        args = ["run", str(ROOT / config), *overrides, "++simulation.t_end=0.1", "--device", device, "--no-report"]
+        args = ["run", str(ROOT / config), "++simulation.t_end=0.1", *overrides, "--device", device, "--no-report"]
         done = _nlcx(*args, "--out", str(out))
         assert done.returncode == 0, done.stderr
     _close(pd.read_csv(tmp_path / "cpu" / "metrics.csv"), pd.read_csv(tmp_path / "cuda" / "metrics.csv"))

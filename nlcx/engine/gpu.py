@@ -28,7 +28,6 @@ from nlcx.engine.ensembles import (
 )
 from nlcx.engine.measure import _input_step, _measured_outputs, _metric_plans, _selected_state, _time_origin
 from nlcx.engine.prepared import TABLEAUS
-from nlcx.engine.simulate import _has_friction
 from nlcx.kernel.device import refused
 from nlcx.kernel.structures import Integration, method_of
 
@@ -142,8 +141,8 @@ def simulate_measure(
     outcomes: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
     for pattern, step in ensemble_calls(items, n_variants):
         arguments = _call_arguments(template, pattern, step, n_variants, slots, columns)
-        plant, controller, elements, forces = arguments
-        why = cuda_loop.unsupported(plant, controller, elements, _has_friction(forces.friction))
+        plant, controller, elements, _ = arguments
+        why = cuda_loop.unsupported(plant, controller, elements)
         if why is not None:
             raise refused(f"{why}; use device: cpu")
         recorded: list[tuple[int, int]] = []

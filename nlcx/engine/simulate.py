@@ -83,7 +83,7 @@ def simulate_items(
         plant, controller = _plant_call(group), _controller_call(group, call.step)
         arguments = (plant, controller, _loop_elements(group), _plant_forces(group))
         if device == "cuda":
-            on_gpu(integration, *arguments, records, outcome, friction=_friction_path(group) is FRICTIONAL)
+            on_gpu(integration, *arguments, records, outcome)
         else:
             simulate(integration, *arguments, records, outcome, _friction_path(group))
         for array in records:
@@ -95,14 +95,14 @@ def simulate_items(
 
 def on_gpu(
     integration: Integration, plant: PlantCall, controller: ControllerCall, elements: LoopElements,
-    forces: PlantForces, records: Records, outcome: Outcome, friction: bool,
+    forces: PlantForces, records: Records, outcome: Outcome,
 ) -> None:  # fmt: skip
     """A kernel call on the GPU (:func:`nlcx.kernel.cuda_loop.simulate`), or a one-line
     ConfigError naming what cannot run there."""
     from nlcx.kernel import cuda_loop
     from nlcx.kernel.device import refused
 
-    why = cuda_loop.unsupported(plant, controller, elements, friction)
+    why = cuda_loop.unsupported(plant, controller, elements)
     if why is not None:
         raise refused(f"{why}; use device: cpu")
     cuda_loop.simulate(integration, plant, controller, elements, forces, records, outcome)

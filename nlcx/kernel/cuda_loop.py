@@ -21,10 +21,12 @@ that the threads of a warp write neighbouring addresses. :func:`simulate` record
 and input and copies them back as the CPU kernel's :class:`~nlcx.kernel.structures.Records`;
 :mod:`nlcx.engine.gpu` keeps outputs and inputs on the GPU and measures them there.
 
-Not on the GPU: friction (the stick-slip path of :mod:`nlcx.kernel.friction`) and plugins that
-are not numba functions, which :func:`unsupported` names before any work; and any plugin whose
-source numba-cuda cannot compile, which :func:`launch` names with numba's reason when the
-kernel compiles, before any thread runs.
+A variant with friction is stepped by the CPU's friction path (Appendix A), compiled for its
+thread (:mod:`nlcx.kernel.cuda_friction`); a kernel whose variants have none is compiled without it.
+
+Not on the GPU: plugins that are not numba functions, which :func:`unsupported` names before any
+work; and any plugin whose source numba-cuda cannot compile, which :func:`launch` names with
+numba's reason when the kernel compiles, before any thread runs.
 """
 
 from __future__ import annotations
@@ -39,19 +41,23 @@ import numpy as np
 
 from nlcx._numba_compat import is_numba_function
 from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, STATUS_OK, no_element
+from nlcx.kernel.cuda_friction import AT_SAMPLE, OVER_STEP, FrictionDevices, friction_devices, frictionless
 from nlcx.kernel.device import Retarget, cuda, kept, refused
-from nlcx.kernel.structures import CLASSIC_RK4
+from nlcx.kernel.friction import has_friction
+from nlcx.kernel.structures import CLASSIC_RK4, Integration
 
 EE = ELEMENT_ENTRY.at
-#: What a recorded signal is (column 0 of ``recorded``): a state, an output (row of C), an input.
-STATE, OUTPUT, INPUT = 0, 1, 2
+#: What a recorded signal is (column 0 of ``recorded``): a state, an output (row of C), an input,
+#: the friction force on an input's axis.
+STATE, OUTPUT, INPUT, FRICTION = 0, 1, 2, 3
 #: Threads per block of the closed-loop and metric kernels.
 THREADS = 128
 
 
 class LoopShape(NamedTuple):
     """What a compiled closed-loop kernel is specialised to: the plugins' functions (CPU forms),
-    the element table's order and offsets, and the sizes of the thread's local arrays."""
+    the element table's order and offsets, whether any variant has friction, and the sizes of
+    the thread's local arrays."""
 
     rhs: Any
     step: Any
@@ -66,9 +72,13 @@ class LoopShape(NamedTuple):
     n_cs: int
     method: int
     n_stages: int
+    friction: bool
+    n_d: int
 
 
-def shape_of(plant: Any, controller: Any, elements: Any, n_u: int, n_log: int, integration: Any) -> LoopShape:
+def shape_of(
+    plant: Any, controller: Any, elements: Any, forces: Any, n_u: int, n_log: int, integration: Any
+) -> LoopShape:
     """The :class:`LoopShape` of a kernel call's structures (``n_u`` inputs, ``n_log`` logged values)."""
     schedules = tuple((slot, fn) for slot, fn in enumerate(controller.callbacks) if is_numba_function(fn))
     table = tuple(
@@ -80,14 +90,13 @@ def shape_of(plant: Any, controller: Any, elements: Any, n_u: int, n_log: int, i
         rhs=plant.rhs, step=controller.step, schedules=schedules, elements=table,
         n_x=plant.x0.shape[1], n_u=n_u, n_y=plant.C.shape[0], n_r=controller.ref.shape[2], n_log=n_log,
         n_cp=controller.cp.shape[1], n_cs=controller.cs0.shape[1], method=integration.method,
-        n_stages=integration.rk_b.shape[0],
+        n_stages=integration.rk_b.shape[0], friction=any(has_friction(axes) for axes in forces.friction),
+        n_d=forces.dist.shape[3],
     )  # fmt: skip
 
 
-def unsupported(plant: Any, controller: Any, elements: Any, friction: bool) -> str | None:
+def unsupported(plant: Any, controller: Any, elements: Any) -> str | None:
     """Why a kernel call cannot run on the GPU (one line naming what), or None."""
-    if friction:
-        return "friction (the stick-slip path) runs on the CPU only"
     for what, fn in (("plant right-hand side", plant.rhs), ("controller step", controller.step)):
         if not is_numba_function(fn):
             return f"the {what} {getattr(fn, '__name__', fn)!r} is not a numba function"
@@ -148,16 +157,21 @@ def _element_link(fn: Any, p_off: int, s_off: int, d_off: int, rest: Any) -> Any
     return link
 
 
-def _devices(shape: LoopShape) -> tuple[Any, Any, Any, Any]:
-    """(rhs, controller step, sensor chain, actuator chain) compiled for the GPU."""
+def _devices(shape: LoopShape) -> tuple[Any, Any, Any, Any, FrictionDevices]:
+    """(rhs, controller step, sensor chain, actuator chain, friction path) compiled for the GPU."""
     from nlcx.controllers.pid_step import via_slot
 
     retarget = Retarget()  # one for the schedules and the step that calls them: each compiled once
     retarget.stand_in(via_slot, _via_slot(retarget, shape.schedules))
     entries = tuple(e for e in shape.elements if e[1] is not no_element)
+    rhs = retarget.device(shape.rhs)
+    friction = (
+        friction_devices(retarget, rhs, shape.n_x, shape.n_u, shape.n_stages, shape.n_d)
+        if shape.friction else frictionless()
+    )  # fmt: skip
     return (
-        retarget.device(shape.rhs), retarget.device(shape.step),
-        _element_chain(retarget, entries, SENSOR), _element_chain(retarget, entries, ACTUATOR),
+        rhs, retarget.device(shape.step),
+        _element_chain(retarget, entries, SENSOR), _element_chain(retarget, entries, ACTUATOR), friction,
     )  # fmt: skip
 
 
@@ -283,7 +297,7 @@ def _loop_signals() -> tuple[Any, Any, Any]:
     return sample, hold, accept
 
 
-def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any) -> Any:
+def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, friction: FrictionDevices) -> Any:
     """The kernel of ``shape``: the thread's closed loop from t_0 to t_K (the module docstring).
     Its arguments are the arrays of a kernel call's structures (:func:`launch` passes them by
     name); the thread's own state, signals and rows live in its local memory."""
@@ -295,47 +309,53 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any) ->
     NLOG, NST, NCP, NCS = max(shape.n_log, 1), max(shape.n_stages, 1), max(shape.n_cp, 1), max(shape.n_cs, 1)
     record, advance = _recorder(), _advance_device(shape.method == CLASSIC_RK4, _stage_device(rhs))
     sample, hold, accept = _loop_signals()
+    has_friction, start_friction, friction_at = friction
+    records_friction = _friction_recorded()
 
     @gpu.jit
-    def kernel(x0, params, C, picked, bounds, cp, cs, ref, ep, es, data, dist, dist_map, rk_a, rk_b, rk_c,
+    def kernel(x0, params, C, picked, bounds, cp, cs, ref, ep, es, data, dist, dist_map, friction, rk_a, rk_b, rk_c,
                dt, n_steps, n_u, recorded, REC, LOGS, status, n_valid, fail_index):  # pragma: no cover  # fmt: skip
         v = cuda_module.grid(1)
         if v >= x0.shape[0]:
             return
-        x = cuda_module.local.array((N, 1), float64)
-        xs = cuda_module.local.array((N, 1), float64)
-        xn = cuda_module.local.array((N, 1), float64)
-        ks = cuda_module.local.array((NST, N, 1), float64)
-        xrow = cuda_module.local.array((1, N), float64)
-        y = cuda_module.local.array((1, NY), float64)
-        r = cuda_module.local.array((1, NR), float64)
-        u = cuda_module.local.array((1, NU), float64)
-        uc = cuda_module.local.array((NU, 1), float64)
-        logged = cuda_module.local.array((1, NLOG), float64)
-        vid = cuda_module.local.array(1, int64)
-        cp_row = cuda_module.local.array((1, NCP), float64)
-        cs_row = cuda_module.local.array((1, NCS), float64)
+        local = cuda_module.local.array
+        x, xs, xn = local((N, 1), float64), local((N, 1), float64), local((N, 1), float64)
+        ks, xrow, y = local((NST, N, 1), float64), local((1, N), float64), local((1, NY), float64)
+        r, u = local((1, NR), float64), local((1, NU), float64)
+        uc, logged, vid = local((NU, 1), float64), local((1, NLOG), float64), local(1, int64)
+        cp_row, cs_row = local((1, NCP), float64), local((1, NCS), float64)
+        mode, direction, held, f_k = local(NU, int64), local(NU, float64), local(NU, float64), local((1, NU), float64)
         for i in range(cp.shape[1]):  # the thread's rows, in its own memory
             cp_row[0, i] = cp[v, i]
         for i in range(cs.shape[1]):
             cs_row[0, i] = cs[v, i]
         for i in range(N):
             x[i, 0] = x0[v, i]
+        for j in range(NU):
+            f_k[0, j] = 0.0
         vid[0] = v
         pv = v if params.shape[1] > 1 else 0
         pc = params[:, pv : pv + 1]
         bb, br, bd = (v if bounds.shape[0] > 1 else 0), (v if ref.shape[0] > 1 else 0), (v if dist.shape[0] > 1 else 0)
         cpv, csv, logv = cp_row[:, : cp.shape[1]], cs_row[:, : cs.shape[1]], logged[:, : LOGS.shape[1]]
         yv, rv, uv, ucv = y[:, : C.shape[0]], r[:, : ref.shape[2]], u[:, :n_u], uc[:n_u, :]
+        axes = friction[v if friction.shape[0] > 1 else 0]
+        frictional, integration = has_friction(axes), Integration(0, rk_a, rk_b, dt)
+        if frictional:
+            start_friction(axes, x[:, 0], mode, direction, held)
+        record_friction = records_friction(recorded)
         status[v], fail_index[v], n_valid[v] = STATUS_OK, -1, n_steps + 1
         for k in range(n_steps + 1):
-            t = k * dt
+            t, kd = k * dt, (k if dist.shape[1] > 1 else 0)
             sample(x, xrow, yv, rv, uv, C, picked, ref, br, k if ref.shape[1] > 1 else 0)
             sensor(t, dt, k, yv, vid, ep, es, data)
             step(t, dt, xrow, yv, rv, cpv, csv, uv, logv, 0)
             actuator(t, dt, k, uv, vid, ep, es, data)
             bad_u = hold(uv, ucv)
-            record(recorded, REC, k, v, x, y, u, C)
+            if frictional and bad_u < 0:  # the breakaway at t_k (Appendix A), and its forces when recorded
+                friction_at(AT_SAMPLE, t, k, kd, x, uv, pc, dist, bd, dist_map, integration, rk_c, axes, mode,
+                            direction, held, xn, f_k, record_friction)  # fmt: skip
+            record(recorded, REC, k, v, x, y, u, C, f_k)
             if LOGS.shape[0] > 1:
                 for i in range(LOGS.shape[1]):
                     LOGS[k, i, v] = logv[0, i]
@@ -344,8 +364,11 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any) ->
                 return
             if k == n_steps:
                 return
-            kd = k if dist.shape[1] > 1 else 0
-            advance(t, dt, x, xs, xn, ks, ucv, pc, dist, bd, kd, dist_map, rk_a, rk_b, rk_c)
+            if frictional:
+                friction_at(OVER_STEP, t, k, kd, x, uv, pc, dist, bd, dist_map, integration, rk_c, axes, mode,
+                            direction, held, xn, f_k, False)  # fmt: skip
+            else:
+                advance(t, dt, x, xs, xn, ks, ucv, pc, dist, bd, kd, dist_map, rk_a, rk_b, rk_c)
             bad = accept(x, xn, bounds, bb)
             if bad >= 0:
                 status[v] = STATUS_NONFINITE if not math.isfinite(x[bad, 0]) else STATUS_BOUND
@@ -360,13 +383,15 @@ def _recorder() -> Callable[..., Any]:
     """The device function that stores a thread's recorded signals of sample k."""
 
     @cuda().jit(device=True)
-    def record(recorded, REC, k, v, x, y, u, C):  # pragma: no cover - device
+    def record(recorded, REC, k, v, x, y, u, C, f_k):  # pragma: no cover - device
         for q in range(recorded.shape[0]):
             kind, i = recorded[q, 0], recorded[q, 1]
             if kind == STATE:
                 REC[k, q, v] = x[i, 0]
             elif kind == INPUT:
                 REC[k, q, v] = u[0, i]
+            elif kind == FRICTION:
+                REC[k, q, v] = f_k[0, i]
             else:
                 acc = 0.0
                 for j in range(C.shape[1]):
@@ -374,6 +399,20 @@ def _recorder() -> Callable[..., Any]:
                 REC[k, q, v] = acc
 
     return record
+
+
+@functools.cache
+def _friction_recorded() -> Callable[..., Any]:
+    """The device function telling whether ``recorded`` holds a friction force."""
+
+    @cuda().jit(device=True)
+    def records_friction(recorded):  # pragma: no cover - device
+        for q in range(recorded.shape[0]):  # noqa: SIM110 - device code: no any() over a generator
+            if recorded[q, 0] == FRICTION:
+                return True
+        return False
+
+    return records_friction
 
 
 # ----------------------------------------------------------------------------- launching
@@ -400,7 +439,7 @@ def launch(
     from nlcx.kernel.integrator import _output_picks, _stage_nodes
 
     gpu = cuda()
-    shape = shape_of(plant, controller, elements, n_u, n_log, integration)
+    shape = shape_of(plant, controller, elements, forces, n_u, n_log, integration)
     kernel = loop_kernel(shape)
     n_rows = plant.x0.shape[0]
     dev = gpu.to_device
@@ -412,7 +451,8 @@ def launch(
         dev(plant.x0), dev(np.ascontiguousarray(plant.p.T)), dev(plant.C), dev(_output_picks(plant.C)),
         dev(plant.bounds), dev(controller.cp), dev(np.array(controller.cs0, copy=True)), dev(controller.ref),
         dev(elements.ep), dev(np.array(elements.es0, copy=True)), dev(elements.data), dev(forces.dist),
-        dev(forces.dist_map), dev(rk_a), dev(np.ascontiguousarray(integration.rk_b)), dev(_stage_nodes(rk_a)),
+        dev(forces.dist_map), dev(forces.friction), dev(rk_a), dev(np.ascontiguousarray(integration.rk_b)),
+        dev(_stage_nodes(rk_a)),
         float(integration.dt), n_samples - 1, n_u, dev(recorded), REC, LOG, out.status, out.n_valid, out.fail_index,
     )  # fmt: skip
     blocks = (n_rows + THREADS - 1) // THREADS
@@ -444,16 +484,20 @@ def _first_line(exc: BaseException) -> str:
 def simulate(
     integration: Any, plant: Any, controller: Any, elements: Any, forces: Any, records: Any, outcome: Any
 ) -> None:
-    """:func:`nlcx.kernel.integrator.simulate` on the GPU (no friction): the same structures in,
-    ``records`` (every state and input; the logs where recorded) and ``outcome`` written."""
+    """:func:`nlcx.kernel.integrator.simulate` on the GPU: the same structures in, ``records``
+    (every state and input; the logs and friction forces where recorded) and ``outcome`` written."""
     _, n_k, n = records.X.shape
     n_u, n_log = records.U.shape[2], records.LOG.shape[2]
-    recorded = np.array([[STATE, i] for i in range(n)] + [[INPUT, j] for j in range(n_u)], dtype=np.int64)
-    done = launch(integration, plant, controller, elements, forces, n_u, n_log, n_k, recorded, records.LOG.shape[1] > 1)
+    logs = records.LOG.shape[1] > 1
+    rows = [[STATE, i] for i in range(n)] + [[INPUT, j] for j in range(n_u)]
+    rows += [[FRICTION, j] for j in range(n_u)] if records.FRICTION.shape[1] > 1 else []
+    done = launch(integration, plant, controller, elements, forces, n_u, n_log, n_k, np.array(rows, np.int64), logs)
     rec = done.REC.copy_to_host()
     records.X[...] = rec[:, :n, :].transpose(2, 0, 1)
-    records.U[...] = rec[:, n:, :].transpose(2, 0, 1)
-    if records.LOG.shape[1] > 1:
+    records.U[...] = rec[:, n : n + n_u, :].transpose(2, 0, 1)
+    if records.FRICTION.shape[1] > 1:
+        records.FRICTION[...] = rec[:, n + n_u :, :].transpose(2, 0, 1)
+    if logs:
         records.LOG[...] = done.LOG.copy_to_host().transpose(2, 0, 1)
     outcome.status[...] = done.status.copy_to_host()
     outcome.n_valid[...] = done.n_valid.copy_to_host()

@@ -329,11 +329,19 @@ def _disturbance_at_sample(drows, k):  # pragma: no cover - compiled
     row when shared over time): the first stage of step k (c = 0, t_k), and at the final sample
     t_K, which begins no step, the last stage of the last step (t_K itself for RK4 and Heun,
     whose last node is c = 1; t_{K-1} for Euler, which has no later node)."""
+    step, stage = sample_stage(drows, k)
+    return drows[step, stage]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def sample_stage(drows, k):  # pragma: no cover - compiled
+    """(step, stage) of the row of ``drows`` that holds d at the sample t_k
+    (:func:`_disturbance_at_sample`)."""
     if drows.shape[0] == 1:
-        return drows[0, 0]
+        return 0, 0
     if k < drows.shape[0]:
-        return drows[k, 0]
-    return drows[drows.shape[0] - 1, drows.shape[1] - 1]
+        return k, 0
+    return drows.shape[0] - 1, drows.shape[1] - 1
 
 
 @njit(cache=True, inline="always", error_model="numpy")
