@@ -89,6 +89,27 @@ def test_no_gpu_is_one_line(tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
+def test_nvvm_is_checked_in_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    """CUDA's compiler of the kernels (NVVM, in the test extra) loads here; where it does not,
+    --device cuda says so in one line saying what to install."""
+    from numba.cuda.cudadrv import nvvm
+
+    from nlcx.errors import ConfigError
+    from nlcx.kernel import device
+
+    device._check_nvvm()  # installed with the test extra: no error
+
+    def missing() -> None:
+        raise nvvm.NvvmSupportError("libNVVM cannot be found.\nlibnvvm.so: cannot open shared object file")
+
+    monkeypatch.setattr(nvvm, "NVVM", missing)
+    with pytest.raises(ConfigError) as err:
+        device._check_nvvm()
+    text = str(err.value)
+    assert "\n" not in text and text.startswith("config error: simulation.device = 'cuda': CUDA's NVVM"), text
+    assert "libNVVM cannot be found." in text and "nlcx[cuda]" in text and "nlcx[cuda12]" in text
+
+
 def test_unknown_device_is_one_line(tmp_path: Path) -> None:
     done = _nlcx("run", str(_config(tmp_path, 0.05)), "--device", "tpu")
     assert done.returncode != 0

@@ -9,9 +9,10 @@ CPU form (``overrides``): the one place the PID does so is its call of a registe
 through the callback table (:func:`nlcx.controllers.pid_step.via_slot`), which the GPU, which
 has no function values, makes as a branch over the schedules in use.
 
-numba-cuda is an optional dependency (``pip install 'nlcx[cuda]'``). :func:`cuda` imports it
-and checks that a GPU is there (or numba's simulator, ``NUMBA_ENABLE_CUDASIM=1``), with a
-one-line :class:`~nlcx.errors.ConfigError` otherwise.
+numba-cuda is an optional dependency (``pip install 'nlcx[cuda]'``, with CUDA 13's NVVM
+compiler; ``'nlcx[cuda12]'`` for CUDA 12 drivers). :func:`cuda` imports it and checks that a
+GPU and NVVM are there (or numba's simulator, ``NUMBA_ENABLE_CUDASIM=1``), with a one-line
+:class:`~nlcx.errors.ConfigError` otherwise.
 
 Floating point: the GPU code is compiled without fused multiply-add contraction (numba-cuda
 contracts by default; :func:`nlcx._numba_compat.cuda_without_fma`), so every addition and
@@ -74,10 +75,25 @@ def cuda() -> Any:
             raise refused(f"no usable GPU here ({exc})".splitlines()[0] + "; allowed here: cpu") from None
         if not available:
             raise refused("no CUDA GPU is available here; allowed here: cpu")
+        _check_nvvm()
         from nlcx._numba_compat import cuda_without_fma
 
         cuda_without_fma()
     return numba_cuda
+
+
+def _check_nvvm() -> None:
+    """NVVM, CUDA's compiler of the kernels, loads; a one-line ConfigError otherwise."""
+    try:
+        from numba.cuda.cudadrv.nvvm import NVVM
+
+        NVVM()
+    except Exception as exc:  # numba-cuda's own words make the line
+        why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise refused(
+            f"CUDA's NVVM compiler was not found ({why}); install it with pip install 'nlcx[cuda]' (CUDA 13 "
+            "drivers) or 'nlcx[cuda12]' (CUDA 12)"
+        ) from None
 
 
 def device_name() -> str:
