@@ -207,6 +207,12 @@ CASES = {
     "xyz": ("configs/xyz_error_ags.yaml", []),
     # chapter 5's H2 and H-infinity preview controllers (sampled at 0.1 s, previewing a step)
     "preview": ("configs/thesis/ch5/fig_5_19.yaml", ["reference.C_B.time=0.3", "++simulation.t_end=1.0"]),
+    # the GA tuner of Figure 5.17: each generation's candidates simulated on the GPU, the tuned
+    # PID then run there (a small population: what is compared is the path, not the optimum)
+    "ga-tuner": ("configs/thesis/ch5/fig_5_17.yaml", [
+        "controllers.ga.tune=[{kind: ga, objective: ise, bounds: {kp: [0.0, 5.0], ki: [0.0, 5.0], kd: [0.0, 2.0]}, "
+        "optimiser: {pop_size: 4, generations: 2, seed: 1}}]", "++simulation.t_end=0.5",
+    ]),
 }  # fmt: skip
 
 
