@@ -3,7 +3,7 @@
 numba's simulator (``tests/test_gpu.py``) runs the kernels as Python, so it cannot see what
 CUDA's compiler refuses. Here each config goes through nlcx's GPU path with every kernel launch
 replaced by a compilation to PTX for compute capability 9.0 (``tests/ptx_compile.py``): no GPU
-is needed, NVVM (in the ``test`` extra) is.
+is needed; CUDA's compilers NVVM and NVRTC (in the ``test`` extra) are.
 """
 
 from __future__ import annotations
