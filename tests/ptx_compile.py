@@ -12,7 +12,8 @@ PTX sizes.
 
 What it replaces, in this process only: ``numba.cuda.dispatcher.get_current_device`` (a device
 function is compiled for the current GPU's compute capability), ``to_device`` and
-``device_array`` (host arrays stand for device arrays), and nlcx's check for a GPU.
+``device_array`` (host arrays stand for device arrays), and nlcx's check for a GPU. The kernels
+are compiled with nlcx's NVVM options, as on a GPU (no fused multiply-add contraction).
 """
 
 from __future__ import annotations
@@ -82,6 +83,9 @@ def _without_a_gpu(compiled: dict[str, int]) -> None:
     ]
     for owner, name, value in replaced:
         setattr(owner, name, value)
+    from nlcx._numba_compat import cuda_without_fma
+
+    cuda_without_fma()  # as nlcx compiles for a GPU
 
 
 def _run_calls(path: str, overrides: list[str]) -> None:

@@ -158,3 +158,31 @@ def test_a_plugin_numba_cuda_refuses_fails_the_check(tmp_path: Path) -> None:
     (line,) = done.stderr.strip().splitlines()
     assert line.startswith("config error: simulation.device = 'cuda': the plant, controller and elements"), line
     assert "'scratchpad'" in line and "do not compile for the GPU" in line and "use device: cpu" in line, line
+
+
+#: a[0] * b[0] + c[0] compiled to PTX with numba-cuda's options, then with nlcx's.
+CONTRACTION = """
+from numba import cuda, types
+from nlcx._numba_compat import cuda_without_fma
+
+
+def kernel(a, b, c, out):
+    out[0] = a[0] * b[0] + c[0]
+
+
+signature = (types.float64[::1],) * 4
+default, _ = cuda.compile_ptx(kernel, signature, cc=(9, 0))
+cuda_without_fma()
+strict, _ = cuda.compile_ptx(kernel, signature, cc=(9, 0))
+print(default.count("fma.rn.f64"), strict.count("fma.rn.f64"), strict.count("mul.rn.f64"), strict.count("add.rn.f64"))
+"""
+
+
+def test_gpu_code_rounds_every_product_and_sum() -> None:
+    """numba-cuda fuses a * b + c into one rounding (FMA); nlcx's GPU code is compiled without
+    that contraction, so the product and the sum round apart, as on the CPU."""
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""}
+    done = subprocess.run([sys.executable, "-c", CONTRACTION], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert done.returncode == 0, done.stderr[-2000:]
+    fused_by_default, fused, products, sums = map(int, done.stdout.split())
+    assert fused_by_default == 1 and fused == 0 and products == 1 and sums == 1
