@@ -176,10 +176,10 @@ def _cell_drifts(name: str, both: pd.DataFrame, numeric: list[str], keys: list[s
         names = metric_names.to_numpy() if metric_names is not None else np.full(len(both), col)
         rt = np.array([tol.of(str(m))[0] for m in names]) if len(both) else np.zeros(0)
         at = np.array([tol.of(str(m))[1] for m in names]) if len(both) else np.zeros(0)
-        same_nan = np.isnan(bv) & np.isnan(nv)
+        same = (np.isnan(bv) & np.isnan(nv)) | (bv == nv)  # NaN against NaN; an infinity against itself
         with np.errstate(invalid="ignore"):
             close = np.abs(nv - bv) <= at + rt * np.abs(bv)
-        bad = ~(same_nan | close)
+        bad = ~(same | close)
         for k in np.nonzero(bad)[0]:
             drifts.append(Drift(name, str(both["_label"].iloc[k]), col, bv[k], nv[k]))
     return drifts

@@ -48,6 +48,21 @@ def test_a_changed_verdict_is_a_missing_and_an_extra_row(tmp_path: Path) -> None
     assert "Table 2.3 | not" in result.output and "extra in NEW" in result.output
 
 
+def test_an_infinity_equals_itself_and_nothing_else(tmp_path: Path) -> None:
+    """A cell that is infinite in both (an identification fit's relative error of a diverged run)
+    has not drifted, even at --rtol 0 --atol 0; an infinity against a number, or against the
+    other infinity, has."""
+    base, new = tmp_path / "base.csv", tmp_path / "new.csv"
+    cells = {"cell": ["a", "b", "c", "d"]}
+    pd.DataFrame(cells | {"rel_error": [float("inf"), 0.5, float("inf"), float("-inf")]}).to_csv(base, index=False)
+    pd.DataFrame(cells | {"rel_error": [float("inf"), 0.5, 2.0, float("inf")]}).to_csv(new, index=False)
+    result = runner.invoke(app, ["diff", str(base), str(new), "--rtol", "0", "--atol", "0"])
+    assert result.exit_code == 1, result.output
+    lines = result.output.strip().splitlines()
+    assert [line.split()[1] for line in lines[1:-1]] == ["c", "d"], result.output
+    assert lines[-1].startswith("drift: 2 cell(s)"), result.output
+
+
 @pytest.mark.slow
 def test_committed_baselines_still_reproduce(tmp_path: Path) -> None:
     """The fast subset of thesis tables (chapters 2-5) regenerates to the committed numbers.
