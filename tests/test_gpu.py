@@ -250,6 +250,47 @@ def test_identify_puts_its_loops_on_the_device() -> None:
     assert identify.spec_digest(on_gpu, spec_split) != identify.spec_digest(spec, spec_split)
 
 
+#: A population packed into a prepared experiment (the identification's objective,
+#: nlcx.thesis.packed_cells) measured on the CPU and on the GPU: their metric rows as JSON.
+PACKED_POPULATION = """
+import json
+import numpy as np
+from nlcx import config
+from nlcx.engine import gpu
+from nlcx.thesis.packed_cells import measured, packed_table
+
+launched = []
+on_device = gpu.simulate_measure
+gpu.simulate_measure = lambda *args: launched.append(args[-1]) or on_device(*args)
+box = {"controllers.conventional.loops.theta.schedule.kp": (12.0, 40.0), "simulation.bounds.theta": (0.004, 0.03)}
+X = np.random.default_rng(4).uniform([b[0] for b in box.values()], [b[1] for b in box.values()], size=(5, 2))
+out = {}
+for device in ("cpu", "cuda"):
+    def experiment(values):
+        settings = [f"{k}={v!r}" for k, v in values.items()]
+        short = ["simulation.t_end=0.06", f"simulation.device={device}"]
+        return config.load("configs/x_error_ags.yaml", [*settings, *short])
+    packed = packed_table(experiment, box)
+    m = measured(packed, {k: X[:, j] for j, k in enumerate(box)}, len(X))
+    text = {k: [m.categories[k][c] if c >= 0 else "" for c in m.codes[k]] for k in m.codes}
+    out[device] = {"variant": m.variant.tolist(), "value": m.value.tolist(), **text}
+print(json.dumps({**out, "launched": launched}))
+"""
+
+
+def test_a_packed_population_is_measured_on_the_gpu_as_on_the_cpu() -> None:
+    """The identification's packed populations take the columnar path onto the device: the
+    same metric rows (runs that stop at a bound among them), values within 1e-9 relative."""
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1", "CUDA_VISIBLE_DEVICES": ""}
+    done = subprocess.run([sys.executable, "-c", PACKED_POPULATION], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = json.loads(done.stdout)
+    assert out["launched"] == [5]  # the GPU's population: the five candidates, once
+    cpu, gpu = (pd.DataFrame(out[d]) for d in ("cpu", "cuda"))
+    assert {"ok", "unstable"} <= set(cpu.status)
+    _close(cpu, gpu)
+
+
 def _key_in_a_process(code: str) -> str:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     return done.stdout.strip()

@@ -412,3 +412,33 @@ def test_the_cell_lookup_reads_what_a_filter_of_the_metrics_reads() -> None:
                 assert ours == expected or (math.isnan(ours) and math.isnan(expected)), (controller, signal, metric)
                 checked += not math.isnan(expected)
     assert checked == 14  # both controllers: M_p, t_r, t_s, e_ss of x and M_p, t_s, e_ss of theta
+
+
+#: Hypotheses whose free values land in every train table's arrays, and one (a first-order
+#: actuator lag, whose time constant enters its element's parameters transformed) that does not.
+PACKED_CASES = ["literal", "saturation=back_calculation", "z_loop=printed", "lag=first_order"]
+
+
+@pytest.mark.parametrize("name", PACKED_CASES)
+def test_a_population_packed_into_prepared_tables_gives_each_candidate_s_own_cells(name: str) -> None:
+    """The objective prepares each train table once and packs the population into its arrays;
+    its losses are those of every candidate's own experiments (:func:`measure_cells`), bit for
+    bit, at the corners of the box and inside it, diverged runs included."""
+    spec = load_spec(ROOT / "configs" / "identify" / "pendulum_all.yaml")
+    cells = identify_module.all_cells(split.load(SPLIT))
+    train = cells[cells.part == "train"].reset_index(drop=True)
+    hyp = next(h for h in hypotheses.family(spec.families, 1) if h.name == name)
+    box = {**spec.free, **hyp.free()}
+    objective = identify_module.Objective(THESIS, hyp, box, train)
+    lower, upper = (np.array([b[i] for b in box.values()]) for i in (0, 1))
+    X = np.vstack([lower, upper, np.random.default_rng(3).uniform(lower, upper, size=(6, len(box)))])
+    packing = objective.packing()
+    packed = [t for t, p in packing.items() if not isinstance(p, str)]
+    if name == "lag=first_order":
+        assert not packed and all("tau: it is not packed as itself" in p for p in packing.values()), packing
+    else:
+        assert packed == list(dict.fromkeys(train.table)), packing
+    candidates = [dict(zip(box, map(float, x), strict=True)) for x in X]
+    own = identify_module.measure_cells(TableRuns(THESIS, list(dict.fromkeys(train.table))), hyp, candidates, train)
+    assert np.isnan(own).any()  # cells of diverged runs or undefined metrics among those compared
+    assert np.array_equal(objective(X), train_loss(own, train))

@@ -24,8 +24,8 @@ screening's table is screening.csv.
 
 For every hypothesis (:mod:`nlcx.thesis.hypotheses`), the seeded GA minimises the mean squared
 relative residual over the train cells only (floors as the calibration: 0.05 for M_p, 0.5 s
-for times; a diverged run or an undefined metric costs 10), every candidate's experiments of a
-generation in one pipeline call (:func:`nlcx.engine.evaluate`). The fitted loop is then
+for times; a diverged run or an undefined metric costs 10), a generation packed into each
+train table prepared once (:mod:`nlcx.thesis.packed_cells`). The fitted loop is then
 measured on every table and scored per part: the median relative error |ours - thesis| /
 |thesis| of M_p, t_r, t_s (cells with a printed 0 excluded), per controller, and the share of
 comparable cells where the sign of (proposed - conventional) agrees with the thesis.
@@ -38,6 +38,7 @@ a hypothesis screened and then combined is fitted once).
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -55,7 +56,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from nlcx import config as cfg
 from nlcx import engine, report
 from nlcx.errors import ConfigError
-from nlcx.thesis import catalog, hypotheses, profiles, split
+from nlcx.thesis import catalog, hypotheses, packed_cells, profiles, split
 from nlcx.thesis.tables import lookup_value, metric_lookup
 from nlcx.tuning.optimise import GASettings, check_search_box, evolve
 from nlcx.validation import validate_model
@@ -199,22 +200,35 @@ def train_loss(ours: np.ndarray, cells: pd.DataFrame) -> np.ndarray:
 
 
 class Objective:
-    """Train loss of a population of candidates (rows of X: the free values in ``keys`` order)."""
+    """Train loss of a population (rows of X: the free values of ``box``, in its order): packed into
+    each table whose free values land in its arrays as themselves (:mod:`nlcx.thesis.packed_cells`),
+    built candidate by candidate elsewhere (:func:`measure_cells`); the same cells bit for bit."""
 
-    def __init__(
-        self, root: Path, hyp: hypotheses.Hypothesis, keys: list[str], cells: pd.DataFrame, device: str = "cpu"
-    ) -> None:
-        self.root, self.hyp, self.keys, self.cells, self.device = root, hyp, keys, cells, device
+    def __init__(self, root: Path, hyp: hypotheses.Hypothesis, box: packed_cells.Box, cells: pd.DataFrame,
+                 device: str = "cpu") -> None:  # fmt: skip
+        self.root, self.hyp, self.box, self.keys, self.cells, self.device = root, hyp, box, list(box), cells, device
         self._runs: TableRuns | None = None
+        self._packed: dict[str, packed_cells.PackedTable | str] | None = None
 
     def __getstate__(self) -> dict[str, Any]:
-        return {**self.__dict__, "_runs": None}
+        return {**self.__dict__, "_runs": None, "_packed": None}
 
-    def __call__(self, X: np.ndarray) -> np.ndarray:
+    def tables(self) -> TableRuns:
+        """The train tables' experiments (read on first use, per process)."""
         if self._runs is None:
             self._runs = TableRuns(self.root, list(dict.fromkeys(self.cells.table)), device=self.device)
-        candidates = [dict(zip(self.keys, map(float, x), strict=True)) for x in np.atleast_2d(X)]
-        return train_loss(measure_cells(self._runs, self.hyp, candidates, self.cells), self.cells)
+        return self._runs
+
+    def packing(self) -> dict[str, packed_cells.PackedTable | str]:
+        """Each train table's packing, or why it has none (prepared on first use, per process)."""
+        if self._packed is None:
+            self._packed = packed_cells.packings(self.tables().raw, self.tables().experiment, self.hyp, self.box)
+        return self._packed
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        by_candidate = functools.partial(measure_cells, self.tables(), self.hyp)
+        ours = packed_cells.population_cells(self.packing(), np.atleast_2d(X), self.keys, self.cells, by_candidate)
+        return train_loss(ours, self.cells)
 
 
 def relative_errors(fit: pd.DataFrame) -> pd.Series:
@@ -277,7 +291,7 @@ def fit_hypothesis(
     bounds = {**spec.free, **hyp.free()}
     keys = list(bounds)
     train = cells[cells.part == "train"].reset_index(drop=True)
-    objective = Objective(root, hyp, keys, train, spec.device)
+    objective = Objective(root, hyp, bounds, train, spec.device)
     lower, upper = (np.array([b[i] for b in bounds.values()]) for i in (0, 1))
     seed = None if start is None else np.array([[{**start, **hyp.neutral()}[k] for k in keys]])
     t0 = time.perf_counter()
