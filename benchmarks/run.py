@@ -29,7 +29,7 @@ the table from a saved output without running anything.
     <= 2 GB, <= 10 us a variant outside the kernel), its first 10 000 variants checked against the
     per-variant path; and the parent's serial time (target <= 0.5 s + 1 us a variant).
 (e) with --fresh-clone: `make run` in a fresh clone with pip's cache off (target <= 90 s).
-(g) `nlcx identify benchmarks/identify_subset.yaml --jobs 2`: eight hypotheses of the pendulum
+(h) `nlcx identify benchmarks/identify_subset.yaml --jobs 2`: eight hypotheses of the pendulum
     identification study, the literal fit first (best of two runs, its kernels compiled).
 Machines are noisy: each timing is the best of a few repeats, and ratios come from one run.
 """
@@ -499,7 +499,7 @@ def bench_c() -> dict[str, float]:
     }  # fmt: skip
 
 
-def bench_g(repeats: int = 2) -> dict[str, Any]:
+def bench_h(repeats: int = 2) -> dict[str, Any]:
     spec = ROOT / "benchmarks" / "identify_subset.yaml"
     walls = []
     for k in range(repeats):
@@ -699,7 +699,7 @@ FIGURE_PATTERNS = {
     "f_wall_s": r"^\(f\) .*?: ([\d.]+) s wall",
     "f_peak_mb": r"^\(f\) .*? peak (\d+) MB",
     "f_outside_us": r"the rest \(start, .*?\) ([\d.]+) us a variant",
-    "g_wall_s": r"^\(g\) .*?: ([\d.]+) s wall",
+    "h_wall_s": r"^\(h\) .*?: ([\d.]+) s wall",
 }
 
 
@@ -717,7 +717,7 @@ def figures_from_text(text: str) -> dict[str, Any]:
 def figures_measured(
     a: dict[str, float] | None, b: dict[str, Any] | None, c: dict[str, float] | None,
     d: dict[str, float] | None, e: dict[str, Any] | None, f: dict[str, Any] | None = None,
-    g: dict[str, Any] | None = None,
+    h: dict[str, Any] | None = None,
 ) -> dict[str, Any]:  # fmt: skip
     """The speed table's figures from the benchmarks' results, rounded as the output prints them."""
     figures: dict[str, Any] = {"machine": machine()}
@@ -737,8 +737,8 @@ def figures_measured(
     if f:
         figures |= {"f_wall_s": round(f["wall_s"], 1), "f_peak_mb": round(f["peak_memory_mb"]),
                     "f_outside_us": round(f["outside_us"], 1)}  # fmt: skip
-    if g:
-        figures |= {"g_wall_s": round(g["wall_s"], 1)}
+    if h:
+        figures |= {"h_wall_s": round(h["wall_s"], 1)}
     return figures
 
 
@@ -787,9 +787,9 @@ def table_rows(f: dict[str, Any]) -> list[tuple[str, str, str, str]]:
             ("f", "that sweep's CPU time a variant outside the kernel and the report",
              f"{f['f_outside_us']:.1f} µs", "≤ 10 µs"),
         ]  # fmt: skip
-    if "g_wall_s" in f:
-        rows.append(("g", "`nlcx identify benchmarks/identify_subset.yaml --jobs 2`: eight hypotheses of the "
-                     "identification study, GA 30 × 15 then 18 × 10", f"{f['g_wall_s']:.1f} s", "–"))  # fmt: skip
+    if "h_wall_s" in f:
+        rows.append(("h", "`nlcx identify benchmarks/identify_subset.yaml --jobs 2`: eight hypotheses of the "
+                     "identification study, GA 30 × 15 then 18 × 10", f"{f['h_wall_s']:.1f} s", "–"))  # fmt: skip
     return rows
 
 
@@ -817,7 +817,7 @@ def write_speed_table(figures: dict[str, Any], readme: Path = README) -> bool:
         return False
     measured = {bench for bench, *_ in table_rows(figures)}
     body = text[start + len(TABLE_START) : end]
-    rows = (re.match(r"^\| \(([a-g]|gpu)\) \|", line) for line in body.splitlines())
+    rows = (re.match(r"^\| \(([a-h]|gpu)\) \|", line) for line in body.splitlines())
     kept = [row.string for row in rows if row and row.group(1) not in measured]
     before = re.search(r"Measured by `make bench` on (.*?) \(`benchmarks", body)
     if before and "machine" not in figures:
@@ -837,7 +837,7 @@ def machine() -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description="nlcx speed benchmarks (latest output: benchmarks/latest.txt)")
     parser.add_argument(
-        "--only", default="a,d,c,b,f,g", help="benchmarks to run, comma-separated (default a,d,c,b,f,g)"
+        "--only", default="a,d,c,b,f,h", help="benchmarks to run, comma-separated (default a,d,c,b,f,h)"
     )
     parser.add_argument("--fresh-clone", action="store_true", help="also time make run in a fresh clone (downloads)")
     parser.add_argument(
@@ -853,7 +853,7 @@ def main() -> None:
     sys.path.insert(0, str(ROOT / "benchmarks"))
     os.chdir(ROOT)
     print(f"nlcx benchmarks, {time.strftime('%Y-%m-%d')}, {machine()}")
-    a = b = c = d = e = f = g = None
+    a = b = c = d = e = f = h = None
     if "a" in chosen:
         a = bench_a()
         print_a(a)
@@ -884,11 +884,11 @@ def main() -> None:
     if "f" in chosen:
         f = bench_f()
         print_f(f)
-    if "g" in chosen:
-        g = bench_g()
+    if "h" in chosen:
+        h = bench_h()
         print(
-            f"(g) nlcx identify benchmarks/identify_subset.yaml --jobs 2 ({g['fitted']} fits): {g['wall_s']:.1f} s "
-            f"wall (best of {', '.join(f'{w:.1f}' for w in g['walls'])}) | {g['summary']}"
+            f"(h) nlcx identify benchmarks/identify_subset.yaml --jobs 2 ({h['fitted']} fits): {h['wall_s']:.1f} s "
+            f"wall (best of {', '.join(f'{w:.1f}' for w in h['walls'])}) | {h['summary']}"
         )
     if args.fresh_clone:
         e = bench_fresh_clone()
@@ -896,7 +896,7 @@ def main() -> None:
             f"(e) make run in a fresh clone, pip's cache off (install, warm-up compile, main job): "
             f"{e['make_run_s']:.0f} s [target <= 90]; the next nlcx run {e['next_run_s']:.1f} s"
         )
-    if write_speed_table(figures_measured(a, b, c, d, e, f, g)):
+    if write_speed_table(figures_measured(a, b, c, d, e, f, h)):
         print("README.md speed table rewritten", file=sys.stderr)
 
 
