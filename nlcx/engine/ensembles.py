@@ -39,7 +39,6 @@ from nlcx.engine.prepared import TABLEAUS, Item, Prepared, items_of
 from nlcx.engine.simulate import (
     _controller_call,
     _failure_reason,
-    _has_friction,
     _loop_elements,
     _plant_call,
     _plant_forces,
@@ -47,7 +46,7 @@ from nlcx.engine.simulate import (
     element_params,
     element_states,
 )
-from nlcx.kernel.friction import FRICTIONAL, FRICTIONLESS
+from nlcx.kernel.friction import FRICTIONAL, FRICTIONLESS, any_friction
 from nlcx.kernel.structures import Integration, Outcome, method_of
 
 #: The per-loop arrays of an item, by name, and the kernel argument (structure, field) each becomes.
@@ -263,7 +262,7 @@ def simulate_ensemble(
         records = _records([items[i] for i in pattern], grid.t.size, 1, n_rows=n_b)
         outcome = Outcome(*(np.zeros(n_b, dtype=np.int64) for _ in range(3)))
         simulate(integration, plant, controller, elements, forces, records, outcome,
-                 FRICTIONAL if _has_friction(forces.friction) else FRICTIONLESS)  # fmt: skip
+                 FRICTIONAL if any_friction(forces.friction) else FRICTIONLESS)  # fmt: skip
         calls.append(EnsembleCall(
             variants=np.repeat(np.arange(n_variants), pattern.size), loops=np.tile(pattern, n_variants),
             X=records.X, U=records.U, status=outcome.status, n_valid=outcome.n_valid,

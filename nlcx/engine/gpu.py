@@ -25,6 +25,9 @@ from nlcx.engine.ensembles import (
     _RunView,
     ensemble_calls,
     failure_rows,
+    loop_rows,
+    measure_ensemble,
+    simulate_ensemble,
 )
 from nlcx.engine.measure import _input_step, _measured_outputs, _metric_plans, _selected_state, _time_origin
 from nlcx.engine.prepared import TABLEAUS
@@ -185,3 +188,17 @@ def simulate_measure(
         return [(s, name, taken[:, c]) for c, (s, name) in enumerate(names[i])]
 
     return rows_out, ok_values
+
+
+def ensemble_metrics(
+    template: Template, slots: Mapping[str, Sequence[Slot]], columns: Mapping[str, np.ndarray], n_variants: int
+) -> tuple[list[LoopRows], Any]:
+    """Simulate and measure ``n_variants`` variants packed from ``columns`` (as
+    :func:`~nlcx.engine.ensembles.simulate_ensemble`) where the template's experiment says
+    (``simulation.device``: on the GPU, :func:`simulate_measure`; on the CPU, the ensemble's
+    kernel calls): each loop's rows and the metric rows (:class:`~nlcx.engine.ensembles.MetricColumns`)."""
+    if template.prepared.experiment.section.simulation.device == "cuda":
+        rows, ok_values = simulate_measure(template, slots, columns, n_variants)
+        return rows, measure_ensemble(template, rows, n_variants, ok_values)
+    rows = loop_rows(simulate_ensemble(template, slots, columns, n_variants), template)
+    return rows, measure_ensemble(template, rows, n_variants)

@@ -19,7 +19,7 @@ from nlcx.engine.batching import group_key, groups_of, kernel_calls
 from nlcx.engine.prepared import TABLEAUS, Item, Prepared, TimeGrid, items_of
 from nlcx.engine.results import Run
 from nlcx.kernel.abi import ELEMENT_ENTRY, HOOKS, STATUS_BOUND, STATUS_NONFINITE, callback_slots, element_slots
-from nlcx.kernel.friction import FA, FRICTION_AXIS, FRICTION_NONE, FRICTIONAL, FRICTIONLESS
+from nlcx.kernel.friction import FRICTION_AXIS, FRICTIONAL, FRICTIONLESS, any_friction
 from nlcx.kernel.structures import (
     ControllerCall,
     FrictionPath,
@@ -176,7 +176,7 @@ def _plant_forces(group: list[Item]) -> PlantForces:
 
 def _friction_path(group: list[Item]) -> FrictionPath:
     """The friction path of a kernel call: compiled only for a call with friction."""
-    return FRICTIONAL if any(_has_friction(g.friction) for g in group) else FRICTIONLESS
+    return FRICTIONAL if any(any_friction(g.friction) for g in group) else FRICTIONLESS
 
 
 def _records(group: list[Item], n_k: int, n_rec: int, n_rows: int | None = None) -> Records:
@@ -243,10 +243,3 @@ def _stack(arrays: list[np.ndarray | None], empty_shape: tuple[int, ...]) -> np.
     # an axis of length 1 (e.g. no noise: one zero row for every sample) meets the others' length
     shape = tuple(max(sizes) for sizes in zip(*(a.shape for a in filled), strict=True))
     return np.ascontiguousarray(np.stack([np.broadcast_to(a, shape) for a in filled]))
-
-
-def _has_friction(axes: np.ndarray | None) -> bool:
-    """Whether friction axes (FRICTION_AXIS rows: an item's, or a call's with a leading row axis)
-    hold a friction model (as the kernel's :func:`nlcx.kernel.friction.has_friction` decides
-    which rows take the friction path)."""
-    return axes is not None and bool(np.any(axes[..., FA.model].astype(np.int64) != FRICTION_NONE))

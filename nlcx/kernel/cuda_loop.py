@@ -43,7 +43,7 @@ from nlcx._numba_compat import is_numba_function
 from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, STATUS_OK, no_element
 from nlcx.kernel.cuda_friction import AT_SAMPLE, OVER_STEP, FrictionDevices, friction_devices, frictionless
 from nlcx.kernel.device import Retarget, cuda, kept, refused
-from nlcx.kernel.friction import has_friction
+from nlcx.kernel.friction import any_friction
 from nlcx.kernel.structures import CLASSIC_RK4, Integration
 
 EE = ELEMENT_ENTRY.at
@@ -90,7 +90,7 @@ def shape_of(
         rhs=plant.rhs, step=controller.step, schedules=schedules, elements=table,
         n_x=plant.x0.shape[1], n_u=n_u, n_y=plant.C.shape[0], n_r=controller.ref.shape[2], n_log=n_log,
         n_cp=controller.cp.shape[1], n_cs=controller.cs0.shape[1], method=integration.method,
-        n_stages=integration.rk_b.shape[0], friction=any(has_friction(axes) for axes in forces.friction),
+        n_stages=integration.rk_b.shape[0], friction=any_friction(forces.friction),
         n_d=forces.dist.shape[3],
     )  # fmt: skip
 
@@ -310,11 +310,11 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
     record, advance = _recorder(), _advance_device(shape.method == CLASSIC_RK4, _stage_device(rhs))
     sample, hold, accept = _loop_signals()
     has_friction, start_friction, friction_at = friction
-    records_friction = _friction_recorded()
 
     @gpu.jit
     def kernel(x0, params, C, picked, bounds, cp, cs, ref, ep, es, data, dist, dist_map, friction, rk_a, rk_b, rk_c,
-               dt, n_steps, n_u, recorded, REC, LOGS, status, n_valid, fail_index):  # pragma: no cover  # fmt: skip
+               dt, n_steps, n_u, recorded, record_friction, REC, LOGS, status, n_valid,
+               fail_index):  # pragma: no cover  # fmt: skip
         v = cuda_module.grid(1)
         if v >= x0.shape[0]:
             return
@@ -343,7 +343,6 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
         frictional, integration = has_friction(axes), Integration(0, rk_a, rk_b, dt)
         if frictional:
             start_friction(axes, x[:, 0], mode, direction, held)
-        record_friction = records_friction(recorded)
         status[v], fail_index[v], n_valid[v] = STATUS_OK, -1, n_steps + 1
         for k in range(n_steps + 1):
             t, kd = k * dt, (k if dist.shape[1] > 1 else 0)
@@ -401,20 +400,6 @@ def _recorder() -> Callable[..., Any]:
     return record
 
 
-@functools.cache
-def _friction_recorded() -> Callable[..., Any]:
-    """The device function telling whether ``recorded`` holds a friction force."""
-
-    @cuda().jit(device=True)
-    def records_friction(recorded):  # pragma: no cover - device
-        for q in range(recorded.shape[0]):  # noqa: SIM110 - device code: no any() over a generator
-            if recorded[q, 0] == FRICTION:
-                return True
-        return False
-
-    return records_friction
-
-
 # ----------------------------------------------------------------------------- launching
 
 
@@ -453,7 +438,8 @@ def launch(
         dev(elements.ep), dev(np.array(elements.es0, copy=True)), dev(elements.data), dev(forces.dist),
         dev(forces.dist_map), dev(forces.friction), dev(rk_a), dev(np.ascontiguousarray(integration.rk_b)),
         dev(_stage_nodes(rk_a)),
-        float(integration.dt), n_samples - 1, n_u, dev(recorded), REC, LOG, out.status, out.n_valid, out.fail_index,
+        float(integration.dt), n_samples - 1, n_u, dev(recorded), bool((recorded[:, 0] == FRICTION).any()),
+        REC, LOG, out.status, out.n_valid, out.fail_index,
     )  # fmt: skip
     blocks = (n_rows + THREADS - 1) // THREADS
     try:  # compiled at its first launch, before any thread runs

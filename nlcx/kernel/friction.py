@@ -16,7 +16,9 @@ direction of the net force otherwise. The parameters of each axis are a
 from __future__ import annotations
 
 import math
+from typing import Any
 
+import numpy as np
 from numba import njit
 
 from nlcx.kernel.abi import Padding, shared_row
@@ -269,6 +271,12 @@ def step_with_friction(rhs, t, work, drow, c, dist_map, fb, mode, direction, hol
         if mode[j] == STUCK:
             x_new[vi] = 0.0
             x_new[int(fb[j, FA.position_index])] = hold[j]
+
+
+def any_friction(axes: Any) -> bool:
+    """Whether friction axes (FRICTION_AXIS rows: an item's, or a call's with a leading row axis;
+    None: none) hold a friction model anywhere, as :func:`has_friction` decides per row."""
+    return axes is not None and bool(np.any(axes[..., FA.model].astype(np.int64) != FRICTION_NONE))
 
 
 @njit(cache=True, error_model="numpy")

@@ -307,21 +307,15 @@ def write_parquet_table(path: Path, table: Any) -> None:
 def run_column_batch(batch: ColumnBatch) -> Any:
     """Simulate and measure a columnar batch; write its part files (the metrics, then the index,
     which marks the batch complete). Returns the batch's :class:`~nlcx.sweeps.batches.BatchResult`."""
-    from nlcx.engine.ensembles import loop_rows, measure_ensemble, simulate_ensemble
+    from nlcx.engine.gpu import ensemble_metrics
     from nlcx.sweeps.batches import BatchResult, set_threads, settle_heap
 
     set_threads()
     try:
         template = _template(batch)
-        if template.prepared.experiment.section.simulation.device == "cuda":
-            from nlcx.engine.gpu import simulate_measure
-
-            rows, ok_values = simulate_measure(template, batch.packing.slots, batch.columns, batch.n)
-        else:
-            calls = simulate_ensemble(template, batch.packing.slots, batch.columns, batch.n)
-            rows, ok_values = loop_rows(calls, template), None
+        rows, measured = ensemble_metrics(template, batch.packing.slots, batch.columns, batch.n)
         status, message = _statuses(template, rows, batch.n)
-        metrics = _metrics_table(batch, measure_ensemble(template, rows, batch.n, ok_values))
+        metrics = _metrics_table(batch, measured)
         parts = batch.out_dir / "parts"
         write_parquet_table(parts / f"{batch.part}.metrics.parquet", metrics)
         write_parquet_table(parts / f"{batch.part}.index.parquet", _index_table(batch, status, message))

@@ -115,17 +115,11 @@ def population_cells(
 def measured(packed: PackedTable, columns: dict[str, np.ndarray], n: int) -> MetricColumns:
     """The metric rows of ``n`` candidates (``columns``: each free value's column) of a packed
     table, simulated and measured where its experiment says (``simulation.device``)."""
-    from nlcx.engine.ensembles import loop_rows, measure_ensemble, simulate_ensemble
+    from nlcx.engine.gpu import ensemble_metrics
 
-    template = packed.template
     slots = {k: s for k, s in packed.slots.items() if s}
     values = {k: np.ascontiguousarray(columns[k], dtype=float) for k in slots}
-    if template.prepared.experiment.section.simulation.device == "cuda":
-        from nlcx.engine.gpu import simulate_measure
-
-        rows, ok_values = simulate_measure(template, slots, values, n)
-        return measure_ensemble(template, rows, n, ok_values)
-    return measure_ensemble(template, loop_rows(simulate_ensemble(template, slots, values, n), template), n)
+    return ensemble_metrics(packed.template, slots, values, n)[1]
 
 
 def packed_cells(measured_rows: MetricColumns, cells: pd.DataFrame, n: int) -> np.ndarray:
