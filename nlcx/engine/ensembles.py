@@ -15,7 +15,6 @@ rows, the loop elements' parameters, states and data, the disturbance and the fr
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -35,6 +34,7 @@ from nlcx.engine.measure import (
     _signal_metrics,
     _step_characteristics,
 )
+from nlcx.engine.metric_rows import Block, Categories, MetricColumns, failed_block, ok_block, ordered
 from nlcx.engine.prepared import TABLEAUS, Item, Prepared, items_of
 from nlcx.engine.simulate import (
     _controller_call,
@@ -309,46 +309,39 @@ def failure_rows(
     template: Template, status: np.ndarray, n_valid: np.ndarray, fail_index: np.ndarray, bounds: np.ndarray
 ) -> LoopRows:
     """One loop's outcome rows (no records), with the time and reason of each run that stopped."""
-    plant, grid = template.prepared.plant, template.prepared.grid
+    grid = template.prepared.grid
     stopped = np.flatnonzero(status != 0)
     t_fail = grid.t[n_valid[stopped] - 1] + grid.dt
-    reasons = [_failure_reason(plant, int(status[e]), int(fail_index[e]), float(tf), bounds[e])
-               for e, tf in zip(stopped, t_fail, strict=True)]  # fmt: skip
     empty = np.empty((status.size, 0, 0))
+    reasons = _reasons(template.prepared.plant, stopped, status, fail_index, n_valid, t_fail, bounds)
     return LoopRows(empty, empty, status, n_valid, fail_index, bounds, stopped, t_fail, reasons)
 
 
-@dataclass
-class MetricColumns:
-    """The long-form metric rows of an ensemble as columns (the columns of metrics.csv): text
-    columns as codes into their category lists (``-1``: missing)."""
-
-    variant: np.ndarray
-    value: np.ndarray
-    codes: dict[str, np.ndarray]
-    categories: dict[str, list[str]]
-
-
-class _Categories:
-    """Text columns as codes into lists of their distinct values."""
-
-    def __init__(self, names: Sequence[str]) -> None:
-        self.values: dict[str, list[str]] = {n: [] for n in names}
-        self._index: dict[str, dict[str, int]] = {n: {} for n in names}
-
-    def code(self, column: str, text: str | None) -> int:
-        if text is None or text == "":
-            return -1
-        index = self._index[column]
-        if text not in index:
-            index[text] = len(self.values[column])
-            self.values[column].append(text)
-        return index[text]
+def _reasons(
+    plant: Any, stopped: np.ndarray, status: np.ndarray, fail_index: np.ndarray, n_valid: np.ndarray,
+    t_fail: np.ndarray, bounds: np.ndarray,
+) -> list[str]:  # fmt: skip
+    """Each stopped run's reason (:func:`~nlcx.engine.simulate._failure_reason`), written once
+    per distinct (status, failing index, time, bounds): runs that stop alike share their text."""
+    if not stopped.size:
+        return []
+    rows = bounds[stopped]
+    if (rows == rows[:1]).all():  # the common case: the runs share their bounds
+        key = np.zeros(stopped.size, dtype=np.int64)
+    else:
+        key = np.unique(rows, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
+    for part in (n_valid[stopped], fail_index[stopped], status[stopped]):  # one integer per distinct tuple
+        key = key * (int(part.max()) + 1) + part
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    texts = [_failure_reason(plant, int(status[stopped[k]]), int(fail_index[stopped[k]]), float(t_fail[k]),
+                             bounds[stopped[k]]) for k in first]  # fmt: skip
+    return [texts[j] for j in inverse]
 
 
-def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> list[tuple[str, str, np.ndarray]]:
-    """(signal, metric, values over the ok runs) of loop i, in the order :func:`nlcx.engine.measure_runs`
-    writes them: the outputs it follows, the other outputs after an input step, the inputs."""
+def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> tuple[list[tuple[str, str]], np.ndarray]:
+    """The (signal, metric) rows of loop i, in the order :func:`nlcx.engine.measure_runs` writes
+    them (the outputs it follows, the other outputs after an input step, the inputs), and their
+    values over the runs that finished (a column per row)."""
     p = template.prepared
     plant, cfg, run = p.plant, p.experiment.section.metrics, _RunView(template.items[i].controller)
     plans = _metric_plans(p)
@@ -385,7 +378,7 @@ def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> li
             blocked(info, s, _output_rows(X, take, plant.C[j]))
     for j, name in enumerate(plant.input_names):
         blocked(lambda u: m.input_metrics(t, u), name, np.ascontiguousarray(U[take, :, j]))
-    return out
+    return [(s, name) for s, name, _ in out], np.stack([v for *_, v in out], axis=1)
 
 
 class _RunView:
@@ -408,8 +401,9 @@ def _output_rows(X: np.ndarray, take: slice | np.ndarray, c_row: np.ndarray) -> 
     return np.stack([x @ c_row for x in X[take]])
 
 
-#: (signal, metric, values over the runs that finished) of a loop, in measure_runs's order.
-OkValues = Callable[[Template, int, LoopRows, np.ndarray], list[tuple[str, str, np.ndarray]]]
+#: The (signal, metric) rows of a loop in measure_runs's order, and their values over the runs
+#: that finished (runs, rows).
+OkValues = Callable[[Template, int, LoopRows, np.ndarray], tuple[list[tuple[str, str]], np.ndarray]]
 
 
 def measure_ensemble(
@@ -421,85 +415,17 @@ def measure_ensemble(
     come from (default: measured here from the rows' records; the GPU's, measured there:
     :func:`nlcx.engine.gpu.simulate_measure`)."""
     plant = template.prepared.plant
-    cats = _Categories(("controller", "signal", "metric", "unit", "status", "note"))
-    blocks: list[_Block] = []
+    cats = Categories()
+    blocks: list[Block] = []
     for i, loop in enumerate(rows):
         label = template.items[i].controller.label
         ok = loop.status == 0
         if ok.any():
-            blocks.append(_ok_block(template, i, loop, ok, cats, label, ok_values or _ok_values))
+            labels, value = (ok_values or _ok_values)(template, i, loop, ok)
+            described = [(s, name, _metric_unit(name, plant.unit_of(s)), _NAN_NOTES.get(name, "undefined"))
+                         for s, name in labels]  # fmt: skip
+            blocks.append(ok_block(np.flatnonzero(ok), i, value, described, cats, label))
         if (~ok).any():
             followed = _measured_outputs(_RunView(template.items[i].controller), plant)
-            blocks.append(_failed_block(loop, followed, cats, label, i))
-    return _ordered(blocks, cats, n_variants, len(rows))
-
-
-@dataclass
-class _Block:
-    """Rows of one loop for some variants: ``n_rows`` rows each, variant-major."""
-
-    variants: np.ndarray
-    loop: int
-    n_rows: int
-    codes: dict[str, np.ndarray]
-    value: np.ndarray
-
-
-def _ok_block(
-    template: Template, i: int, loop: LoopRows, ok: np.ndarray, cats: _Categories, label: str, ok_values: OkValues
-) -> _Block:
-    plant = template.prepared.plant
-    values = ok_values(template, i, loop, ok)
-    variants = np.flatnonzero(ok)
-    value = np.stack([v for _, _, v in values], axis=1).reshape(-1)  # variant-major
-    signal = np.array([cats.code("signal", s) for s, _, _ in values])
-    metric = np.array([cats.code("metric", name) for _, name, _ in values])
-    unit = np.array([cats.code("unit", _metric_unit(name, plant.unit_of(s))) for s, name, _ in values])
-    nan_note = np.array([cats.code("note", _NAN_NOTES.get(name, "undefined")) for _, name, _ in values])
-    n = variants.size
-    codes = {
-        "controller": np.full(value.size, cats.code("controller", label)),
-        "signal": np.tile(signal, n), "metric": np.tile(metric, n), "unit": np.tile(unit, n),
-        "status": np.full(value.size, cats.code("status", "ok")),
-        "note": np.where(np.isnan(value), np.tile(nan_note, n), -1),
-    }  # fmt: skip
-    return _Block(variants, i, len(values), codes, value)
-
-
-def _failed_block(loop: LoopRows, followed: list[str], cats: _Categories, label: str, i: int) -> _Block:
-    """The rows of the runs that stopped: t_fail, and a missing settling time per followed output."""
-    variants, t_fail = loop.stopped, loop.t_fail
-    reasons = [cats.code("note", reason) for reason in loop.reasons]
-    n_rows = 1 + len(followed)
-    value = np.full((variants.size, n_rows), math.nan)
-    value[:, 0] = t_fail
-    signal = np.array([cats.code("signal", s) for s in ["all", *followed]])
-    metric = np.array([cats.code("metric", name) for name in ["t_fail", *(["settling_time"] * len(followed))]])
-    n = variants.size
-    codes = {
-        "controller": np.full(value.size, cats.code("controller", label)),
-        "signal": np.tile(signal, n), "metric": np.tile(metric, n),
-        "unit": np.full(value.size, cats.code("unit", "s")),
-        "status": np.full(value.size, cats.code("status", "unstable")),
-        "note": np.repeat(np.array(reasons), n_rows),
-    }  # fmt: skip
-    return _Block(variants, i, n_rows, codes, value.reshape(-1))
-
-
-def _ordered(blocks: list[_Block], cats: _Categories, n_variants: int, n_loops: int) -> MetricColumns:
-    """The blocks' rows in :func:`nlcx.engine.measure_runs`'s order (by variant, then loop, then
-    row), each row put in its place."""
-    counts = np.zeros((n_variants, n_loops), dtype=np.int64)
-    for b in blocks:
-        counts[b.variants, b.loop] = b.n_rows
-    starts = np.concatenate([[0], np.cumsum(counts.reshape(-1))[:-1]]).reshape(n_variants, n_loops)
-    total = int(counts.sum())
-    variant = np.repeat(np.arange(n_variants), counts.sum(axis=1))
-    value = np.empty(total)
-    codes = {k: np.empty(total, dtype=np.int32) for k in cats.values}
-    for b in blocks:
-        pos = (starts[b.variants, b.loop][:, None] + np.arange(b.n_rows)[None, :]).reshape(-1)
-        value[pos] = b.value
-        for k, c in b.codes.items():
-            codes[k][pos] = c
-    return MetricColumns(variant, value, codes, cats.values)
+            blocks.append(failed_block(loop.stopped, i, loop.t_fail, loop.reasons, followed, cats, label))
+    return ordered(blocks, cats, n_variants, len(rows))

@@ -12,13 +12,14 @@ A batch larger than the GPU's memory holds is cut into chunks of rows (:func:`ch
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from nlcx.engine.ensembles import (
     LoopRows,
+    OkValues,
     Slot,
     Template,
     _call_arguments,
@@ -125,7 +126,7 @@ def _chunk(arguments: tuple[Any, ...], rows: slice) -> tuple[Any, ...]:
 
 def simulate_measure(
     template: Template, slots: Mapping[str, Sequence[Slot]], columns: Mapping[str, np.ndarray], n_variants: int
-) -> tuple[list[LoopRows], Callable[[Template, int, LoopRows, np.ndarray], list[tuple[str, str, np.ndarray]]]]:
+) -> tuple[list[LoopRows], OkValues]:
     """Simulate and measure ``n_variants`` variants of ``template`` on the GPU (the packing of
     :func:`~nlcx.engine.ensembles.simulate_ensemble`): each loop's outcome rows, and the
     function that gives :func:`~nlcx.engine.ensembles.measure_ensemble` the metric values of
@@ -183,9 +184,8 @@ def simulate_measure(
             outcomes[i] = (status[mine], n_valid[mine], fail_index[mine], bounds[mine])
     rows_out = [failure_rows(template, *outcomes[i]) for i in range(len(items))]
 
-    def ok_values(template: Template, i: int, loop: LoopRows, ok: np.ndarray) -> list[tuple[str, str, np.ndarray]]:
-        taken = values[i][ok]
-        return [(s, name, taken[:, c]) for c, (s, name) in enumerate(names[i])]
+    def ok_values(template: Template, i: int, loop: LoopRows, ok: np.ndarray) -> tuple[list[tuple[str, str]], Any]:
+        return names[i], values[i][ok]
 
     return rows_out, ok_values
 
@@ -196,7 +196,7 @@ def ensemble_metrics(
     """Simulate and measure ``n_variants`` variants packed from ``columns`` (as
     :func:`~nlcx.engine.ensembles.simulate_ensemble`) where the template's experiment says
     (``simulation.device``: on the GPU, :func:`simulate_measure`; on the CPU, the ensemble's
-    kernel calls): each loop's rows and the metric rows (:class:`~nlcx.engine.ensembles.MetricColumns`)."""
+    kernel calls): each loop's rows and the metric rows (:class:`~nlcx.engine.metric_rows.MetricColumns`)."""
     if template.prepared.experiment.section.simulation.device == "cuda":
         rows, ok_values = simulate_measure(template, slots, columns, n_variants)
         return rows, measure_ensemble(template, rows, n_variants, ok_values)

@@ -217,10 +217,11 @@ def _text(values: Any) -> Any:
 
 
 def _coded(codes: np.ndarray, categories: list[str]) -> Any:
-    """A text column from codes into ``categories`` (-1: missing), dictionary-encoded."""
+    """A text column from int32 codes into ``categories`` (-1: missing), dictionary-encoded."""
     import pyarrow as pa
 
-    indices = pa.array(codes.astype(np.int32), mask=codes < 0)
+    missing = codes < 0
+    indices = pa.array(codes, pa.int32(), mask=missing if missing.any() else None)
     return pa.DictionaryArray.from_arrays(indices, _text(categories))
 
 
@@ -270,22 +271,17 @@ def _metrics_table(batch: ColumnBatch, measured: Any) -> Any:
     """The batch's rows of metrics.csv (those of ``batch.metrics`` when it names some)."""
     import pyarrow as pa
 
-    keep = np.ones(measured.value.size, dtype=bool)
+    variant, value, codes = measured.variant, measured.value, measured.codes
     if batch.metrics is not None:
         names = measured.categories["metric"]
-        wanted = [k for k, name in enumerate(names) if name in batch.metrics]
-        keep = np.isin(measured.codes["metric"], wanted)
-    codes = {k: c[keep] for k, c in measured.codes.items()}
+        keep = np.isin(codes["metric"], [k for k, name in enumerate(names) if name in batch.metrics])
+        variant, value, codes = variant[keep], value[keep], {k: c[keep] for k, c in codes.items()}
     cats = measured.categories
     return pa.table({
-        "variant": pa.array(measured.variant[keep].astype(np.int64) + batch.first),
-        "controller": _coded(codes["controller"], cats["controller"]),
-        "signal": _coded(codes["signal"], cats["signal"]),
-        "metric": _coded(codes["metric"], cats["metric"]),
-        "value": _floats(measured.value[keep]),
-        "unit": _coded(codes["unit"], cats["unit"]),
-        "status": _coded(codes["status"], cats["status"]),
-        "note": _coded(codes["note"], cats["note"]),
+        "variant": pa.array(variant + batch.first, pa.int64()),
+        **{name: _coded(codes[name], cats[name]) for name in ("controller", "signal", "metric")},
+        "value": _floats(value),
+        **{name: _coded(codes[name], cats[name]) for name in ("unit", "status", "note")},
     })  # fmt: skip
 
 

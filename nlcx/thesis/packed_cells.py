@@ -28,7 +28,8 @@ import numpy as np
 import pandas as pd
 
 from nlcx import engine
-from nlcx.engine.ensembles import MetricColumns, Slot, Template
+from nlcx.engine.ensembles import Slot, Template
+from nlcx.engine.metric_rows import MetricColumns
 from nlcx.errors import NlcxError
 from nlcx.thesis.tables import ANGLE_METRICS, ANGLES, POSITION_METRICS
 
