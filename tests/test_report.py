@@ -214,3 +214,20 @@ def test_report_on_a_directory_that_is_none_of_ours_is_a_one_line_error(tmp_path
     assert result.exit_code == 2
     assert "DIR" in result.output and "an nlcx output directory" in result.output
     assert "Traceback" not in result.output
+
+
+def test_first_rows_are_each_codes_first_occurrence() -> None:
+    """Codes first seen early, past the first window and at the very end: each one's first row,
+    as a scan of the whole column per code finds it."""
+    from nlcx.pages.sweep_charts import first_rows
+
+    rng = np.random.default_rng(7)
+    codes = rng.integers(1, 4, size=50_000)
+    codes[9_000], codes[30_001], codes[-1] = 4, 5, 6  # beyond 4096 and 4096 + 8192 rows, and last
+    codes[[0, 17]] = 0  # rows outside the selection (code 0) are never asked for
+    present = np.array([3, 1, 2, 6, 4, 5])
+    expected = [int(np.argmax(codes == c)) for c in present]
+    assert first_rows(codes, present).tolist() == expected
+    assert first_rows(codes, present, window=1).tolist() == expected
+    with pytest.raises(ValueError, match=r"codes \[7\] do not occur"):
+        first_rows(codes, np.array([1, 7]))

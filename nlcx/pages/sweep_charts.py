@@ -140,13 +140,33 @@ def bins_of(values: pd.Series) -> tuple[pd.Series, list[str]]:
     return keys.map(position), [f"{v:.4g}" if numeric else str(v) for v in levels]
 
 
+def first_rows(codes: np.ndarray, present: np.ndarray, window: int = 4096) -> np.ndarray:
+    """The first row of each code of ``present`` (each must occur in ``codes``): windows of
+    doubling length scanned from the top until every code has been seen. In a metrics table every
+    (controller, signal, metric) shows among the first variants' rows, so this reads a few
+    thousand rows, where a scan per code reads the whole table for each."""
+    first = dict.fromkeys(present.tolist(), -1)
+    missing = set(first)
+    start = 0
+    while missing:
+        if start >= codes.size:
+            raise ValueError(f"codes {sorted(missing)} do not occur")
+        part = codes[start : start + window]
+        for code in np.flatnonzero(np.bincount(part)).tolist():
+            if code in missing:
+                first[code] = start + int(np.argmax(part == code))
+                missing.discard(code)
+        start, window = start + window, 2 * window
+    return np.array(list(first.values()), dtype=np.int64)
+
+
 def first_seen(
     columns: Sequence[pd.Series], rows: np.ndarray | None = None
 ) -> tuple[np.ndarray, list[tuple[str, ...]]]:
     """Each row's group, the groups being the distinct tuples of ``columns`` (as categories), in the
     order they first appear (among ``rows``, a mask, when given; other rows get -1); and the
     groups' tuples. The tuples are combined into one small integer code per row, counted with
-    ``bincount``, and each code's first row found by a scan: a few passes over the rows, no sort."""
+    ``bincount``, and each code's first row found by :func:`first_rows`: a few passes over the rows, no sort."""
     columns = [c if isinstance(c.dtype, pd.CategoricalDtype) else c.astype("category") for c in columns]
     sizes = [len(column.cat.categories) + 1 for column in columns]
     combined = np.zeros(len(columns[0]), dtype=np.int32 if np.prod(sizes, dtype=float) < 2**31 else np.int64)
@@ -158,7 +178,7 @@ def first_seen(
         combined[~rows] = 0  # no tuple has code 0 (every code above is shifted by one)
     counts = np.bincount(combined) if combined.size else np.zeros(1, dtype=np.int64)
     present = np.flatnonzero(counts[1:]) + 1
-    first = np.array([int(np.argmax(combined == code)) for code in present], dtype=np.int64)
+    first = first_rows(combined, present)
     by_appearance = np.argsort(first, kind="stable")
     rank = np.full(counts.size, -1, dtype=combined.dtype)
     rank[present[by_appearance]] = np.arange(present.size)
