@@ -157,6 +157,35 @@ def same_arrays(a: list[dict[str, np.ndarray | None]], b: list[dict[str, np.ndar
     return all(_same(x[k], y[k]) for x, y in zip(a, b, strict=True) for k in x)
 
 
+def probed_slots(
+    base: Template, probe: Callable[[str, float], Template], base_values: Mapping[str, float],
+    probes: Mapping[str, Sequence[float]],
+) -> dict[str, tuple[Slot, ...]] | str:  # fmt: skip
+    """Where each key's values land in ``base``'s arrays: the key set to each of its ``probes``
+    values (``probe(key, value)``: the template with that value alone changed) must change the
+    same entries, each to the value itself (:func:`changed_positions`); else why not (a text)."""
+    slots: dict[str, tuple[Slot, ...]] = {}
+    for key, values in probes.items():
+        found: set[tuple[Slot, ...]] = set()
+        for value in values:
+            changed = changed_positions(base, probe(key, value), base_values[key], value)
+            if isinstance(changed, str):
+                return f"{key}: {changed}"
+            found.add(tuple(changed))
+        if len(found) > 1:
+            return f"{key}: its values land in different places"
+        slots[key] = found.pop() if found else ()
+    return slots
+
+
+def corner_agrees(
+    base: Template, corner: Template, slots: Mapping[str, Sequence[Slot]], values: Mapping[str, float]
+) -> bool:
+    """Whether ``corner`` (the template prepared with ``values``) is ``base`` with ``values``
+    written into their slots: the same structure and the same arrays, bit for bit."""
+    return corner.structure() == base.structure() and same_arrays(corner.arrays(), substituted(base, slots, values))
+
+
 @dataclass
 class EnsembleCall:
     """One kernel call of an ensemble: its rows (variant e, loop i), its records and outcome."""

@@ -137,6 +137,6 @@ def ordered(blocks: list[Block], cats: Categories, n_variants: int, n_loops: int
     variant, value = np.empty(total, dtype=np.int64), np.empty(total)
     codes = np.empty((len(TEXT_COLUMNS), total), dtype=np.int32)
     for b in blocks:
-        _place(starts[b.variants, b.loop], b.variants.astype(np.int64), b.value, b.pattern, b.nan_note, b.note,
-               variant, value, codes)  # fmt: skip
+        rows = np.asarray(b.variants, dtype=np.int64)  # no copy: the blocks' positions are int64
+        _place(starts[rows, b.loop], rows, b.value, b.pattern, b.nan_note, b.note, variant, value, codes)
     return MetricColumns(variant, value, dict(zip(TEXT_COLUMNS, codes, strict=True)), cats.values)

@@ -91,7 +91,7 @@ def _corners(columns: dict[str, np.ndarray]) -> list[dict[str, Any]]:
 
 def packing(base_raw: dict[str, Any], spec: SweepSection, plan: ColumnPlan | None) -> Packing | str:
     """The sweep's :class:`Packing`, or why its variants need configs of their own (a text)."""
-    from nlcx.engine.ensembles import changed_positions, same_arrays, substituted
+    from nlcx.engine.ensembles import corner_agrees, probed_slots, same_arrays
 
     if spec.timeseries:
         return "the sweep keeps time series"
@@ -106,22 +106,13 @@ def packing(base_raw: dict[str, Any], spec: SweepSection, plan: ColumnPlan | Non
         other_seed = probe.template(first, (seed + 1) % 2**32)
         if not same_arrays(template.arrays(), other_seed.arrays()):
             return "the uncertainties draw from the variant's seed"
-        slots: dict[str, tuple[Any, ...]] = {}
-        for key, column in plan.columns.items():
-            found: set[tuple[Any, ...]] = set()
-            for value in _probe_values(column, first[key]):
-                changed = changed_positions(template, probe.template({**first, key: value}, seed), first[key], value)
-                if isinstance(changed, str):
-                    return f"{key}: {changed}"
-                found.add(tuple(changed))
-            if len(found) > 1:
-                return f"{key}: its values land in different places"
-            slots[key] = found.pop() if found else ()
+        probes = {key: _probe_values(column, first[key]) for key, column in plan.columns.items()}
+        slots = probed_slots(template, lambda key, value: probe.template({**first, key: value}, seed), first, probes)
+        if isinstance(slots, str):
+            return slots
         for corner in _corners(plan.columns):
-            corner_template = probe.template({**first, **corner}, seed)
-            if corner_template.structure() != template.structure() or not same_arrays(
-                corner_template.arrays(), substituted(template, slots, {**first, **corner})
-            ):
+            values = {**first, **corner}
+            if not corner_agrees(template, probe.template(values, seed), slots, values):
                 return "the varied values act on the loops together, not each as itself"
     except NlcxError as exc:
         return f"a corner of the varied values is not valid ({str(exc).splitlines()[0]})"

@@ -51,7 +51,7 @@ def packed_table(experiment: Callable[[dict[str, float]], Any], box: Box) -> Pac
     of their own (a text). The template holds the middle of the box; each value is probed at
     both ends of its range, and both corners of the box must equal the template with their
     values written into those places."""
-    from nlcx.engine.ensembles import changed_positions, same_arrays, substituted
+    from nlcx.engine.ensembles import corner_agrees, probed_slots
 
     def template(values: dict[str, float]) -> Template:
         return Template.of(engine.prepare(experiment(values)))
@@ -61,21 +61,11 @@ def packed_table(experiment: Callable[[dict[str, float]], Any], box: Box) -> Pac
         base = template(middle)
         if base.prepared.tuning:
             return "a controller is tuned"
-        slots: dict[str, tuple[Slot, ...]] = {}
-        for key, ends in box.items():
-            found = set()
-            for value in ends:
-                changed = changed_positions(base, template({**middle, key: value}), middle[key], value)
-                if isinstance(changed, str):
-                    return f"{key}: {changed}"
-                found.add(tuple(changed))
-            if len(found) > 1:
-                return f"{key}: its values land in different places"
-            slots[key] = found.pop()
+        slots = probed_slots(base, lambda key, value: template({**middle, key: value}), middle, box)
+        if isinstance(slots, str):
+            return slots
         for corner in ({k: lo for k, (lo, _) in box.items()}, {k: hi for k, (_, hi) in box.items()}):
-            other = template(corner)
-            predicted = substituted(base, slots, corner)
-            if other.structure() != base.structure() or not same_arrays(other.arrays(), predicted):
+            if not corner_agrees(base, template(corner), slots, corner):
                 return "the free values act on the loops together, not each as itself"
     except NlcxError as exc:
         return f"a corner of the free values is not valid ({str(exc).splitlines()[0]})"
