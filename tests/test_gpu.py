@@ -401,3 +401,57 @@ def test_identify_refuses_the_gpu_where_it_does_not_use_it(tmp_path: Path) -> No
     text = (done.stdout + done.stderr).strip()
     assert text == "--device = 'cuda': a consistency or chapter 5 study runs on the cpu only", text
     assert not (tmp_path / "o").exists()
+
+
+def test_overlapped_batches_in_chunks_match_cpu(tmp_path: Path) -> None:
+    """A sweep in three batches of two variants, each cut into chunks of three rows, two batches
+    in flight at once (one on the device while the one before it is written): statuses and
+    metrics as on the CPU."""
+    sweep = {"seed": 5, "random": {"n": 6, "params": {"plant.params.l": {"dist": "uniform", "relative": 0.3},
+                                                        "simulation.bounds.theta": {"dist": "uniform", "low": 0.004,
+                                                                                    "high": 0.02}}}}  # fmt: skip
+    config = _config(tmp_path, 0.05, sweep={**sweep, "format": "csv"})
+    small = (
+        "import nlcx.sweeps.columnar as c, nlcx.engine.gpu as g; c.GPU_BATCH_VARIANTS = 2; "
+        "g.chunk_rows = lambda n_rows, bytes_per_row: min(n_rows, 3); from nlcx.cli import main; main()"
+    )
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1", "CUDA_VISIBLE_DEVICES": ""}
+    args = ["sweep", str(config), "--device", "cuda", "--out", str(tmp_path / "cuda"), "--no-report"]
+    done = subprocess.run([sys.executable, "-c", small, *args], capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr
+    done = _nlcx("sweep", str(config), "--device", "cpu", "--out", str(tmp_path / "cpu"), "--no-report")
+    assert done.returncode == 0, done.stderr
+    assert len(list((tmp_path / "cuda" / "parts").glob("*.index.*"))) == 3
+    cpu_index, gpu_index = (read_output_table(tmp_path / d, "sweep") for d in ("cpu", "cuda"))
+    assert list(cpu_index.status) == list(gpu_index.status)
+    assert {"ok", "unstable"} <= set(cpu_index.status)
+    _close(read_output_table(tmp_path / "cpu", "metrics"), read_output_table(tmp_path / "cuda", "metrics"))
+
+
+def test_one_ensemble_at_a_time_on_the_gpu(monkeypatch: pytest.MonkeyPatch) -> None:
+    """simulate_measure called from four threads at once: one call at a time on the GPU."""
+    import threading
+    import time
+
+    from nlcx.engine import gpu
+
+    inside, most, calls = [0], [0], []
+    count = threading.Lock()
+
+    def fake(template: object, slots: object, columns: object, n: int) -> tuple[list[object], None]:
+        with count:
+            inside[0] += 1
+            most[0] = max(most[0], inside[0])
+        time.sleep(0.02)
+        calls.append(n)
+        with count:
+            inside[0] -= 1
+        return [], None
+
+    monkeypatch.setattr(gpu, "_simulate_measure", fake)
+    threads = [threading.Thread(target=gpu.simulate_measure, args=(None, {}, {}, n)) for n in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sorted(calls) == [0, 1, 2, 3] and most[0] == 1

@@ -8,10 +8,13 @@ metric values come back; :func:`nlcx.engine.ensembles.measure_ensemble` lays the
 CPU's rows.
 
 A batch larger than the GPU's memory holds is cut into chunks of rows (:func:`chunk_rows`).
+One call at a time runs on the GPU: a second waits for the first, so that a sweep may lay out
+and write one batch while the next one runs (:func:`nlcx.sweeps.runner.make_executor`).
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -37,6 +40,9 @@ from nlcx.kernel.structures import Integration, method_of
 
 #: Share of the GPU's free memory one chunk's records may take.
 MEMORY_SHARE = 0.6
+
+#: Held by the one :func:`simulate_measure` on the GPU at a time.
+_ON_DEVICE = threading.Lock()
 
 
 def _blocks(template: Template, i: int, recorded: list[tuple[int, int]]) -> list[tuple[str, Any]]:
@@ -130,7 +136,15 @@ def simulate_measure(
     """Simulate and measure ``n_variants`` variants of ``template`` on the GPU (the packing of
     :func:`~nlcx.engine.ensembles.simulate_ensemble`): each loop's outcome rows, and the
     function that gives :func:`~nlcx.engine.ensembles.measure_ensemble` the metric values of
-    its runs that finished."""
+    its runs that finished. Waits while another call runs on the GPU."""
+    with _ON_DEVICE:
+        return _simulate_measure(template, slots, columns, n_variants)
+
+
+def _simulate_measure(
+    template: Template, slots: Mapping[str, Sequence[Slot]], columns: Mapping[str, np.ndarray], n_variants: int
+) -> tuple[list[LoopRows], OkValues]:
+    """:func:`simulate_measure`, the GPU held."""
     from nlcx.kernel import cuda_loop, cuda_metrics
     from nlcx.kernel.device import cuda
 

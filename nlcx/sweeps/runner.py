@@ -7,7 +7,7 @@ import gc
 import os
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,11 +38,16 @@ def make_executor(
     kind: str, jobs: int, scheduler: str | None, cluster: ClusterSpec | None = None
 ) -> tuple[Executor | None, Callable[[], None]]:
     """(executor, close) for "serial", "process" or "dask" (on ``scheduler``'s cluster, on
-    the cluster a cluster file describes (:mod:`nlcx.sweeps.cluster`), or on a local one)."""
+    the cluster a cluster file describes (:mod:`nlcx.sweeps.cluster`), or on a local one); and
+    for "gpu", two threads of this process: one batch runs on the GPU while the one before it is
+    laid out and written (:func:`nlcx.engine.gpu.simulate_measure` lets one call at a time on the GPU)."""
     for name in THREAD_VARIABLES:  # one BLAS/OpenMP thread per worker
         os.environ.setdefault(name, "1")
     if kind == "serial":
         return None, lambda: None
+    if kind == "gpu":
+        threads = ThreadPoolExecutor(max_workers=2)
+        return threads, lambda: threads.shutdown(wait=True, cancel_futures=True)
     if kind == "process":
         pool = ProcessPoolExecutor(max_workers=jobs, initializer=set_threads)
         return pool, lambda: pool.shutdown(wait=True, cancel_futures=True)
@@ -230,16 +235,21 @@ class _Job:
     def workers(self) -> int:
         return 1 if self.executor == "serial" else self.jobs
 
-    def _run(self, batches: Sequence[Any], tally: _Tally, task: Callable[[Any], BatchResult]) -> float:
-        """Run the batches (the kernel loaded first, once, before the workers fork); the time they started."""
+    def _run(
+        self, batches: Sequence[Any], tally: _Tally, task: Callable[[Any], BatchResult], overlap: bool = False
+    ) -> float:
+        """Run the batches (the kernel loaded first, once, before the workers fork); the time they
+        started. On the GPU, batches whose task lets one at a time on the device (``overlap``:
+        :func:`~nlcx.sweeps.columnar.run_column_batch`) run two at once, the others one after another."""
         from nlcx import engine
 
         tally.report()
         if batches:
             engine.load_kernel()
         planned = time.perf_counter()
-        # one process holds the GPU: its batches run one after another there
-        executor = "serial" if self.base.section.simulation.device == "cuda" else self.executor
+        executor = self.executor
+        if self.base.section.simulation.device == "cuda":  # one process holds the GPU
+            executor = "gpu" if overlap else "serial"
         _run_batches(batches, executor, self.jobs, self.scheduler, tally.add, self.cluster, task)
         return planned
 
@@ -277,7 +287,7 @@ class _Job:
             )
             todo = [b for b in batches if not (staging / "parts" / f"{b.part}.index.parquet").exists()]
             tally = _Tally(plan.n, plan.n - sum(b.n for b in todo), self.progress)
-            planned = self._run(todo, tally, columnar.run_column_batch)
+            planned = self._run(todo, tally, columnar.run_column_batch, overlap=True)
             simulated = time.perf_counter()
             parts = [(b.first, b.part) for b in batches]
             statuses = assemble_columns(staging, parts, self.base_raw, self.spec, tally.statuses)
