@@ -19,8 +19,10 @@ variants:
 - end to end: ``nlcx sweep --device cuda`` of the sweep of benchmark (b) with that many
   variants (plan, simulate, measure, write the metrics; then the report, timed apart).
 
-Each time is the best of two after a warm-up (the compilation is timed apart). The statuses of
-the reference and of nlcx are compared variant by variant.
+The reference and the kernel are each the best of two after a warm-up (the kernel's compilation
+is timed apart); simulate + measure is one call, whose first, at the smallest size, also loads
+or compiles the metric kernels; end to end is one process. The statuses of the reference and of
+nlcx are compared variant by variant.
 """
 
 from __future__ import annotations
