@@ -25,9 +25,13 @@ ROOT = Path(__file__).resolve().parent.parent
 RTOL = 1e-9
 
 
-def _nlcx(*args: str, simulator: bool = True, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+def _nlcx(
+    *args: str, simulator: bool = True, cwd: Path | None = None, prelude: str = ""
+) -> subprocess.CompletedProcess[str]:
+    """The CLI in a child process (``prelude``: Python run in it first, e.g. to shrink a size)."""
     env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1" if simulator else "0", "CUDA_VISIBLE_DEVICES": ""}
-    return subprocess.run([sys.executable, "-m", "nlcx.cli", *args], capture_output=True, text=True, env=env, cwd=cwd)
+    command = ["-c", f"{prelude}\nfrom nlcx.cli import main; main()"] if prelude else ["-m", "nlcx.cli"]
+    return subprocess.run([sys.executable, *command, *args], capture_output=True, text=True, env=env, cwd=cwd)
 
 
 def _close(cpu: pd.DataFrame, gpu: pd.DataFrame) -> None:
@@ -39,6 +43,13 @@ def _close(cpu: pd.DataFrame, gpu: pd.DataFrame) -> None:
     assert np.array_equal(np.isnan(a), np.isnan(b))
     finite = ~np.isnan(a)
     np.testing.assert_allclose(b[finite], a[finite], rtol=RTOL, atol=0.0)
+
+
+def _bounded_sweep(seed: int, n: int) -> dict[str, object]:
+    """A CSV sweep of n variants over the pendulum's length and a bound on theta that stops some."""
+    params = {"plant.params.l": {"dist": "uniform", "relative": 0.3},
+              "simulation.bounds.theta": {"dist": "uniform", "low": 0.004, "high": 0.02}}  # fmt: skip
+    return {"seed": seed, "random": {"n": n, "params": params}, "format": "csv"}
 
 
 def _config(tmp_path: Path, t_end: float, **extra: object) -> Path:
@@ -65,10 +76,7 @@ def test_run_on_gpu_matches_cpu(tmp_path: Path) -> None:
 def test_sweep_on_gpu_matches_cpu(tmp_path: Path) -> None:
     """A columnar sweep measured on the device: step (x), regulation (theta) and input (F)
     metrics, with a bound on theta that stops some variants, as on the CPU."""
-    sweep = {"seed": 3, "random": {"n": 4, "params": {"plant.params.l": {"dist": "uniform", "relative": 0.3},
-                                                        "simulation.bounds.theta": {"dist": "uniform", "low": 0.004,
-                                                                                    "high": 0.02}}}}  # fmt: skip
-    config = _config(tmp_path, 0.05, sweep={**sweep, "format": "csv"})
+    config = _config(tmp_path, 0.05, sweep=_bounded_sweep(seed=3, n=4))
     for device in ("cpu", "cuda"):
         done = _nlcx("sweep", str(config), "--device", device, "--out", str(tmp_path / device), "--no-report")
         assert done.returncode == 0, done.stderr
@@ -407,17 +415,13 @@ def test_overlapped_batches_in_chunks_match_cpu(tmp_path: Path) -> None:
     """A sweep in three batches of two variants, each cut into chunks of three rows, two batches
     in flight at once (one on the device while the one before it is written): statuses and
     metrics as on the CPU."""
-    sweep = {"seed": 5, "random": {"n": 6, "params": {"plant.params.l": {"dist": "uniform", "relative": 0.3},
-                                                        "simulation.bounds.theta": {"dist": "uniform", "low": 0.004,
-                                                                                    "high": 0.02}}}}  # fmt: skip
-    config = _config(tmp_path, 0.05, sweep={**sweep, "format": "csv"})
+    config = _config(tmp_path, 0.05, sweep=_bounded_sweep(seed=5, n=6))
     small = (
         "import nlcx.sweeps.columnar as c, nlcx.engine.gpu as g; c.GPU_BATCH_VARIANTS = 2; "
-        "g.chunk_rows = lambda n_rows, bytes_per_row: min(n_rows, 3); from nlcx.cli import main; main()"
+        "g.chunk_rows = lambda n_rows, bytes_per_row: min(n_rows, 3)"
     )
-    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1", "CUDA_VISIBLE_DEVICES": ""}
-    args = ["sweep", str(config), "--device", "cuda", "--out", str(tmp_path / "cuda"), "--no-report"]
-    done = subprocess.run([sys.executable, "-c", small, *args], capture_output=True, text=True, env=env)
+    done = _nlcx("sweep", str(config), "--device", "cuda", "--out", str(tmp_path / "cuda"), "--no-report",
+                 prelude=small)  # fmt: skip
     assert done.returncode == 0, done.stderr
     done = _nlcx("sweep", str(config), "--device", "cpu", "--out", str(tmp_path / "cpu"), "--no-report")
     assert done.returncode == 0, done.stderr
