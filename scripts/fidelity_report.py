@@ -24,7 +24,7 @@ import pandas as pd
 import yaml
 
 from nlcx.thesis import hypotheses, profiles, split
-from nlcx.thesis.identify import DEFINITIONS, scores
+from nlcx.thesis.fitting import DEFINITIONS, scores
 
 ROOT = Path(__file__).resolve().parents[1]
 SPLIT = ROOT / "configs" / "identify" / "split.yaml"

@@ -28,7 +28,7 @@ from nlcx.thesis.consistency import (
     used_box,
     with_intervals,
 )
-from nlcx.thesis.identify import DEFINITIONS, FLOORS, measure_cells
+from nlcx.thesis.fitting import DEFINITIONS, FLOORS, measure_cells
 
 ROOT = Path(__file__).resolve().parents[1]
 THESIS = ROOT / "configs" / "thesis"

@@ -241,13 +241,13 @@ def test_identify_puts_its_loops_on_the_device() -> None:
     resume digest is the one of the spec without the setting (its earlier fits stay valid)."""
     import hashlib
 
-    from nlcx.thesis import identify, split
+    from nlcx.thesis import fitting, identify, split
 
     root = ROOT / "configs" / "thesis"
     assert all(
-        raw["simulation"]["device"] == "cuda" for raw in identify.TableRuns(root, ["2.3"], device="cuda").raw.values()
+        raw["simulation"]["device"] == "cuda" for raw in fitting.TableRuns(root, ["2.3"], device="cuda").raw.values()
     )
-    assert "device" not in identify.TableRuns(root, ["2.3"]).raw["2.3"].get("simulation", {})
+    assert "device" not in fitting.TableRuns(root, ["2.3"]).raw["2.3"].get("simulation", {})
     spec = identify.load_spec(ROOT / "configs" / "identify" / "pendulum_all.yaml")
     spec_split = split.load(ROOT / "configs" / "identify" / "split.yaml")
     before = json.dumps(
@@ -442,20 +442,92 @@ def test_one_ensemble_at_a_time_on_the_gpu(monkeypatch: pytest.MonkeyPatch) -> N
     inside, most, calls = [0], [0], []
     count = threading.Lock()
 
-    def fake(template: object, slots: object, columns: object, n: int) -> tuple[list[object], None]:
+    def fake(ensembles: list[gpu.Ensemble]) -> list[tuple[list[object], None]]:
         with count:
             inside[0] += 1
             most[0] = max(most[0], inside[0])
         time.sleep(0.02)
-        calls.append(n)
+        calls.extend(e.n_variants for e in ensembles)
         with count:
             inside[0] -= 1
-        return [], None
+        return [([], None)]
 
-    monkeypatch.setattr(gpu, "_simulate_measure", fake)
+    monkeypatch.setattr(gpu, "_simulate_measure_all", fake)
     threads = [threading.Thread(target=gpu.simulate_measure, args=(None, {}, {}, n)) for n in range(4)]
     for t in threads:
         t.start()
     for t in threads:
         t.join()
     assert sorted(calls) == [0, 1, 2, 3] and most[0] == 1
+
+
+#: A generation of four hypotheses' populations on three train tables (short horizons): their
+#: packed tables' metric rows on the CPU, on the GPU one hypothesis at a time, and on the GPU all
+#: together (nlcx.thesis.lockstep), with the closed-loop launches each way took.
+LOCKSTEP_GENERATION = """
+import json
+from pathlib import Path
+import numpy as np
+from nlcx.engine.gpu import ensembles_metrics
+from nlcx.kernel import cuda_loop
+from nlcx.thesis import fitting, hypotheses, identify, lockstep, split
+
+launches = []
+on_device = cuda_loop.launch
+cuda_loop.launch = lambda *args: launches.append(args[1].x0.shape[0]) or on_device(*args)
+root = Path("configs/thesis")
+spec = identify.load_spec(Path("configs/identify/pendulum_all.yaml"))
+cells = identify.all_cells(split.load(Path("configs/identify/split.yaml")))
+names = ["literal", "derivative=filtered", "saturation=clamping", "z_loop=printed"]
+hyps = [h for h in hypotheses.family(spec.families, 1) if h.name in names]
+train = list(dict.fromkeys(cells[cells.part == "train"].table))
+
+def searches(device):
+    runs = fitting.TableRuns(root, train, device=device)
+    for raw in runs.raw.values():
+        raw["simulation"] = {**raw.get("simulation", {}), "t_end": 0.1}
+    return [fitting.search(root, h, spec.free, cells, device, None, runs) for h in hyps]
+
+def rows(m):
+    text = {k: [m.categories[k][c] if c >= 0 else "" for c in m.codes[k]] for k in m.codes}
+    return {"variant": m.variant.tolist(), "value": m.value.tolist(), **text}
+
+out = {}
+for way, device in (("cpu", "cpu"), ("alone", "cuda"), ("together", "cuda")):
+    found = searches(device)
+    pops = [np.random.default_rng(k).uniform(s.lower, s.upper, size=(3, len(s.lower))) for k, s in enumerate(found)]
+    ensembles = [e for s, X in zip(found, pops) for e in s.objective.ensembles(X).values()]
+    launches.clear()
+    if way == "together":
+        measured = ensembles_metrics(ensembles)
+        used = list(launches)
+        losses = lockstep.generation_losses([s.objective for s in found], pops)
+    else:
+        measured = [m for e in ensembles for m in ensembles_metrics([e])]
+        used = list(launches)
+        losses = [s.objective(X) for s, X in zip(found, pops)]
+    out[way] = {"rows": [rows(m) for m in measured], "losses": [f.tolist() for f in losses],
+                "launches": used, "ensembles": len(ensembles)}
+print(json.dumps(out))
+"""
+
+
+def test_a_generation_of_many_hypotheses_runs_in_shared_launches() -> None:
+    """The identification's lockstep on the GPU: the populations of several hypotheses go to the
+    GPU in one call, whose loops of the same kernel share a launch. Their metric rows are those
+    of each ensemble alone on the GPU, bit for bit, and within 1e-9 of the CPU's."""
+    done = subprocess.run(
+        [sys.executable, "-c", LOCKSTEP_GENERATION], capture_output=True, text=True, cwd=ROOT,
+        env={**os.environ, "NUMBA_ENABLE_CUDASIM": "1", "CUDA_VISIBLE_DEVICES": ""},
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = json.loads(done.stdout)
+    alone, together = out["alone"], out["together"]
+    assert alone["ensembles"] == together["ensembles"] == 12  # four hypotheses, three packed tables each
+    # the same loops (rows of the launches), in fewer launches
+    assert len(together["launches"]) < len(alone["launches"])
+    assert sum(together["launches"]) == sum(alone["launches"])
+    assert together["rows"] == alone["rows"] and together["losses"] == alone["losses"]
+    for cpu, gpu in zip(out["cpu"]["rows"], together["rows"], strict=True):
+        _close(pd.DataFrame(cpu), pd.DataFrame(gpu))
+    np.testing.assert_allclose(np.array(together["losses"]), np.array(out["cpu"]["losses"]), rtol=RTOL, atol=0.0)

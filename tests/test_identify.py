@@ -16,9 +16,10 @@ from typer.testing import CliRunner
 
 from nlcx import config, engine
 from nlcx.cli import app
-from nlcx.thesis import catalog, hypotheses, profiles, split
+from nlcx.thesis import catalog, fitting, hypotheses, profiles, split
 from nlcx.thesis import identify as identify_module
-from nlcx.thesis.identify import IdentifySpec, Screen, TableRuns, direction_agreement, load_spec, screening, train_loss
+from nlcx.thesis.fitting import TableRuns, direction_agreement, train_loss
+from nlcx.thesis.identify import IdentifySpec, Screen, load_spec, screening
 from nlcx.thesis.tables import ANGLE_METRICS, POSITION_METRICS, lookup_value, metric_lookup
 from nlcx.uncertainty.actuator_lag import first_order_lag
 
@@ -310,7 +311,7 @@ def test_the_test_tables_change_no_fit_no_screen_no_ranking_and_no_profile(
 
 
 def test_a_diverged_cell_counts_as_a_failure_not_as_missing() -> None:
-    from nlcx.thesis.identify import scores
+    from nlcx.thesis.fitting import scores
 
     fit = pd.DataFrame(
         {
@@ -429,7 +430,7 @@ def test_a_population_packed_into_prepared_tables_gives_each_candidate_s_own_cel
     train = cells[cells.part == "train"].reset_index(drop=True)
     hyp = next(h for h in hypotheses.family(spec.families, 1) if h.name == name)
     box = {**spec.free, **hyp.free()}
-    objective = identify_module.Objective(THESIS, hyp, box, train)
+    objective = fitting.Objective(THESIS, hyp, box, train)
     lower, upper = (np.array([b[i] for b in box.values()]) for i in (0, 1))
     X = np.vstack([lower, upper, np.random.default_rng(3).uniform(lower, upper, size=(6, len(box)))])
     packing = objective.packing()
@@ -439,6 +440,28 @@ def test_a_population_packed_into_prepared_tables_gives_each_candidate_s_own_cel
     else:
         assert packed == list(dict.fromkeys(train.table)), packing
     candidates = [dict(zip(box, map(float, x), strict=True)) for x in X]
-    own = identify_module.measure_cells(TableRuns(THESIS, list(dict.fromkeys(train.table))), hyp, candidates, train)
+    own = fitting.measure_cells(TableRuns(THESIS, list(dict.fromkeys(train.table))), hyp, candidates, train)
     assert np.isnan(own).any()  # cells of diverged runs or undefined metrics among those compared
     assert np.array_equal(objective(X), train_loss(own, train))
+
+
+def test_fits_in_lockstep_are_the_fits_alone(tmp_path: Path) -> None:
+    """The GPU's way of fitting (every hypothesis's GA stepped side by side, each generation's
+    populations measured together, the fitted loops measured together) gives each hypothesis
+    the fit it gets alone, bit for bit (here on the CPU, where the GPU's share is the kernel)."""
+    from nlcx.thesis import lockstep
+    from nlcx.tuning.optimise import GASettings
+
+    spec = load_spec(_spec(tmp_path, SPLIT)).model_copy(
+        update={"optimiser": GASettings(pop_size=4, generations=2, seed=5)}
+    )
+    cells = identify_module.all_cells(split.load(SPLIT))
+    family = [h for h in hypotheses.family(["saturation", "z_loop"], 1) if h.name != "lag=first_order"]
+    start = {k: (lo + hi) / 2 for k, (lo, hi) in spec.free.items()}
+    together = list(lockstep.fits(spec.free, spec.optimiser, THESIS, family, cells, start, device="cpu"))
+    assert [s["hypothesis"] for s, _ in together] == [h.name for h in family] and len(family) >= 3
+    for (summary, fit), hyp in zip(together, family, strict=True):
+        own_summary, own_fit = identify_module.fit_hypothesis(spec, THESIS, hyp, cells, 1, start)
+        same = [json.dumps({**s, "wall_s": 0}, sort_keys=True) for s in (summary, own_summary)]
+        assert same[0] == same[1], hyp.name  # NaN scores included
+        pd.testing.assert_frame_equal(fit, own_fit)

@@ -14,9 +14,11 @@ and write one batch while the next one runs (:func:`nlcx.sweeps.runner.make_exec
 
 from __future__ import annotations
 
+import hashlib
 import threading
 from collections.abc import Mapping, Sequence
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -34,6 +36,7 @@ from nlcx.engine.ensembles import (
     simulate_ensemble,
 )
 from nlcx.engine.measure import _input_step, _measured_outputs, _metric_plans, _selected_state, _time_origin
+from nlcx.engine.metric_rows import MetricColumns
 from nlcx.engine.prepared import TABLEAUS
 from nlcx.kernel.device import refused
 from nlcx.kernel.structures import Integration, method_of
@@ -130,6 +133,36 @@ def _chunk(arguments: tuple[Any, ...], rows: slice) -> tuple[Any, ...]:
     return tuple(out)
 
 
+class Ensemble(NamedTuple):
+    """``n_variants`` variants of a template, packed from ``columns`` into the places ``slots``
+    name (as :func:`~nlcx.engine.ensembles.simulate_ensemble` packs them)."""
+
+    template: Template
+    slots: Mapping[str, Sequence[Slot]]
+    columns: Mapping[str, np.ndarray]
+    n_variants: int
+
+
+@dataclass
+class _Call:
+    """One kernel call of an ensemble on the GPU: its structures, the signals its metrics read,
+    each loop's metric blocks and reference table, and (once run) its rows' outcomes and each
+    loop's metric rows over the call's rows (pieces in row order)."""
+
+    pattern: np.ndarray
+    arguments: tuple[Any, Any, Any, Any]
+    integration: Integration
+    t: np.ndarray
+    recorded: np.ndarray
+    measuring: dict[int, tuple[tuple[Any, ...], np.ndarray]]
+    names: dict[int, list[tuple[str, str]]]
+    n_rows: int
+    n_u: int
+    n_log: int
+    outcome: tuple[np.ndarray, ...] = ()
+    pieces: dict[int, list[np.ndarray]] = field(default_factory=dict)
+
+
 def simulate_measure(
     template: Template, slots: Mapping[str, Sequence[Slot]], columns: Mapping[str, np.ndarray], n_variants: int
 ) -> tuple[list[LoopRows], OkValues]:
@@ -137,71 +170,207 @@ def simulate_measure(
     :func:`~nlcx.engine.ensembles.simulate_ensemble`): each loop's outcome rows, and the
     function that gives :func:`~nlcx.engine.ensembles.measure_ensemble` the metric values of
     its runs that finished. Waits while another call runs on the GPU."""
+    return simulate_measure_all([Ensemble(template, slots, columns, n_variants)])[0]
+
+
+def simulate_measure_all(ensembles: Sequence[Ensemble]) -> list[tuple[list[LoopRows], OkValues]]:
+    """:func:`simulate_measure` of each ensemble, their kernel calls launched together: the calls
+    of every ensemble that compile to the same closed-loop kernel (:class:`LoopShape`) on the same
+    time grid and integration, with the same shared arrays, run as the rows of one launch, and
+    the runs that read the same metric blocks and references are measured by one launch. Each
+    row is its own thread, so a run's numbers do not depend on the launch it is in."""
     with _ON_DEVICE:
-        return _simulate_measure(template, slots, columns, n_variants)
+        return _simulate_measure_all(ensembles)
 
 
-def _simulate_measure(
-    template: Template, slots: Mapping[str, Sequence[Slot]], columns: Mapping[str, np.ndarray], n_variants: int
-) -> tuple[list[LoopRows], OkValues]:
-    """:func:`simulate_measure`, the GPU held."""
+def _simulate_measure_all(ensembles: Sequence[Ensemble]) -> list[tuple[list[LoopRows], OkValues]]:
+    """:func:`simulate_measure_all`, the GPU held."""
+    calls = [_calls(e) for e in ensembles]
+    groups: dict[tuple[Any, ...], list[_Call]] = {}
+    for call in (c for mine in calls for c in mine):
+        groups.setdefault(_launch_key(call), []).append(call)
+    for group in groups.values():
+        _run_group(group)
+    return [_assembled(e, mine) for e, mine in zip(ensembles, calls, strict=True)]
+
+
+def _calls(ensemble: Ensemble) -> list[_Call]:
+    """The GPU calls of an ensemble (one per call of :func:`ensemble_calls`), not yet run; a
+    plugin that cannot run on the GPU is refused in one line."""
     from nlcx.kernel import cuda_loop, cuda_metrics
-    from nlcx.kernel.device import cuda
 
-    gpu = cuda()
+    template, slots, columns, n_variants = ensemble
     p = template.prepared
     sim, grid, items = p.experiment.section.simulation, p.grid, template.items
     tableau = TABLEAUS[sim.integrator]
     integration = Integration(method=method_of(sim.integrator), rk_a=tableau.a, rk_b=tableau.b, dt=grid.dt)
-    t_dev = gpu.to_device(grid.t)
-    names: dict[int, list[tuple[str, str]]] = {}
-    values: dict[int, np.ndarray] = {}
-    outcomes: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+    out = []
     for pattern, step in ensemble_calls(items, n_variants):
         arguments = _call_arguments(template, pattern, step, n_variants, slots, columns)
-        plant, controller, elements, _ = arguments
-        why = cuda_loop.unsupported(plant, controller, elements)
+        why = cuda_loop.unsupported(*arguments[:3])
         if why is not None:
             raise refused(f"{why}; use device: cpu")
         recorded: list[tuple[int, int]] = []
         labelled = {int(i): _blocks(template, int(i), recorded) for i in pattern}
-        measuring = {}  # each loop's metric kernel, references on the GPU and number of values
-        for i, blocks in labelled.items():
-            refs, table = _references(template, i, blocks)
-            width = sum(len(cuda_metrics.BLOCK_NAMES[b.kind]) for b in refs)
-            measuring[i] = (cuda_metrics.metrics_kernel(refs, grid.t), gpu.to_device(table), width)
-            names[i] = [(s, name) for s, b in blocks for name in cuda_metrics.BLOCK_NAMES[b.kind]]
-        n_rows = n_variants * pattern.size
-        n_u, n_log = len(p.plant.inputs), len(items[int(pattern[0])].controller.log_names)
+        measuring = {i: _references(template, i, blocks) for i, blocks in labelled.items()}
+        names = {
+            i: [(s, name) for s, b in blocks for name in cuda_metrics.BLOCK_NAMES[b.kind]]
+            for i, blocks in labelled.items()
+        }
         rec = np.array(recorded, dtype=np.int64).reshape(-1, 2)
-        size = chunk_rows(n_rows, grid.t.size * max(rec.shape[0], 1) * 8)
-        out: dict[int, list[np.ndarray]] = {int(i): [] for i in pattern}
-        status, n_valid, fail_index = (np.empty(n_rows, dtype=np.int64) for _ in range(3))
-        for start in range(0, n_rows, size):
-            rows = slice(start, min(start + size, n_rows))
-            plant_c, controller_c, elements_c, forces_c = _chunk(arguments, rows)
-            done = cuda_loop.launch(
-                integration, plant_c, controller_c, elements_c, forces_c, n_u, n_log, grid.t.size, rec, False
+        n_log = len(items[int(pattern[0])].controller.log_names)
+        out.append(_Call(pattern, arguments, integration, grid.t, rec, measuring, names,
+                         n_variants * pattern.size, len(p.plant.inputs), n_log))  # fmt: skip
+    return out
+
+
+#: Fields of the kernel's structures that are not per row (an array of one row is shared).
+_WHOLE = ("C", "dist_map", "table")
+
+
+def _launch_key(call: _Call) -> tuple[Any, ...]:
+    """What the calls of one launch share: the loop kernel, the time grid and integration, the
+    signals recorded, and each shared array (by content); per-row arrays by their row shape."""
+    from nlcx.kernel import cuda_loop
+
+    shape = cuda_loop.shape_of(*call.arguments, call.n_u, call.n_log, call.integration)
+    fields: list[tuple[Any, ...]] = []
+    for part in call.arguments:
+        for name, value in part._asdict().items():
+            if _per_row(name, value, call.n_rows):
+                fields.append((name, "rows", value.shape[1:], value.dtype.str))
+            elif isinstance(value, np.ndarray):
+                fields.append((name, "shared", value.shape, value.dtype.str, _digest(value)))
+    i = call.integration
+    return (shape, i.dt, _digest(i.rk_a), _digest(i.rk_b), _digest(call.t), call.recorded.tobytes(), tuple(fields))
+
+
+def _per_row(name: str, value: Any, n_rows: int) -> bool:
+    """Whether a field of a call's structures holds a row per row of the call (else it is shared)."""
+    if not isinstance(value, np.ndarray) or value.ndim == 0 or name in _WHOLE:
+        return False
+    return value.shape[0] > 1 or n_rows == 1
+
+
+def _digest(array: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(array).tobytes()).hexdigest()
+
+
+def _joined(group: list[_Call]) -> tuple[Any, ...]:
+    """The structures of one launch: the calls' per-row arrays one after the other, the shared
+    ones as they are (the same in every call of a launch, :func:`_launch_key`)."""
+    if len(group) == 1:
+        return group[0].arguments
+    out = []
+    for k, part in enumerate(group[0].arguments):
+        fields = {}
+        for name, value in part._asdict().items():
+            if _per_row(name, value, group[0].n_rows):
+                fields[name] = np.concatenate([c.arguments[k]._asdict()[name] for c in group])
+        out.append(part._replace(**fields))
+    return tuple(out)
+
+
+class _MetricRun(NamedTuple):
+    """One metric launch of a loop launch: the blocks and reference table it measures with, over
+    the launch's rows [start, stop), which are the rows of ``members`` (call, loop, first row)."""
+
+    blocks: tuple[Any, ...]
+    table: np.ndarray
+    start: int
+    stop: int
+    members: list[tuple[_Call, int, int]]
+
+
+def _metric_runs(group: list[_Call], offsets: np.ndarray) -> list[_MetricRun]:
+    """The metric launches of a loop launch: for each loop of a call, one over the call's rows
+    (the other loops' rows measured and dropped, as each loop reads only its own), merged with
+    the next calls' while they measure with the same blocks and references."""
+    runs: list[_MetricRun] = []
+    signature_before = None
+    for call, first in zip(group, offsets, strict=False):
+        signature = tuple((call.measuring[int(i)][0], _digest(call.measuring[int(i)][1])) for i in call.pattern)
+        stop, n = int(first) + call.n_rows, len(call.pattern)
+        if signature == signature_before:
+            runs[-n:] = [run._replace(stop=stop, members=[*run.members, (call, int(i), int(first))])
+                         for run, i in zip(runs[-n:], call.pattern, strict=True)]  # fmt: skip
+        else:
+            runs += [_MetricRun(*call.measuring[int(i)], int(first), stop, [(call, int(i), int(first))])
+                     for i in call.pattern]  # fmt: skip
+        signature_before = signature
+    return runs
+
+
+def _run_group(group: list[_Call]) -> None:
+    """Launch the calls of ``group`` (one :func:`_launch_key`) as one loop launch, in chunks of
+    rows that fit the GPU's memory (:func:`chunk_rows`), measure them there, and hand each call
+    its outcomes and metric rows."""
+    from nlcx.kernel import cuda_loop, cuda_metrics
+    from nlcx.kernel.device import cuda
+
+    gpu = cuda()
+    one = group[0]
+    arguments = _joined(group)
+    offsets = np.cumsum([0] + [c.n_rows for c in group])
+    n_rows = int(offsets[-1])
+    t_dev = gpu.to_device(one.t)
+    tables: dict[str, Any] = {}
+    measuring = []
+    for run in _metric_runs(group, offsets):
+        key = _digest(run.table)
+        if key not in tables:
+            tables[key] = gpu.to_device(run.table)
+        width = sum(len(cuda_metrics.BLOCK_NAMES[b.kind]) for b in run.blocks)
+        measuring.append((run, cuda_metrics.metrics_kernel(run.blocks, one.t), tables[key], width))
+    for call in group:
+        call.pieces = {int(i): [] for i in call.pattern}
+    outcome = tuple(np.empty(n_rows, dtype=np.int64) for _ in range(3))
+    size = chunk_rows(n_rows, one.t.size * max(one.recorded.shape[0], 1) * 8)
+    for start in range(0, n_rows, size):
+        stop = min(start + size, n_rows)
+        plant, controller, elements, forces = _chunk(arguments, slice(start, stop))
+        done = cuda_loop.launch(one.integration, plant, controller, elements, forces, one.n_u, one.n_log,
+                                one.t.size, one.recorded, False)  # fmt: skip
+        for array, on_gpu in zip(outcome, (done.status, done.n_valid, done.fail_index), strict=True):
+            array[start:stop] = on_gpu.copy_to_host()
+        for run, kernel, table, width in measuring:
+            lo, hi = max(run.start, start), min(run.stop, stop)
+            if lo >= hi:
+                continue
+            OUT = gpu.device_array((hi - lo, width))
+            kernel[(hi - lo + cuda_loop.THREADS - 1) // cuda_loop.THREADS, cuda_loop.THREADS](
+                t_dev, done.REC, table, OUT, lo - start
             )
-            status[rows], n_valid[rows] = done.status.copy_to_host(), done.n_valid.copy_to_host()
-            fail_index[rows] = done.fail_index.copy_to_host()
-            for i, (kernel, refs, width) in measuring.items():
-                OUT = gpu.device_array((rows.stop - rows.start, width))
-                kernel[(OUT.shape[0] + 127) // 128, 128](t_dev, done.REC, refs, OUT)
-                out[i].append(OUT.copy_to_host())
-            del done
-        loops = np.tile(pattern, n_variants)
-        bounds = np.broadcast_to(plant.bounds, (n_rows, plant.bounds.shape[-1]))
-        for i in labelled:
+            values = OUT.copy_to_host()
+            for call, loop, first in run.members:
+                a, b = max(first, lo), min(first + call.n_rows, hi)
+                if a < b:
+                    call.pieces[loop].append(values[a - lo : b - lo])
+        del done
+    for call, first in zip(group, offsets, strict=False):
+        call.outcome = tuple(array[first : first + call.n_rows] for array in outcome)
+
+
+def _assembled(ensemble: Ensemble, calls: list[_Call]) -> tuple[list[LoopRows], OkValues]:
+    """An ensemble's loop rows and metric values from its calls, once run."""
+    template, n_variants = ensemble.template, ensemble.n_variants
+    names: dict[int, list[tuple[str, str]]] = {}
+    values: dict[int, np.ndarray] = {}
+    rows: dict[int, LoopRows] = {}
+    for call in calls:
+        loops = np.tile(call.pattern, n_variants)
+        bounds = call.arguments[0].bounds
+        bounds = np.broadcast_to(bounds, (call.n_rows, bounds.shape[-1]))
+        for i in map(int, call.pattern):
             mine = loops == i
-            values[i] = np.concatenate(out[i])[mine]
-            outcomes[i] = (status[mine], n_valid[mine], fail_index[mine], bounds[mine])
-    rows_out = [failure_rows(template, *outcomes[i]) for i in range(len(items))]
+            names[i], values[i] = call.names[i], np.concatenate(call.pieces[i])[mine]
+            status, n_valid, fail_index = (array[mine] for array in call.outcome)
+            rows[i] = failure_rows(template, status, n_valid, fail_index, bounds[mine])
 
     def ok_values(template: Template, i: int, loop: LoopRows, ok: np.ndarray) -> tuple[list[tuple[str, str]], Any]:
         return names[i], values[i][ok]
 
-    return rows_out, ok_values
+    return [rows[i] for i in range(len(template.items))], ok_values
 
 
 def ensemble_metrics(
@@ -216,3 +385,16 @@ def ensemble_metrics(
         return rows, measure_ensemble(template, rows, n_variants, ok_values)
     rows = loop_rows(simulate_ensemble(template, slots, columns, n_variants), template)
     return rows, measure_ensemble(template, rows, n_variants)
+
+
+def ensembles_metrics(ensembles: Sequence[Ensemble]) -> list[MetricColumns]:
+    """The metric rows of each ensemble (:func:`ensemble_metrics`), those on the GPU simulated
+    and measured together (:func:`simulate_measure_all`), the others one by one on the CPU."""
+    on_gpu = [k for k, e in enumerate(ensembles) if e.template.prepared.experiment.section.simulation.device == "cuda"]
+    out: dict[int, MetricColumns] = {}
+    for k, (rows, ok_values) in zip(on_gpu, simulate_measure_all([ensembles[k] for k in on_gpu]), strict=True):
+        out[k] = measure_ensemble(ensembles[k].template, rows, ensembles[k].n_variants, ok_values)
+    for k, e in enumerate(ensembles):
+        if k not in out:
+            out[k] = ensemble_metrics(*e)[1]
+    return [out[k] for k in range(len(ensembles))]

@@ -390,9 +390,10 @@ _KERNELS: dict[tuple[tuple[Block, ...], bytes], Any] = {}
 
 
 def metrics_kernel(blocks: tuple[Block, ...], t: np.ndarray) -> Any:
-    """A kernel ``kernel(t, REC, REF, OUT)`` writing each run's values (OUT row v, the blocks'
-    :data:`BLOCK_NAMES` one after the other) from its records (REC[:, :, v]) and the
-    references REF (rows ``ref_row``); compiled once per blocks and time grid in a process."""
+    """A kernel ``kernel(t, REC, REF, OUT, first)`` writing the values of the runs first,
+    first + 1, ... of the records (OUT row v, the blocks' :data:`BLOCK_NAMES` one after the
+    other) from their records (REC[:, :, first + v]) and the references REF (rows
+    ``ref_row``); compiled once per blocks and time grid in a process."""
     key = (blocks, np.ascontiguousarray(t).tobytes())
     if key not in _KERNELS:
         grid = hashlib.sha256(key[1]).hexdigest()
@@ -414,10 +415,10 @@ def _metrics_kernel(blocks: tuple[Block, ...], t: np.ndarray) -> Any:
         chain = _link(_MAKERS[b.kind](f, b, t), len(BLOCK_NAMES[b.kind]), chain)
 
     @gpu.jit
-    def kernel(t, REC, REF, OUT):  # pragma: no cover - device
+    def kernel(t, REC, REF, OUT, first):  # pragma: no cover - device
         v = cuda_module.grid(1)
         if v >= OUT.shape[0]:
             return
-        chain(t, REC, REF, OUT[v], 0, v)
+        chain(t, REC, REF, OUT[v], 0, first + v)
 
     return kernel

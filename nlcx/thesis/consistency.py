@@ -10,7 +10,7 @@ not, which printed numbers cannot hold together? Per column, a diagnostic (never
   experiment reads (the literal loop's fit seeding the others); a proposed column keeps its
   printed AGS ranges and rates (a hypothesis with nothing free is one loop);
 - **a cloud of random loops**: random hypotheses with random free values in a wide box,
-  measured under each definition of t_r and t_s (:data:`nlcx.thesis.identify.DEFINITIONS`).
+  measured under each definition of t_r and t_s (:data:`nlcx.thesis.fitting.DEFINITIONS`).
 
 A hypothesis is examined on a column when each of its options changes the column's experiment.
 A loop *hits* a cell inside the interval its printed text covers (:func:`printed_interval`); a
@@ -45,7 +45,7 @@ from nlcx import config as cfg
 from nlcx import engine, report
 from nlcx.pages import tolerances
 from nlcx.thesis import catalog, hypotheses
-from nlcx.thesis.identify import DEFINITIONS, FLOORS, TableRuns, cell_values, measure_cells, train_loss, write_study
+from nlcx.thesis.fitting import DEFINITIONS, FLOORS, TableRuns, cell_values, measure_cells, train_loss, write_study
 from nlcx.tuning.optimise import GASettings, check_search_box, evolve
 from nlcx.validation import validate_model
 

@@ -29,7 +29,8 @@ from nlcx import engine, report
 from nlcx.errors import NlcxError
 from nlcx.thesis import catalog, hypotheses, profiles, split
 from nlcx.thesis.cstr import CSTR_METRICS, _value
-from nlcx.thesis.identify import finished, relative_errors, save_fit, spec_digest, train_loss, write_study
+from nlcx.thesis.fitting import relative_errors, train_loss, write_study
+from nlcx.thesis.identify import finished, save_fit, spec_digest
 from nlcx.tuning.optimise import GASettings, evolve
 from nlcx.validation import validate_model
 

@@ -29,6 +29,7 @@ import pandas as pd
 
 from nlcx import engine
 from nlcx.engine.ensembles import Slot, Template
+from nlcx.engine.gpu import Ensemble, ensemble_metrics, ensembles_metrics
 from nlcx.engine.metric_rows import MetricColumns
 from nlcx.errors import NlcxError
 from nlcx.thesis.tables import ANGLE_METRICS, ANGLES, POSITION_METRICS
@@ -81,21 +82,35 @@ def packings(tables: Iterable[str], experiment: Callable[..., Any], hyp: Any, bo
     return {table: packed_table(of(table), box) for table in tables}
 
 
+def population_ensembles(packing: dict[str, PackedTable | str], X: np.ndarray, keys: list[str]) -> dict[str, Ensemble]:
+    """The population (rows of X: the free values ``keys``) as an ensemble of each packed table."""
+    columns = {key: np.ascontiguousarray(X[:, k], dtype=float) for k, key in enumerate(keys)}
+    out = {}
+    for table, packed in packing.items():
+        if not isinstance(packed, str):
+            slots = {k: s for k, s in packed.slots.items() if s}
+            out[table] = Ensemble(packed.template, slots, {k: columns[k] for k in slots}, len(X))
+    return out
+
+
 def population_cells(
     packing: dict[str, PackedTable | str], X: np.ndarray, keys: list[str], cells: pd.DataFrame,
     by_candidate: Callable[[list[dict[str, float]], pd.DataFrame], np.ndarray],
+    measured_rows: dict[str, MetricColumns] | None = None,
 ) -> np.ndarray:  # fmt: skip
     """Our value of every cell (rows of ``cells``) for every candidate (rows of X: the free values
-    ``keys``): a packed table's from its packing, the others' from ``by_candidate(candidates,
-    their cells)`` (each candidate's own experiments)."""
+    ``keys``): a packed table's from the metric rows of its ensemble (``measured_rows``, by
+    table; default: measured here, the GPU's ensembles together), the others' from
+    ``by_candidate(candidates, their cells)`` (each candidate's own experiments)."""
     n = len(X)
+    if measured_rows is None:
+        ensembles = population_ensembles(packing, X, keys)
+        measured_rows = dict(zip(ensembles, ensembles_metrics(list(ensembles.values())), strict=True))
     ours = np.full((len(cells), n), math.nan)
     tables = cells.table.to_numpy()
-    for table, packed in packing.items():
-        if not isinstance(packed, str):
-            mine = tables == table
-            columns = {key: X[:, k] for k, key in enumerate(keys)}
-            ours[mine] = packed_cells(measured(packed, columns, n), cells[mine], n)
+    for table, rows in measured_rows.items():
+        mine = tables == table
+        ours[mine] = packed_cells(rows, cells[mine], n)
     unpacked = np.isin(tables, [t for t, p in packing.items() if isinstance(p, str)])
     if unpacked.any():
         candidates = [dict(zip(keys, map(float, x), strict=True)) for x in X]
@@ -106,8 +121,6 @@ def population_cells(
 def measured(packed: PackedTable, columns: dict[str, np.ndarray], n: int) -> MetricColumns:
     """The metric rows of ``n`` candidates (``columns``: each free value's column) of a packed
     table, simulated and measured where its experiment says (``simulation.device``)."""
-    from nlcx.engine.gpu import ensemble_metrics
-
     slots = {k: s for k, s in packed.slots.items() if s}
     values = {k: np.ascontiguousarray(columns[k], dtype=float) for k in slots}
     return ensemble_metrics(packed.template, slots, values, n)[1]

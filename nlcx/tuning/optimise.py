@@ -8,7 +8,7 @@ serial one because each candidate's loss depends only on the candidate.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Generator
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from typing import Any
@@ -75,25 +75,50 @@ def evolve(
     callback: Callable[[int, float], None] | None = None,
     start: np.ndarray | None = None,
 ) -> OptimResult:
-    """Minimise ``objective`` over the box [lower, upper] with pymoo's GA. ``start`` (rows of
-    candidates) seeds the first population; the rest of it is drawn uniformly in the box from
-    the seed (without ``start``, pymoo's own random sampling)."""
+    """Minimise ``objective`` over the box [lower, upper] with pymoo's GA (:func:`evolution`,
+    each generation's population evaluated at once). ``start`` (rows of candidates) seeds the
+    first population; the rest of it is drawn uniformly in the box from the seed (without
+    ``start``, pymoo's own random sampling)."""
+    generations = evolution(lower, upper, settings, callback, start)
+    X = next(generations)
+    while True:
+        try:
+            X = generations.send(split_evaluate(objective, np.ascontiguousarray(X), executor, chunks))
+        except StopIteration as done:
+            result: OptimResult = done.value
+            return result
+
+
+def evolution(
+    lower: np.ndarray,
+    upper: np.ndarray,
+    settings: GASettings,
+    callback: Callable[[int, float], None] | None = None,
+    start: np.ndarray | None = None,
+) -> Generator[np.ndarray, np.ndarray, OptimResult]:
+    """pymoo's GA over the box [lower, upper], one generation at a time (its ask and tell): the
+    generator yields each population to evaluate (rows of X), is sent their losses (one per
+    row), and returns the :class:`OptimResult`. Several GAs may be stepped side by side, their
+    populations evaluated together; each draws from its own seeded random state, so the result
+    is that of :func:`evolve` with the same settings."""
     from pymoo.algorithms.soo.nonconvex.ga import GA
     from pymoo.core.problem import Problem
     from pymoo.operators.crossover.sbx import SBX
     from pymoo.operators.mutation.pm import PM
     from pymoo.operators.sampling.rnd import FloatRandomSampling
-    from pymoo.optimize import minimize
 
     history: list[tuple[int, int, float]] = []
     count = [0]
+    given: list[tuple[np.ndarray, np.ndarray]] = []  # the population sent out and its losses
 
     class _Problem(Problem):
         def __init__(self) -> None:
             super().__init__(n_var=len(lower), n_obj=1, xl=np.asarray(lower), xu=np.asarray(upper))
 
         def _evaluate(self, X: np.ndarray, out: dict[str, Any], *args: Any, **kwargs: Any) -> None:
-            f = split_evaluate(objective, np.ascontiguousarray(X), executor, chunks)
+            asked, f = given.pop()
+            if not np.array_equal(X, asked):
+                raise RuntimeError("the GA evaluated another population than the one it asked for")
             count[0] += len(X)
             out["F"] = f[:, None]
 
@@ -110,9 +135,20 @@ def evolve(
         mutation=PM(eta=settings.mutation_eta),
         eliminate_duplicates=True,
     )
-    res = minimize(
-        _Problem(), algorithm, ("n_gen", settings.generations), seed=settings.seed, callback=record, verbose=False
-    )
+    problem = _Problem()
+    algorithm.setup(problem, termination=("n_gen", settings.generations), seed=settings.seed, callback=record)
+    while algorithm.has_next():
+        infills = algorithm.ask()
+        X = np.ascontiguousarray(infills.get("X"))
+        f = np.asarray((yield X), dtype=float)
+        if f.shape != (len(X),):
+            raise ValueError(f"{len(X)} losses expected, one per row of the population, got shape {f.shape}")
+        given.append((X, f))
+        algorithm.evaluator.eval(problem, infills, algorithm=algorithm)
+        if given:
+            raise RuntimeError("the GA did not evaluate the population it asked for")
+        algorithm.tell(infills=infills)
+    res = algorithm.result()
     return OptimResult(
         x=np.atleast_1d(res.X).astype(float), f=float(np.atleast_1d(res.F)[0]), history=history, evaluations=count[0]
     )
