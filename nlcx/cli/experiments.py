@@ -433,7 +433,7 @@ def calibrate(
 @one_line_errors
 def identify(
     spec: Annotated[Path, typer.Argument(help="Identification spec YAML.", show_default=False)],
-    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Worker processes evaluating each population.")] = 1,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Worker processes (fits on the GPU run in this one).")] = 1,
     out: Annotated[
         Path | None, typer.Option("--out", help="Output directory (default results/identify/<name>).")
     ] = None,

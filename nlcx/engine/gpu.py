@@ -159,6 +159,8 @@ class _Call:
     n_rows: int
     n_u: int
     n_log: int
+    #: What each loop of the call is measured with (its blocks and reference table's digest).
+    signature: tuple[tuple[Any, str], ...] = ()
     outcome: tuple[np.ndarray, ...] = ()
     pieces: dict[int, list[np.ndarray]] = field(default_factory=dict)
 
@@ -190,7 +192,7 @@ def _simulate_measure_all(ensembles: Sequence[Ensemble]) -> list[tuple[list[Loop
     for call in (c for mine in calls for c in mine):
         groups.setdefault(_launch_key(call), []).append(call)
     for group in groups.values():
-        _run_group(group)
+        _run_group(sorted(group, key=lambda call: repr(call.signature)))  # alike measured together
     return [_assembled(e, mine) for e, mine in zip(ensembles, calls, strict=True)]
 
 
@@ -219,8 +221,9 @@ def _calls(ensemble: Ensemble) -> list[_Call]:
         }
         rec = np.array(recorded, dtype=np.int64).reshape(-1, 2)
         n_log = len(items[int(pattern[0])].controller.log_names)
+        signature = tuple((measuring[int(i)][0], _digest(measuring[int(i)][1])) for i in pattern)
         out.append(_Call(pattern, arguments, integration, grid.t, rec, measuring, names,
-                         n_variants * pattern.size, len(p.plant.inputs), n_log))  # fmt: skip
+                         n_variants * pattern.size, len(p.plant.inputs), n_log, signature))  # fmt: skip
     return out
 
 
@@ -285,19 +288,19 @@ class _MetricRun(NamedTuple):
 def _metric_runs(group: list[_Call], offsets: np.ndarray) -> list[_MetricRun]:
     """The metric launches of a loop launch: for each loop of a call, one over the call's rows
     (the other loops' rows measured and dropped, as each loop reads only its own), merged with
-    the next calls' while they measure with the same blocks and references."""
+    the next calls' while they measure with the same blocks and references (their
+    ``signature``)."""
     runs: list[_MetricRun] = []
     signature_before = None
     for call, first in zip(group, offsets, strict=False):
-        signature = tuple((call.measuring[int(i)][0], _digest(call.measuring[int(i)][1])) for i in call.pattern)
         stop, n = int(first) + call.n_rows, len(call.pattern)
-        if signature == signature_before:
+        if call.signature == signature_before:
             runs[-n:] = [run._replace(stop=stop, members=[*run.members, (call, int(i), int(first))])
                          for run, i in zip(runs[-n:], call.pattern, strict=True)]  # fmt: skip
         else:
             runs += [_MetricRun(*call.measuring[int(i)], int(first), stop, [(call, int(i), int(first))])
                      for i in call.pattern]  # fmt: skip
-        signature_before = signature
+        signature_before = call.signature
     return runs
 
 
