@@ -236,14 +236,20 @@ def measure_fits(runs: TableRuns, fits: list[tuple[hypotheses.Hypothesis, dict[s
     return [cell_values(results[k * n : (k + 1) * n], cells, 1)[:, 0] for k in range(len(fits))]
 
 
+def fit_table(cells: pd.DataFrame, ours: np.ndarray) -> pd.DataFrame:
+    """The cells with the thesis's value (``thesis``), ours and the relative error of each."""
+    fit = cells.rename(columns={"value": "thesis"}).assign(nlcx=ours)
+    fit["rel_error"] = relative_errors(fit)
+    return fit
+
+
 def fitted(
     hyp: hypotheses.Hypothesis, cells: pd.DataFrame, values: dict[str, float], result: OptimResult,
     ours: np.ndarray, wall_s: float,
 ) -> tuple[dict[str, Any], pd.DataFrame]:  # fmt: skip
     """A finished fit: (summary, fit table) from the GA's result, the fitted ``values`` and our
     value of every cell under them."""
-    fit = cells.rename(columns={"value": "thesis"}).assign(nlcx=ours)
-    fit["rel_error"] = relative_errors(fit)
+    fit = fit_table(cells, ours)
     summary = {
         "hypothesis": hyp.name,
         "options": dict(hyp.options),

@@ -29,7 +29,7 @@ from nlcx import engine, report
 from nlcx.errors import NlcxError
 from nlcx.thesis import catalog, hypotheses, profiles, split
 from nlcx.thesis.cstr import CSTR_METRICS, _value
-from nlcx.thesis.fitting import relative_errors, train_loss, write_study
+from nlcx.thesis.fitting import fit_table, relative_errors, train_loss, write_study
 from nlcx.thesis.identify import finished, save_fit, spec_digest
 from nlcx.tuning.optimise import GASettings, evolve
 from nlcx.validation import validate_model
@@ -121,8 +121,7 @@ def fit_hypothesis(
         result = evolve(Objective(root, hyp, list(free), train), lower, upper, spec.optimiser)
         values = dict(zip(free, map(float, result.x), strict=True))
     ours = measure(MethodRuns(root, list(dict.fromkeys(cells.method))), hyp, [values], cells)[:, 0]
-    fit = cells.rename(columns={"value": "thesis"}).assign(nlcx=ours)
-    fit["rel_error"] = relative_errors(fit)
+    fit = fit_table(cells, ours)
     summary = {
         "hypothesis": hyp.name,
         "options": dict(hyp.options),
