@@ -461,7 +461,7 @@ def test_one_ensemble_at_a_time_on_the_gpu(monkeypatch: pytest.MonkeyPatch) -> N
     assert sorted(calls) == [0, 1, 2, 3] and most[0] == 1
 
 
-#: A generation of four hypotheses' populations on three train tables (short horizons): their
+#: A generation of three hypotheses' populations on three train tables (short horizons): their
 #: packed tables' metric rows on the CPU, on the GPU one hypothesis at a time, and on the GPU all
 #: together (nlcx.thesis.lockstep), with the closed-loop launches each way took.
 LOCKSTEP_GENERATION = """
@@ -478,14 +478,14 @@ cuda_loop.launch = lambda *args: launches.append(args[1].x0.shape[0]) or on_devi
 root = Path("configs/thesis")
 spec = identify.load_spec(Path("configs/identify/pendulum_all.yaml"))
 cells = identify.all_cells(split.load(Path("configs/identify/split.yaml")))
-names = ["literal", "derivative=filtered", "saturation=clamping", "z_loop=printed"]
+names = ["literal", "saturation=clamping", "z_loop=printed"]
 hyps = [h for h in hypotheses.family(spec.families, 1) if h.name in names]
 train = list(dict.fromkeys(cells[cells.part == "train"].table))
 
 def searches(device):
     runs = fitting.TableRuns(root, train, device=device)
     for raw in runs.raw.values():
-        raw["simulation"] = {**raw.get("simulation", {}), "t_end": 0.1}
+        raw["simulation"] = {**raw.get("simulation", {}), "t_end": 0.03}
     return [fitting.search(root, h, spec.free, cells, device, None, runs) for h in hyps]
 
 def rows(m):
@@ -495,7 +495,7 @@ def rows(m):
 out = {}
 for way, device in (("cpu", "cpu"), ("alone", "cuda"), ("together", "cuda")):
     found = searches(device)
-    pops = [np.random.default_rng(k).uniform(s.lower, s.upper, size=(3, len(s.lower))) for k, s in enumerate(found)]
+    pops = [np.random.default_rng(k).uniform(s.lower, s.upper, size=(2, len(s.lower))) for k, s in enumerate(found)]
     ensembles = [e for s, X in zip(found, pops) for e in s.objective.ensembles(X).values()]
     launches.clear()
     if way == "together":
@@ -523,7 +523,7 @@ def test_a_generation_of_many_hypotheses_runs_in_shared_launches() -> None:
     assert done.returncode == 0, done.stderr[-3000:]
     out = json.loads(done.stdout)
     alone, together = out["alone"], out["together"]
-    assert alone["ensembles"] == together["ensembles"] == 12  # four hypotheses, three packed tables each
+    assert alone["ensembles"] == together["ensembles"] == 9  # three hypotheses, three packed tables each
     # the same loops (rows of the launches), in fewer launches
     assert len(together["launches"]) < len(alone["launches"])
     assert sum(together["launches"]) == sum(alone["launches"])
