@@ -1,4 +1,4 @@
-"""Ensembles on the GPU: the variants of a columnar sweep simulated and measured there.
+"""Ensembles on the GPU: a columnar sweep's or a GA generation's variants simulated and measured there.
 
 The host packs the variants' arrays exactly as :func:`nlcx.engine.ensembles.simulate_ensemble`
 packs them for the CPU (the same kernel calls, rows and values), launches the closed loop
@@ -7,9 +7,12 @@ measures every run there (:mod:`nlcx.kernel.cuda_metrics`). Only each run's outc
 metric values come back; :func:`nlcx.engine.ensembles.measure_ensemble` lays them out as the
 CPU's rows.
 
-A batch larger than the GPU's memory holds is cut into chunks of rows (:func:`chunk_rows`).
-One call at a time runs on the GPU: a second waits for the first, so that a sweep may lay out
-and write one batch while the next one runs (:func:`nlcx.sweeps.runner.make_executor`).
+Several ensembles may go in one call (:func:`simulate_measure_all`, the identification's
+generations of many hypotheses): their kernel calls that compile to the same closed-loop kernel
+and share their one-row arrays run as the rows of one launch. A launch larger than the GPU's
+memory holds is cut into chunks of rows (:func:`chunk_rows`). One call at a time runs on the
+GPU: a second waits for the first, so that a sweep may lay out and write one batch while the
+next one runs (:func:`nlcx.sweeps.runner.make_executor`).
 """
 
 from __future__ import annotations
