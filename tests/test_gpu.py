@@ -258,9 +258,18 @@ def test_identify_puts_its_loops_on_the_device() -> None:
     assert identify.spec_digest(on_gpu, spec_split) != identify.spec_digest(spec, spec_split)
 
 
+#: Metric rows (:class:`nlcx.engine.metric_rows.MetricColumns`) as JSON, in a child script.
+ROWS_AS_JSON = """
+def rows(m):
+    text = {k: [m.categories[k][c] if c >= 0 else "" for c in m.codes[k]] for k in m.codes}
+    return {"variant": m.variant.tolist(), "value": m.value.tolist(), **text}
+"""
+
 #: A population packed into a prepared experiment (the identification's objective,
 #: nlcx.thesis.packed_cells) measured on the CPU and on the GPU: their metric rows as JSON.
-PACKED_POPULATION = """
+PACKED_POPULATION = (
+    ROWS_AS_JSON
+    + """
 import json
 import numpy as np
 from nlcx import config
@@ -279,11 +288,10 @@ for device in ("cpu", "cuda"):
         short = ["simulation.t_end=0.06", f"simulation.device={device}"]
         return config.load("configs/x_error_ags.yaml", [*settings, *short])
     packed = packed_table(experiment, box)
-    m = measured(packed, {k: X[:, j] for j, k in enumerate(box)}, len(X))
-    text = {k: [m.categories[k][c] if c >= 0 else "" for c in m.codes[k]] for k in m.codes}
-    out[device] = {"variant": m.variant.tolist(), "value": m.value.tolist(), **text}
+    out[device] = rows(measured(packed, {k: X[:, j] for j, k in enumerate(box)}, len(X)))
 print(json.dumps({**out, "launched": launched}))
 """
+)
 
 
 def test_a_packed_population_is_measured_on_the_gpu_as_on_the_cpu() -> None:
@@ -464,7 +472,9 @@ def test_one_ensemble_at_a_time_on_the_gpu(monkeypatch: pytest.MonkeyPatch) -> N
 #: A generation of three hypotheses' populations on three train tables (short horizons): their
 #: packed tables' metric rows on the CPU, on the GPU one hypothesis at a time, and on the GPU all
 #: together (nlcx.thesis.lockstep), with the closed-loop launches each way took.
-LOCKSTEP_GENERATION = """
+LOCKSTEP_GENERATION = (
+    ROWS_AS_JSON
+    + """
 import json
 from pathlib import Path
 import numpy as np
@@ -488,10 +498,6 @@ def searches(device):
         raw["simulation"] = {**raw.get("simulation", {}), "t_end": 0.03}
     return [fitting.search(root, h, spec.free, cells, device, None, runs) for h in hyps]
 
-def rows(m):
-    text = {k: [m.categories[k][c] if c >= 0 else "" for c in m.codes[k]] for k in m.codes}
-    return {"variant": m.variant.tolist(), "value": m.value.tolist(), **text}
-
 out = {}
 for way, device in (("cpu", "cpu"), ("alone", "cuda"), ("together", "cuda")):
     found = searches(device)
@@ -510,6 +516,7 @@ for way, device in (("cpu", "cpu"), ("alone", "cuda"), ("together", "cuda")):
                 "launches": used, "ensembles": len(ensembles)}
 print(json.dumps(out))
 """
+)
 
 
 def test_a_generation_of_many_hypotheses_runs_in_shared_launches() -> None:

@@ -283,6 +283,7 @@ class _MetricRun(NamedTuple):
 
     blocks: tuple[Any, ...]
     table: np.ndarray
+    digest: str  # the table's
     start: int
     stop: int
     members: list[tuple[_Call, int, int]]
@@ -301,8 +302,8 @@ def _metric_runs(group: list[_Call], offsets: np.ndarray) -> list[_MetricRun]:
             runs[-n:] = [run._replace(stop=stop, members=[*run.members, (call, int(i), int(first))])
                          for run, i in zip(runs[-n:], call.pattern, strict=True)]  # fmt: skip
         else:
-            runs += [_MetricRun(*call.measuring[int(i)], int(first), stop, [(call, int(i), int(first))])
-                     for i in call.pattern]  # fmt: skip
+            runs += [_MetricRun(*call.measuring[int(i)], digest, int(first), stop, [(call, int(i), int(first))])
+                     for i, (_, digest) in zip(call.pattern, call.signature, strict=True)]  # fmt: skip
         signature_before = call.signature
     return runs
 
@@ -323,11 +324,10 @@ def _run_group(group: list[_Call]) -> None:
     tables: dict[str, Any] = {}
     measuring = []
     for run in _metric_runs(group, offsets):
-        key = _digest(run.table)
-        if key not in tables:
-            tables[key] = gpu.to_device(run.table)
+        if run.digest not in tables:
+            tables[run.digest] = gpu.to_device(run.table)
         width = sum(len(cuda_metrics.BLOCK_NAMES[b.kind]) for b in run.blocks)
-        measuring.append((run, cuda_metrics.metrics_kernel(run.blocks, one.t), tables[key], width))
+        measuring.append((run, cuda_metrics.metrics_kernel(run.blocks, one.t), tables[run.digest], width))
     for call in group:
         call.pieces = {int(i): [] for i in call.pattern}
     outcome = tuple(np.empty(n_rows, dtype=np.int64) for _ in range(3))

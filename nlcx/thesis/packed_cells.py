@@ -84,13 +84,14 @@ def packings(tables: Iterable[str], experiment: Callable[..., Any], hyp: Any, bo
 
 def population_ensembles(packing: dict[str, PackedTable | str], X: np.ndarray, keys: list[str]) -> dict[str, Ensemble]:
     """The population (rows of X: the free values ``keys``) as an ensemble of each packed table."""
-    columns = {key: np.ascontiguousarray(X[:, k], dtype=float) for k, key in enumerate(keys)}
-    out = {}
-    for table, packed in packing.items():
-        if not isinstance(packed, str):
-            slots = {k: s for k, s in packed.slots.items() if s}
-            out[table] = Ensemble(packed.template, slots, {k: columns[k] for k in slots}, len(X))
-    return out
+    columns = {key: X[:, k] for k, key in enumerate(keys)}
+    return {t: ensemble(p, columns, len(X)) for t, p in packing.items() if not isinstance(p, str)}
+
+
+def ensemble(packed: PackedTable, columns: dict[str, np.ndarray], n: int) -> Ensemble:
+    """``n`` candidates of a packed table (``columns``: each free value's column) as an ensemble."""
+    slots = {k: s for k, s in packed.slots.items() if s}
+    return Ensemble(packed.template, slots, {k: np.ascontiguousarray(columns[k], dtype=float) for k in slots}, n)
 
 
 def population_cells(
@@ -121,9 +122,7 @@ def population_cells(
 def measured(packed: PackedTable, columns: dict[str, np.ndarray], n: int) -> MetricColumns:
     """The metric rows of ``n`` candidates (``columns``: each free value's column) of a packed
     table, simulated and measured where its experiment says (``simulation.device``)."""
-    slots = {k: s for k, s in packed.slots.items() if s}
-    values = {k: np.ascontiguousarray(columns[k], dtype=float) for k in slots}
-    return ensemble_metrics(packed.template, slots, values, n)[1]
+    return ensemble_metrics(*ensemble(packed, columns, n))[1]
 
 
 def packed_cells(measured_rows: MetricColumns, cells: pd.DataFrame, n: int) -> np.ndarray:

@@ -83,7 +83,7 @@ def evolve(
     X = next(generations)
     while True:
         try:
-            X = generations.send(split_evaluate(objective, np.ascontiguousarray(X), executor, chunks))
+            X = generations.send(split_evaluate(objective, X, executor, chunks))
         except StopIteration as done:
             result: OptimResult = done.value
             return result
