@@ -20,7 +20,7 @@ from nlcx.thesis import catalog, fitting, hypotheses, profiles, split
 from nlcx.thesis import identify as identify_module
 from nlcx.thesis.fitting import TableRuns, direction_agreement, train_loss
 from nlcx.thesis.identify import IdentifySpec, Screen, load_spec, screening
-from nlcx.thesis.tables import ANGLE_METRICS, POSITION_METRICS, lookup_value, metric_lookup
+from nlcx.thesis.tables import ANGLE_METRICS, POSITION_METRICS, lookup_value, metric_lookup, rows_lookup
 from nlcx.uncertainty.actuator_lag import first_order_lag
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -398,9 +398,15 @@ def test_claims_come_from_a_reproduction_under_each_top_fit_and_are_reused(tmp_p
 def test_the_cell_lookup_reads_what_a_filter_of_the_metrics_reads() -> None:
     """Every thesis (controller, signal, metric) read through the one-pass lookup equals the
     first matching row of a boolean filter of the run's metrics (M_p of a position: overshoot
-    / 100; a metric the thesis does not define, or a missing signal: NaN)."""
-    metrics = engine.evaluate([built(hypotheses.Hypothesis())])[0].metrics
+    / 100; a metric the thesis does not define, or a missing signal: NaN). The lookup of the
+    rows themselves, without the DataFrame, is the same, a missing value NaN as in the frame."""
+    result = engine.evaluate([built(hypotheses.Hypothesis())])[0]
+    metrics = result.metrics
     values = metric_lookup(metrics)
+    from_rows = rows_lookup(result.metric_rows)
+    assert list(from_rows) == list(values)
+    assert all(from_rows[k] == v or (math.isnan(from_rows[k]) and math.isnan(v)) for k, v in values.items())
+    assert math.isnan(rows_lookup([["c", "x", "overshoot", None, "%", "ok", ""]])["c", "x", "overshoot"])
     checked = 0
     for controller in ("conventional", "proposed", "absent"):
         for signal in ("x", "theta", "nowhere"):

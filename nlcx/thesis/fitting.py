@@ -23,7 +23,7 @@ from nlcx import engine, report
 from nlcx.engine.gpu import Ensemble
 from nlcx.engine.metric_rows import MetricColumns
 from nlcx.thesis import catalog, hypotheses, packed_cells, profiles
-from nlcx.thesis.tables import lookup_value, metric_lookup
+from nlcx.thesis.tables import lookup_value, rows_lookup
 from nlcx.tuning.optimise import OptimResult
 
 FLOORS = {"Mp": 0.05, "tr": 0.5, "ts": 0.5}
@@ -89,17 +89,17 @@ def cell_values(results: list[engine.Result], cells: pd.DataFrame, n_candidates:
     (candidate-major, tables in the order of ``cells``)."""
     tables = list(dict.fromkeys(cells.table))
     out = np.full((len(cells), n_candidates), np.nan)
-    of_table: dict[str, list[tuple[int, Any]]] = {  # a cell: a row of ``cells``, its columns by name
-        t: [(i, c) for i, c in enumerate(cells.itertuples(index=False)) if c.table == t] for t in tables
-    }
+    of_table: dict[str, list[tuple[int, str, str, str]]] = {t: [] for t in tables}  # row, controller, signal, metric
+    for i, (table, *cell) in enumerate(zip(cells.table, cells.controller, cells.signal, cells.metric, strict=True)):
+        of_table[table].append((i, *cell))
     for k in range(n_candidates):
         for t_index, table in enumerate(tables):
             result = results[k * len(tables) + t_index]
             ok = {run.label for run in result.runs if run.status == "ok"}
-            values = metric_lookup(result.metrics)
-            for i, cell in of_table[table]:
-                if cell.controller in ok:
-                    out[i, k] = lookup_value(values, cell.controller, cell.signal, cell.metric)
+            values = rows_lookup(result.metric_rows)
+            for i, controller, signal, metric in of_table[table]:
+                if controller in ok:
+                    out[i, k] = lookup_value(values, controller, signal, metric)
     return out
 
 

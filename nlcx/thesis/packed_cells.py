@@ -127,7 +127,7 @@ def measured(packed: PackedTable, columns: dict[str, np.ndarray], n: int) -> Met
 
 def packed_cells(measured_rows: MetricColumns, cells: pd.DataFrame, n: int) -> np.ndarray:
     """Our value of every cell (rows of ``cells``, one table's) for each of ``n`` candidates
-    (columns), from the table's metric rows: as :func:`nlcx.thesis.identify.cell_values` reads a
+    (columns), from the table's metric rows: as :func:`nlcx.thesis.fitting.cell_values` reads a
     run's metrics, the first row of (controller, signal, metric) of a run that finished (M_p of
     a position is overshoot/100), NaN where there is none."""
     m = measured_rows

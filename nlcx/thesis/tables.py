@@ -10,6 +10,7 @@ onto nlcx's metrics for the claims and the calibration too.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import pandas as pd
@@ -26,11 +27,16 @@ ANGLE_METRICS = {"Mp": "peak_deviation", "ts": "settling_time", "ess": "steady_s
 def metric_lookup(metrics: pd.DataFrame) -> dict[tuple[str, str, str], float]:
     """(controller, signal, nlcx metric) -> value of a run's metrics, the first row of each:
     one pass over the frame, so a table of cells is read without one filter per cell."""
+    return rows_lookup(zip(metrics.controller, metrics.signal, metrics.metric, metrics.value, strict=True))
+
+
+def rows_lookup(rows: Iterable[Sequence[Any]]) -> dict[tuple[str, str, str], float]:
+    """:func:`metric_lookup` of metric rows that start (controller, signal, metric, value), as
+    :attr:`nlcx.engine.Result.metric_rows` gives them without building a DataFrame (a missing
+    value is NaN, as in the frame)."""
     out: dict[tuple[str, str, str], float] = {}
-    for controller, signal, metric, value in zip(
-        metrics.controller, metrics.signal, metrics.metric, metrics.value, strict=True
-    ):
-        out.setdefault((controller, signal, metric), float(value))
+    for controller, signal, metric, value, *_ in rows:
+        out.setdefault((controller, signal, metric), math.nan if value is None else float(value))
     return out
 
 
