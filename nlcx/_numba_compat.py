@@ -29,8 +29,9 @@ from typing import Any
 TESTED: tuple[tuple[int, int], ...] = tuple((0, minor) for minor in range(59, 69))
 
 #: The message numba warns with when a compiled function takes compiled functions as values
-#: (the kernel's function tables): a regular expression for :func:`warnings.filterwarnings`.
-FIRST_CLASS_FUNCTION_WARNING = "First-class function type feature is experimental"
+#: (the kernel's function tables): a regular expression for :func:`warnings.filterwarnings`,
+#: which matches from the message's start, where numba puts its terminal's bold codes.
+FIRST_CLASS_FUNCTION_WARNING = r"(\x1b\[[0-9;]*m)*First-class function type feature is experimental"
 
 
 @contextlib.contextmanager

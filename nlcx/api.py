@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, Union
 from nlcx import compiled_cache
 from nlcx._numba_compat import quiet_first_class_functions
 from nlcx.errors import ConfigError
+from nlcx.limits import MAX_JOBS, check_count
 from nlcx.results import Result, SweepResult, load_run, read_output_table
 
 if TYPE_CHECKING:
@@ -60,7 +61,7 @@ def _with_overrides(raw: dict[str, Any], overrides: OverridesLike) -> dict[str, 
     return cfg.apply_overrides(raw, list(overrides))
 
 
-def experiment(config: ConfigLike, overrides: OverridesLike = None) -> Experiment:
+def experiment(config: ConfigLike, overrides: OverridesLike = None, *, allow_env: bool = False) -> Experiment:
     """The validated experiment of ``config`` with ``overrides``.
 
     Parameters
@@ -71,6 +72,9 @@ def experiment(config: ConfigLike, overrides: OverridesLike = None) -> Experimen
     overrides : list of str or mapping, optional
         ``["simulation.t_end=5", "+simulation.bounds.x=5", "~uncertainty.disturbance"]``, or a
         nested mapping merged on top.
+    allow_env : bool
+        Let the config's ``${...}`` call every resolver OmegaConf knows, ``oc.env`` (the
+        process's environment) included; off, a config reads only its own values.
 
     Returns
     -------
@@ -95,10 +99,16 @@ def experiment(config: ConfigLike, overrides: OverridesLike = None) -> Experimen
     raw = _with_overrides(_raw(config), overrides)
     if "sweep" in raw:
         raise ConfigError("sweep", "...", "a config with a sweep section runs with nlcx.sweep, not nlcx.run")
-    return cfg.build(cfg.interpolate(raw))
+    return cfg.build(cfg.interpolate(raw, allow_env=allow_env), allow_env=allow_env)
 
 
-def run(config: ConfigLike, overrides: OverridesLike = None, *, out: str | os.PathLike[str] | None = None) -> Result:
+def run(
+    config: ConfigLike,
+    overrides: OverridesLike = None,
+    *,
+    out: str | os.PathLike[str] | None = None,
+    allow_env: bool = False,
+) -> Result:
     """Simulate every controller of ``config`` on its plant and measure the runs.
 
     The same pipeline as ``nlcx run``: the controllers see the same plant, references and
@@ -113,6 +123,8 @@ def run(config: ConfigLike, overrides: OverridesLike = None, *, out: str | os.Pa
     out : str or path, optional
         Also write the run directory there, exactly as ``nlcx run --out`` does (see
         :meth:`Result.save`). Without it nothing is written.
+    allow_env : bool
+        What :func:`experiment` takes; recorded in the run's manifest.
 
     Returns
     -------
@@ -129,7 +141,7 @@ def run(config: ConfigLike, overrides: OverridesLike = None, *, out: str | os.Pa
     >>> list(table.columns)
     ['unit', 'conventional', 'proposed', 'improvement_proposed_pct']
     """
-    exp = experiment(config, overrides)  # checks numba's cache before anything compiled is loaded
+    exp = experiment(config, overrides, allow_env=allow_env)  # checks numba's cache before anything compiled is loaded
     from nlcx import engine
 
     with quiet_first_class_functions():  # numba's note on compiling the kernel's function values
@@ -146,6 +158,7 @@ def sweep(
     jobs: int | None = None,
     executor: str = "process",
     out: str | os.PathLike[str] | None = None,
+    allow_env: bool = False,
 ) -> SweepResult:
     """Run the ``sweep:`` section of ``config``: every variant, in batches, on ``jobs`` workers.
 
@@ -162,6 +175,8 @@ def sweep(
     out : str or path, optional
         The sweep directory (resumable: a rerun skips finished variants). Without it the
         sweep runs in a temporary directory that is removed afterwards.
+    allow_env : bool
+        What :func:`experiment` takes; recorded in the sweep's manifest.
 
     Returns
     -------
@@ -182,10 +197,12 @@ def sweep(
 
     if executor not in ("process", "serial", "dask"):
         raise ConfigError("executor", executor, "allowed: process, serial, dask")
+    if jobs is not None:
+        check_count("jobs", jobs, 1, MAX_JOBS, "worker processes")
     raw = _with_overrides(_raw(config), overrides)
     with tempfile.TemporaryDirectory(prefix="nlcx-sweep-") as scratch:
         target = Path(out) if out is not None else Path(scratch) / "sweep"
         with quiet_first_class_functions():
-            sweeps.run(raw, [], target, executor, jobs or 2, with_report=out is not None)
+            sweeps.run(raw, [], target, executor, jobs or 2, with_report=out is not None, allow_env=allow_env)
         variants, metrics = read_output_table(target, "sweep"), read_output_table(target, "metrics")
         return SweepResult(variants, metrics, target if out is not None else None)

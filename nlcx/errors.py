@@ -8,6 +8,9 @@ from typing import Any
 class NlcxError(Exception):
     """Base class of the errors the CLI prints as a single line."""
 
+    #: The command line's exit status for this error: 2, a refused input; 1, work that failed.
+    exit_code = 2
+
 
 class ConfigError(NlcxError):
     """A configuration value is invalid: names the key path, the value and what is allowed."""

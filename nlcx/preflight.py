@@ -3,6 +3,7 @@
 - every configured reference is followed by a controller (or measured): a reference that
   drives nothing is a mistake in the config, not something to ignore;
 - a plant's inputs and outputs have distinct names (metrics.csv rows are keyed by them);
+- a step reference's time leaves the run at least two samples to measure it by;
 - the arrays of the run fit in memory: the estimate is made before anything is allocated.
 """
 
@@ -38,6 +39,21 @@ def check_signal_names(plant: Plant) -> None:
                     "inputs and outputs need distinct names (metrics are keyed by signal)",
                 )
             seen[name] = kind
+
+
+def check_reference_times(references: Mapping[str, Any], t_end: float, dt: float) -> None:
+    """A step reference (or any measured as one) must step at a sample that leaves at least two
+    samples of the run after it: its time at most ``t_end - dt``."""
+    latest = t_end - dt
+    for signal, ref in references.items():
+        plan = ref.model.metric_plan(ref.config)
+        if plan.kind == "step" and plan.t_step > latest + 1e-9 * dt:
+            raise ConfigError(
+                f"reference.{signal}.time",
+                plan.t_step,
+                f"too late to measure a step response: simulation.t_end = {t_end:g} s with dt = {dt:g} s; "
+                f"allowed: 0 <= time <= {latest:g}",
+            )
 
 
 def check_references(

@@ -6,7 +6,6 @@ so an interrupted run never leaves a half-written file behind.
 
 from __future__ import annotations
 
-import json
 import platform
 import socket
 import subprocess
@@ -22,6 +21,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 import yaml
 
+from nlcx import manifest as manifests
 from nlcx._version import __version__
 from nlcx.drawing import FigurePlan, Line, Painter, Panel, atomic_write, draw, draw_all
 from nlcx.engine import METRIC_COLUMNS, Result, Run
@@ -368,14 +368,16 @@ def manifest(
     where: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """manifest.json of a run directory: its name and kind (``nlcx_output``: run), how and where
-    it was made (:func:`provenance` from ``started``, :func:`environment` or ``where``), the
-    seeds, the timings, each run's status and (filled in by :func:`write_run`) the files."""
+    it was made (:func:`provenance` from ``started``, :func:`environment` or ``where``), whether
+    the config could read the process's environment (``allow_env``), the seeds, the timings,
+    each run's status and (filled in by :func:`write_run`) the files."""
     exp = result.prepared.experiment
     ss = result.prepared.seed_sequence
     return {
         "name": exp.name,
         "nlcx_output": "run",
         **provenance(overrides, started),
+        "allow_env": exp.allow_env,
         **(environment() if where is None else where),
         "seed": {
             "entropy": int(cast(int, ss.entropy)),  # prepare seeds it with the config's integer seed
@@ -451,5 +453,5 @@ def write_run(
         timings["wall"] = time.perf_counter() - started
     info = manifest(result, timings, overrides, write_start if started is None else started, where)
     info["files"] = [p.name for p in written]
-    write_text(out_dir / "manifest.json", json.dumps(info, indent=2) + "\n")
+    manifests.write(out_dir, info)  # the mark, and the checksum of every file
     return [*written, out_dir / "manifest.json"]

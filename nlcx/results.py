@@ -11,7 +11,6 @@ the same metrics, column for column.
 from __future__ import annotations
 
 import copy
-import json
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -19,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from nlcx import compiled_cache
+from nlcx import compiled_cache, manifest, safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.pages.output_tables import read_output_table
 
@@ -195,7 +194,7 @@ class Result:
         self._known(controller)
         if self._trajectories is None:
             raise ConfigError(
-                "trajectory", controller, "this run directory has no time series (outputs.timeseries: false)"
+                "trajectory", controller, "this run was written without time series (outputs.timeseries: false)"
             )
         return self._trajectories[controller].copy()
 
@@ -304,18 +303,25 @@ def _frame(columns: Mapping[str, np.ndarray]) -> pd.DataFrame:
     return pd.DataFrame({name: np.asarray(values) for name, values in columns.items()})
 
 
-def _read_timeseries(directory: Path) -> dict[str, pd.DataFrame] | None:
-    """timeseries.csv (or .parquet) split by controller, each without the columns its run
-    does not have (another controller's logs: empty in its rows)."""
+def _timeseries_file(directory: Path, listed: Mapping[str, Any]) -> Path | None:
+    """The time series file the manifest lists (timeseries.csv or .parquet), or None."""
+    for name in ("timeseries.parquet", "timeseries.csv"):
+        if name in listed:
+            return directory / name
+    return None
+
+
+def _read_timeseries(path: Path | None) -> dict[str, pd.DataFrame] | None:
+    """A time series file (CSV or Parquet) split by controller, each without the columns its
+    run does not have (another controller's logs: empty in its rows); None without one."""
     import pandas as pd
 
-    csv, parquet = directory / "timeseries.csv", directory / "timeseries.parquet"
-    if parquet.is_file():
-        frame = pd.read_parquet(parquet)
-    elif csv.is_file():
-        frame = pd.read_csv(csv, dtype={"controller": str}, keep_default_na=False, na_values=[""])
-    else:
+    if path is None:
         return None
+    if path.suffix == ".parquet":
+        frame = pd.read_parquet(path)
+    else:
+        frame = pd.read_csv(path, dtype={"controller": str}, keep_default_na=False, na_values=[""])
     out = {}
     for controller, rows in frame.groupby("controller", sort=False):
         rows = rows.drop(columns="controller").reset_index(drop=True).astype(np.float64)  # "1" in a CSV is 1.0
@@ -339,8 +345,9 @@ def load_run(directory: str | os.PathLike[str]) -> Result:
     Parameters
     ----------
     directory : str or path
-        The run directory: metrics.csv and config.yaml; timeseries.csv or .parquet if the run
-        wrote them.
+        The run directory: metrics.csv, config.yaml and manifest.json; timeseries.csv or
+        .parquet if the run wrote them. Each file read is checked against the SHA-256 the
+        manifest records first.
 
     Returns
     -------
@@ -351,7 +358,10 @@ def load_run(directory: str | os.PathLike[str]) -> Result:
     Raises
     ------
     nlcx.errors.ConfigError
-        If ``directory`` is not a run directory.
+        If ``directory`` is not a directory.
+    nlcx.manifest.IntegrityError
+        If its manifest cannot be read or is not a run's, or a file it reads does not match
+        the checksum the manifest recorded (truncated or altered): nothing is read in part.
 
     Examples
     --------
@@ -362,17 +372,24 @@ def load_run(directory: str | os.PathLike[str]) -> Result:
     >>> again.metrics.equals(result.metrics)
     True
     """
-    import yaml
-
     compiled_cache.ready()  # before the plant's model (and its compiled functions) is loaded
     path = Path(directory)
-    missing = [name for name in ("metrics.csv", "config.yaml") if not (path / name).is_file()]
-    if missing:
-        raise ConfigError("directory", str(path), f"a run directory (no {' or '.join(missing)} in it)")
-    config = yaml.safe_load((path / "config.yaml").read_text(encoding="utf-8"))
+    if not path.is_dir():
+        raise ConfigError("directory", str(path), "a run directory (nlcx run --out DIR, Result.save)")
+    record = manifest.load(path)
+    listed: dict[str, Any] = record.get("checksums", {})
+    if record.get(manifest.MARKER) != "run" or "metrics.csv" not in listed or "config.yaml" not in listed:
+        raise manifest.IntegrityError(
+            path / manifest.MANIFEST, "not the manifest of a run with checksums of its files (an output of "
+            "another kind, or of an nlcx that recorded none)", "a run directory: write it again with nlcx run",
+        )  # fmt: skip
+    series = _timeseries_file(path, listed)
+    manifest.verify(path, ["config.yaml", "metrics.csv", *([series.name] if series is not None else [])])
+    config = safe_yaml.load_file(path / "config.yaml")
+    if not isinstance(config, dict):
+        raise manifest.IntegrityError(path / "config.yaml", "not a mapping of sections", "the config nlcx wrote")
     metrics = _read_metrics(path / "metrics.csv")
-    manifest = json.loads((path / "manifest.json").read_text()) if (path / "manifest.json").is_file() else {}
-    statuses = {r["controller"]: r["status"] for r in manifest.get("runs", [])}
+    statuses = {r["controller"]: r["status"] for r in record.get("runs", [])}
     if not statuses:
         statuses = dict(metrics.groupby("controller", sort=False).status.first())
     return Result(
@@ -380,7 +397,7 @@ def load_run(directory: str | os.PathLike[str]) -> Result:
         config=config,
         metrics=metrics,
         statuses=statuses,
-        trajectories=_read_timeseries(path),
+        trajectories=_read_timeseries(series),
         outputs=_outputs_of(config),
         directory=path,
     )

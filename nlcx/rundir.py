@@ -6,7 +6,11 @@ every file is there, report included, is it renamed to the target's name. If the
 already is an nlcx output directory, the new directory replaces it whole: nothing of the old
 one survives beside the new one. An interrupted write (an exception, Ctrl-C) removes its
 temporary directory and leaves the old target as it was. An existing directory that nlcx did
-not write (:func:`written_by_nlcx`) is never replaced: the write is refused.
+not write is never replaced, whatever it holds: only a directory that carries nlcx's mark
+(:func:`written_by_nlcx`: its manifest and its mark file name the same random id,
+:mod:`nlcx.manifest`) and holds no file its manifest does not list is. The working directory,
+the directories above it, the home directory and the root are refused as targets, whatever
+they hold.
 
 Replacing (:func:`install`): on Linux the new and the old directory exchange their names in
 one step (``renameat2`` with ``RENAME_EXCHANGE``), so the target's name always holds a
@@ -25,7 +29,9 @@ releases if the process dies; the file itself stays (removing it would let two p
 two different files of one name). ``.<name>.nlcx-owner`` records the holder's process id and
 start time, for the refusal a second process prints. The leftovers of a killed writer
 (temporary and set-aside directories) are removed by the next writer of the same target,
-which holds the lock and so knows that nobody is writing them.
+which holds the lock and so knows that nobody is writing them. The lock is taken only once
+the target has been accepted (:func:`claim` checks it first), so a refused target leaves no
+file behind; the check is made again under the lock.
 """
 
 from __future__ import annotations
@@ -45,8 +51,8 @@ from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from nlcx import manifest
 from nlcx.errors import NlcxError
-from nlcx.pages.output_tables import has_table
 
 if TYPE_CHECKING:
     from nlcx.drawing import Painter
@@ -54,8 +60,8 @@ if TYPE_CHECKING:
 
 #: The kinds of output directory nlcx writes whole, as its manifest names them under :data:`MARKER`.
 KINDS = ("run", "sweep", "reproduction", "linearize")
-#: The manifest.json key that marks a directory nlcx wrote; its value is one of :data:`KINDS`.
-MARKER = "nlcx_output"
+#: The manifest.json key that marks a directory nlcx wrote; its value is one of :data:`manifest.KINDS`.
+MARKER = manifest.MARKER
 #: What an output directory may be.
 ALLOWED = "a new or empty directory, or one nlcx wrote"
 _TMP, _OLD, _PARTIAL, _LOCK, _OWNER = ".nlcx-tmp-", ".nlcx-old-", ".nlcx-partial", ".nlcx-lock", ".nlcx-owner"
@@ -106,45 +112,63 @@ def partial_dir(target: Path) -> Path:
     return _beside(target, _PARTIAL)
 
 
-def _read_manifest(directory: Path) -> dict[str, Any]:
-    """``directory``'s manifest.json as a mapping; empty when it is missing or not a JSON object."""
-    try:
-        manifest = json.loads((directory / "manifest.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}
-    return manifest if isinstance(manifest, dict) else {}
-
-
-def _written_before_the_marker(directory: Path, manifest: Mapping[str, Any]) -> bool:
-    """An output of an nlcx that wrote no :data:`MARKER`: a manifest recording nlcx's version,
-    a sweep's index in either form (sweep.parquet, a dataset directory or a file, or
-    sweep.csv) or its part files (an interrupted sweep has only these), or a reproduction's
-    tables/ beside its claims.csv."""
-    versions = manifest.get("versions")
-    return (
-        (isinstance(versions, dict) and "nlcx" in versions)
-        or has_table(directory, "sweep")
-        or any((directory / "parts").glob("*.index.csv"))
-        or any((directory / "parts").glob("*.index.parquet"))
-        or ((directory / "tables").is_dir() and (directory / "claims.csv").is_file())
-    )
-
-
 def written_by_nlcx(directory: Path) -> bool:
-    """Whether ``directory`` is an nlcx output directory: its manifest.json names one of
-    :data:`KINDS` under :data:`MARKER`, or it was written before the marker existed."""
-    manifest = _read_manifest(directory)
-    return manifest.get(MARKER) in KINDS or _written_before_the_marker(directory, manifest)
+    """Whether ``directory`` carries nlcx's mark: its manifest.json names one of
+    :data:`nlcx.manifest.KINDS` under :data:`MARKER` and the random id its mark file holds
+    (:func:`nlcx.manifest.is_marked`). File names prove nothing: a directory that merely holds
+    a sweep.csv or a manifest.json is not nlcx's."""
+    return manifest.is_marked(directory)
 
 
-def check_target(target: Path) -> None:
-    """Refuse (:class:`OutputError`) a ``target`` that exists and is neither an empty directory
-    nor an nlcx output directory (:func:`written_by_nlcx`)."""
+def _protected(target: Path) -> str | None:
+    """Why ``target`` can never be an output directory (it is the working directory or above
+    it, the home directory or the root), or None."""
+    real = _real(target)
+    if real == Path(real.anchor):
+        return "the root of the file system"
+    if real == _real(Path.home()):
+        return "the home directory"
+    cwd = _real(Path.cwd())
+    if real == cwd or real in cwd.parents:
+        return "the working directory" if real == cwd else "a directory above the working directory"
+    return None
+
+
+def check_target(target: Path, key: str = "--out") -> None:
+    """Refuse (:class:`OutputError`, naming ``key``) a ``target`` that nlcx may not write or
+    replace: the working directory, a directory above it, the home directory or the root; an
+    existing entry that is not a directory; a directory that is not empty and does not carry
+    nlcx's mark (:func:`written_by_nlcx`), whatever it holds; a marked directory holding files
+    its manifest does not list (someone else's, put there since)."""
+    why = _protected(target)
+    if why is not None:
+        raise OutputError(target, f"is {why}, which nlcx never writes into", ALLOWED, key)
     if not os.path.lexists(target):
         return
-    if target.is_dir() and (not any(target.iterdir()) or written_by_nlcx(target)):
+    if not target.is_dir():
+        raise OutputError(target, "exists and is not a directory", ALLOWED, key)
+    if not any(target.iterdir()):
         return
-    raise OutputError(target, "exists and is not an nlcx output directory", ALLOWED)
+    _readable_manifest(target)
+    if not written_by_nlcx(target):
+        raise OutputError(target, UNMARKED, ALLOWED, key)
+    foreign = manifest.unlisted(target)
+    if foreign:
+        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
+        raise OutputError(
+            target, f"holds files nlcx did not write ({foreign[0]}{more}); move them out first", ALLOWED, key
+        )
+
+
+def _readable_manifest(directory: Path) -> None:
+    """A directory with nlcx's mark file whose manifest cannot be read is refused naming the
+    manifest (:class:`nlcx.manifest.IntegrityError`), not as a directory nlcx did not write."""
+    if manifest.read_mark(directory) is not None:
+        manifest.load(directory)
+
+
+#: Why a directory that is not empty and carries no mark is refused.
+UNMARKED = "exists, is not empty and carries no nlcx mark (an output of an nlcx without the mark: remove it by hand)"
 
 
 def lock_owner(target: Path) -> dict[str, Any] | None:
@@ -227,13 +251,39 @@ def remove_leftovers(target: Path) -> None:
 
 @contextmanager
 def claim(target: Path) -> Iterator[None]:
-    """Make ``target`` this process's to write: hold its lock (:func:`locked`), check that it
-    may be replaced (:func:`check_target`) and clear a killed writer's leftovers. Take it before
-    the work that fills it, so a refusal comes before that work, not after."""
+    """Make ``target`` this process's to write: check that it may be replaced
+    (:func:`check_target`), hold its lock (:func:`locked`), check again under the lock and
+    clear a killed writer's leftovers. Take it before the work that fills it, so a refusal
+    comes before that work, not after; a refused target leaves no file behind."""
+    check_target(target)
     with locked(target):
         check_target(target)
         remove_leftovers(target)
         yield
+
+
+@contextmanager
+def claim_in_place(target: Path, kind: str, key: str = "--out") -> Iterator[None]:
+    """Make ``target`` this process's to write into and resume in place (an identification or
+    a calibration): refused as :func:`check_target` refuses, locked; a new or empty directory
+    gets its mark and a first manifest (kind ``kind``), which its writer completes."""
+    check_target(target, key)
+    with locked(target, key):
+        check_target(target, key)
+        if not written_by_nlcx(target):
+            target.mkdir(parents=True, exist_ok=True)
+            manifest.write(target, {"name": target.name, MARKER: kind})
+        yield
+
+
+def check_marked(directory: Path, key: str = "DIR") -> None:
+    """Refuse (:class:`OutputError`) a ``directory`` nlcx did not write, before anything is
+    written into it (``nlcx report``)."""
+    if directory.is_dir():
+        _readable_manifest(directory)
+    if not directory.is_dir() or not written_by_nlcx(directory):
+        raise OutputError(directory, "is not an output directory nlcx wrote (it carries no nlcx mark)",
+                          "a run, sweep or reproduction directory nlcx wrote", key)  # fmt: skip
 
 
 def _new_sibling(target: Path, suffix: str) -> Path:
@@ -353,8 +403,9 @@ def save_run(
     started: float | None = None,
 ) -> Path:
     """Write the run directory of ``result`` as ``nlcx run`` does (it calls this): staged, under
-    the lock of ``out_dir``, the files of :func:`nlcx.report.write_run` and, ``with_report``,
-    report.html and report.md, then renamed into place (:func:`staged`).
+    the lock of ``out_dir``, the files of :func:`nlcx.report.write_run` (results and manifest
+    first) and, ``with_report``, report.html and report.md (:func:`write_pages`), then renamed
+    into place (:func:`staged`).
 
     Parameters
     ----------
@@ -378,15 +429,83 @@ def save_run(
     -------
     Path
         ``out_dir``.
+
+    Raises
+    ------
+    ReportError
+        The report failed: the results are in ``out_dir`` all the same, and its manifest
+        records the failure.
     """
     from nlcx import report
 
     phases = dict(result.timings if timings is None else timings)
     begun = time.perf_counter() - sum(phases.values()) if started is None else started
+    failure = None
     with staged(out_dir) as stage:
         report.write_run(result, stage, phases, started=begun, painter=painter, overrides=overrides)
         if with_report:
-            from nlcx.pages.render import write_report
-
-            write_report(stage)
+            failure = write_pages(stage)
+    if failure is not None:
+        raise ReportError(out_dir, failure)
     return out_dir
+
+
+#: The files a report writes into an output directory (with the folder :data:`PAGE_FOLDER`):
+#: its pages and the tables it derives from the results for them.
+PAGES = ("report.html", "report.md", "report_summary.csv", "summary.csv", "profiles.csv")
+#: The folder of a sweep report's charts.
+PAGE_FOLDER = "report_files/"
+
+
+def is_page(rel: str) -> bool:
+    """Whether the relative path ``rel`` is a file a report writes (:data:`PAGES`, :data:`PAGE_FOLDER`)."""
+    return rel in PAGES or rel.startswith(PAGE_FOLDER)
+
+
+class ReportError(NlcxError):
+    """A report page that could not be written, after the results were: names the directory
+    that holds them and says that its manifest records the failure."""
+
+    exit_code = 1
+
+    def __init__(self, directory: Path, reason: str) -> None:
+        self.directory, self.reason = directory, reason
+        super().__init__(
+            f"report error: {directory}/report.html not written: {reason}; the results are complete in "
+            f"{directory}/ and its manifest.json records the failure; allowed: nlcx report {directory} to try again"
+        )
+
+    def __reduce__(self) -> tuple[type, tuple[Path, str]]:
+        return (type(self), (self.directory, self.reason))
+
+
+def write_pages(directory: Path, configs: Path | None = None, verify: bool = False) -> str | None:
+    """Write ``directory``'s report pages (:func:`nlcx.pages.render.write_report`) after its
+    results and manifest, and record the outcome in the manifest (``report``: ok, or failed
+    and why; the pages' checksums). Returns None, or the reason the pages failed: the results
+    stay, whatever the pages do. An interruption (Ctrl-C) is not a failure of the pages: it
+    goes on up.
+
+    ``verify``: first check every file the manifest lists, but the pages, against its
+    checksums (:func:`nlcx.manifest.verify`; a directory written before, ``nlcx report``):
+    a truncated or altered file is refused (:class:`nlcx.manifest.IntegrityError`), and no
+    page is written."""
+    from nlcx.pages.render import write_report
+
+    listed = manifest.load(directory).get("checksums", {})
+    if verify:
+        manifest.verify(directory, [name for name in listed if not is_page(name)])
+    pages = [name for name in listed if is_page(name)]
+    try:
+        write_report(directory, configs)
+    except Exception as exc:
+        if os.environ.get("NLCX_DEBUG"):
+            raise
+        lines = str(exc).splitlines()
+        reason = lines[0] if lines else "the page could not be rendered"
+        if not isinstance(exc, NlcxError):
+            reason = f"an internal error of the report ({reason}; set NLCX_DEBUG=1 for a traceback)"
+        manifest.update(directory, pages, report={"status": "failed", "error": reason})
+        return reason
+    manifest.update(directory, pages, report={"status": "ok"})
+    return None

@@ -15,6 +15,7 @@ from typer.testing import CliRunner
 import nlcx
 from nlcx.cli import app
 from nlcx.errors import ConfigError
+from nlcx.manifest import IntegrityError
 from nlcx.results import read_output_table
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -71,13 +72,15 @@ def test_load_run_reads_parquet_and_directories_without_time_series(tmp_path: Pa
     parquet = nlcx.run(X_CONFIG, [*SHORT, "outputs.timeseries_format=parquet"], out=tmp_path / "p")
     pd.testing.assert_frame_equal(nlcx.load_run(tmp_path / "p").trajectory("proposed"), parquet.trajectory("proposed"))
     nlcx.run(X_CONFIG, [*SHORT, "outputs.timeseries=false"], out=tmp_path / "none")
-    with pytest.raises(ConfigError, match=r"trajectory = 'proposed': this run directory has no time series"):
+    with pytest.raises(ConfigError, match=r"trajectory = 'proposed': this run was written without time series"):
         nlcx.load_run(tmp_path / "none").trajectory("proposed")
 
 
 def test_load_run_refuses_what_is_not_a_run_directory(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match=r"directory = .*: a run directory \(no metrics.csv or config.yaml in it\)"):
+    with pytest.raises(IntegrityError, match=r"manifest.json: missing; allowed: an output directory nlcx wrote"):
         nlcx.load_run(tmp_path)
+    with pytest.raises(ConfigError, match=r"directory = .*: a run directory"):
+        nlcx.load_run(tmp_path / "nothing")
 
 
 def test_compare_is_the_thesis_formula_on_the_metrics(result: nlcx.Result) -> None:

@@ -31,6 +31,7 @@ def test_run_writes_the_run_directory(name: str, tmp_path: Path) -> None:
     )
     assert result.exit_code == 0, result.output
     assert {p.name for p in out.iterdir()} == {
+        ".nlcx-output",
         "config.yaml",
         "metrics.csv",
         "timeseries.csv",

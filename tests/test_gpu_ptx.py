@@ -25,12 +25,12 @@ RUNS = {
     "x-error-ags": ("configs/x_error_ags.yaml", []),
     "x-time-ags": ("configs/x_time_ags.yaml", []),
     "xyz": ("configs/xyz_error_ags.yaml", []),
-    "cstr": ("configs/cstr_nonlinear.yaml", []),
+    "cstr": ("configs/cstr_nonlinear.yaml", ["++reference.C_B.time=0.1"]),  # a step within the short run
     # the intelligent controllers of chapter 5: fuzzy, single-neuron and ANFIS schedules, preview
     "fuzzy": ("configs/thesis/ch5/fig_5_10.yaml", []),
     "single-neuron": ("configs/thesis/ch5/fig_5_12.yaml", []),
     "anfis": ("configs/thesis/ch5/fig_5_15.yaml", []),
-    "preview": ("configs/thesis/ch5/fig_5_19.yaml", []),
+    "preview": ("configs/thesis/ch5/fig_5_19.yaml", ["++reference.C_B.time=0.1"]),
     # simple friction on both axes of the x-y pendulum
     "friction": ("configs/thesis/ch3/fig_3_07.yaml", []),
     # loop elements at both hooks, a disturbance, Heun's tableau

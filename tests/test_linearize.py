@@ -256,7 +256,7 @@ def test_bad_arguments_are_one_config_error_each() -> None:
         nlcx.linearize(X_ERROR, "proposed", at="t=2")
     with pytest.raises(ConfigError, match=r"along = 'e': .* 'conventional' .* its gains are constant"):
         linearize_along(X_ERROR, "e", "conventional")
-    with pytest.raises(ConfigError, match="points = 1: an integer >= 2"):
+    with pytest.raises(ConfigError, match="points = 1: frozen points along the axis; allowed: an integer from 2 to"):
         linearize_along(X_ERROR, "e", points=1)
 
 
@@ -276,7 +276,7 @@ def test_the_command_writes_the_analysis_and_its_sweep(tmp_path: Path) -> None:
     assert "controller proposed, frozen at e = 0.5" in done.output and f"wrote {out}/" in done.output
     assert {p.name for p in out.iterdir()} == {
         "poles.csv", "margins.csv", "gains.csv", "poles_along.csv", "margins_along.csv", "gains_along.csv",
-        "along.png", "config.yaml", "manifest.json",
+        "along.png", "config.yaml", "manifest.json", ".nlcx-output",
     }  # fmt: skip
     lin = nlcx.linearize(X_ERROR, "proposed", at="e=0.5")
     poles = pd.read_csv(out / "poles.csv")
@@ -293,11 +293,13 @@ def test_the_command_writes_the_analysis_and_its_sweep(tmp_path: Path) -> None:
     assert (manifest["nlcx_output"], manifest["controller"], manifest["at"]) == ("linearize", "proposed",
                                                                                {"t": 0.0, "e": 0.5})  # fmt: skip
     assert manifest["along"] == {"axis": "e", "from": 0.0, "to": 1.0, "points": 5}
-    assert set(manifest["files"]) == {p.name for p in out.iterdir()} - {"manifest.json"}
+    assert set(manifest["files"]) == {p.name for p in out.iterdir()} - {"manifest.json", ".nlcx-output"}
     assert yaml.safe_load((out / "config.yaml").read_text())["name"] == "x_error_ags"
     again = _run(str(X_ERROR), "--controller", "conventional", "--out", str(out))
     assert again.exit_code == 0, again.output
-    assert {p.name for p in out.iterdir()} == {"poles.csv", "margins.csv", "gains.csv", "config.yaml", "manifest.json"}
+    assert {p.name for p in out.iterdir()} == {
+        "poles.csv", "margins.csv", "gains.csv", "config.yaml", "manifest.json", ".nlcx-output"
+    }  # fmt: skip
 
 
 @pytest.mark.parametrize(

@@ -18,7 +18,7 @@ import yaml
 from pandas.testing import assert_frame_equal
 from typer.testing import CliRunner
 
-from nlcx import rundir
+from nlcx import manifest, rundir
 from nlcx.cli import app
 from nlcx.errors import ConfigError
 from nlcx.pages import render, sweep
@@ -74,6 +74,7 @@ def parquet_form(source: Path, target: Path) -> Path:
     for stem in STEMS:
         table = pa_csv.read_csv(source / f"{stem}.csv", convert_options=options)
         _write_dataset(table, target / f"{stem}.parquet", cut=table.num_rows // 2)
+    manifest.update(target)  # the checksums of the converted directory, as nlcx records them
     return target
 
 
@@ -208,14 +209,11 @@ def test_the_report_shows_the_same_numbers_from_either_form(forms: dict[str, Pat
         assert sweep.table_files(pages[name]) == {stem: stem + suffix for stem in STEMS}
 
 
-def test_a_directory_with_the_parquet_form_is_a_sweeps_output(forms: dict[str, Path], tmp_path: Path) -> None:
-    """Without a manifest (an older nlcx's sweep), sweep.parquet marks the directory as one
-    nlcx wrote, so a sweep may replace it; a run's page is not made of it."""
+def test_a_directory_with_the_parquet_form_is_not_ours_by_its_name(forms: dict[str, Path], tmp_path: Path) -> None:
+    """Without nlcx's mark, a sweep.parquet proves nothing: the directory is refused as a target."""
     bare = tmp_path / "bare"
     bare.mkdir()
     shutil.copytree(forms["parquet"] / "sweep.parquet", bare / "sweep.parquet")
-    assert rundir.written_by_nlcx(bare)
-    rundir.check_target(bare)
-    shutil.rmtree(bare / "sweep.parquet")
-    (bare / "notes.txt").write_text("mine\n")
     assert not rundir.written_by_nlcx(bare)
+    with pytest.raises(rundir.OutputError, match="carries no nlcx mark"):
+        rundir.check_target(bare)

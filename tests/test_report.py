@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
+from nlcx import manifest
 from nlcx.cli import app
 from nlcx.comparison import THESIS_METRICS
 from nlcx.pages.tables import cells_of
@@ -84,6 +85,7 @@ def test_a_controller_whose_run_stopped_shows_its_status_in_the_comparison(tmp_p
         columns=metrics.columns,
     )
     pd.concat([stopped, metrics[metrics.controller == "proposed"]]).to_csv(out / "metrics.csv", index=False)
+    manifest.update(out, ["metrics.csv"])  # as nlcx records the rows of a stopped run
     assert runner.invoke(app, ["report", str(out)]).exit_code == 0
     html = (out / "report.html").read_text()
     proposed = metrics[(metrics.controller == "proposed") & metrics.metric.isin(THESIS_METRICS)]
@@ -212,7 +214,10 @@ def test_a_reproductions_page_and_twin_carry_the_claims_and_the_table_verdicts(r
 def test_report_on_a_directory_that_is_none_of_ours_is_a_one_line_error(tmp_path: Path) -> None:
     result = runner.invoke(app, ["report", str(tmp_path)])
     assert result.exit_code == 2
-    assert "DIR" in result.output and "an nlcx output directory" in result.output
+    assert result.output.splitlines() == [
+        f"output error: DIR = '{tmp_path}': is not an output directory nlcx wrote (it carries no nlcx mark); "
+        "allowed: a run, sweep or reproduction directory nlcx wrote"
+    ]
     assert "Traceback" not in result.output
 
 

@@ -11,6 +11,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 
@@ -21,13 +22,14 @@ from typer.testing import CliRunner
 
 import nlcx
 from nlcx import config, engine, rundir
+from nlcx import manifest as manifests
 from nlcx.cli import app
 from nlcx.results import read_output_table
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "configs" / "x_error_ags.yaml"
 NLCX = [sys.executable, "-m", "nlcx.cli"]
-REFUSED = "exists and is not an nlcx output directory; allowed: a new or empty directory, or one nlcx wrote"
+REFUSED = f"{rundir.UNMARKED}; allowed: {rundir.ALLOWED}"
 runner = CliRunner()
 
 
@@ -62,7 +64,7 @@ def test_a_rerun_replaces_the_run_directory_whole(tmp_path: Path) -> None:
     args = ["simulation.t_end=5", "outputs.timeseries=false", "outputs.figure=false", "--no-report"]
     second = runner.invoke(app, ["run", str(CONFIG), *args, "--out", str(out)])
     assert second.exit_code == 0, second.output
-    assert {p.name for p in out.iterdir()} == {"config.yaml", "metrics.csv", "manifest.json"}
+    assert {p.name for p in out.iterdir()} == {"config.yaml", "metrics.csv", "manifest.json", ".nlcx-output"}
     assert yaml.safe_load((out / "config.yaml").read_text())["simulation"]["t_end"] == 5
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["files"] == ["config.yaml", "metrics.csv"] and manifest["nlcx_output"] == "run"
@@ -77,29 +79,30 @@ def test_the_new_directory_replaces_the_old_one_whole(
     and nothing beside the target but its lock file."""
     out = tmp_path / "D"
     with rundir.staged(out) as stage:
-        (stage / "manifest.json").write_text(json.dumps({rundir.MARKER: "run"}))
         (stage / "old.csv").write_text("old\n")
         (stage / "sub").mkdir()
         (stage / "sub" / "old.txt").write_text("old\n")
+        manifests.write(stage, {rundir.MARKER: "run"})
     calls: list[bool] = []
     real_exchange = rundir._exchange
     monkeypatch.setattr(rundir, "_exchange", lambda a, b: calls.append(exchange) or (exchange and real_exchange(a, b)))
     with rundir.staged(out) as stage:
         assert stage.parent == out.parent and stage.name.startswith(".D.nlcx-tmp-")
-        (stage / "manifest.json").write_text(json.dumps({rundir.MARKER: "run", "second": True}))
         (stage / "new.csv").write_text("new\n")
+        written = manifests.write(stage, {rundir.MARKER: "run", "second": True})
         assert snapshot(out)["old.csv"] == b"old\n", "the old directory stays until the new one is complete"
     assert calls == [exchange]
-    assert snapshot(out) == {"manifest.json": b'{"nlcx_output": "run", "second": true}', "new.csv": b"new\n"}
+    assert set(snapshot(out)) == {"manifest.json", ".nlcx-output", "new.csv"}
+    assert json.loads((out / "manifest.json").read_text()) == written and written["second"] is True
     assert siblings(out) == {rundir.lock_path(out).name}
 
 
-@pytest.mark.parametrize("interruption", [KeyboardInterrupt, RuntimeError])
+@pytest.mark.parametrize("interruption", [KeyboardInterrupt, SystemExit])
 def test_an_interrupted_write_leaves_the_old_directory_as_it_was(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, interruption: type[BaseException]
 ) -> None:
-    """A run whose report fails (the last file written) or is interrupted installs nothing:
-    the old directory is byte for byte what it was, and the staged one is gone."""
+    """A run interrupted while it writes its report (the last file) installs nothing: the old
+    directory is byte for byte what it was, and the staged one is gone."""
     out = tmp_path / "D"
     result = engine.run_experiment(config.load(CONFIG, ["simulation.t_end=1"]))
     rundir.save_run(result, out, with_report=False)
@@ -128,18 +131,22 @@ def test_a_directory_nlcx_did_not_write_is_refused_in_one_line(tmp_path: Path) -
         ["sweep", str(write_sweep(tmp_path))],
         ["reproduce", "--only", "table-2.3", "--configs", str(ROOT / "configs" / "thesis")],
     )
-    for target in (foreign, tmp_path / "file"):
+    for target, problem in (
+        (foreign, REFUSED),
+        (tmp_path / "file", f"exists and is not a directory; allowed: {rundir.ALLOWED}"),
+    ):
         for command in commands:
             result = runner.invoke(app, [*command, "--out", str(target)])
             assert result.exit_code == 2, result.output
-            assert result.stderr.splitlines() == [f"output error: --out = '{target}': {REFUSED}"]
+            assert result.stderr.splitlines() == [f"output error: --out = '{target}': {problem}"]
     assert snapshot(foreign) == {"notes.txt": b"keep me\n"} and (tmp_path / "file").read_text() == "a file\n"
-    assert not [p for p in tmp_path.iterdir() if ".nlcx-tmp-" in p.name or ".nlcx-partial" in p.name]
+    assert not [p for p in tmp_path.iterdir() if ".nlcx-" in p.name], "a refused target leaves nothing beside it"
     empty = tmp_path / "empty"
     empty.mkdir()
     result = runner.invoke(app, ["run", str(CONFIG), "simulation.t_end=1", "--no-report", "--out", str(empty)])
     assert result.exit_code == 0, result.output
     assert {p.name for p in empty.iterdir()} == {
+        ".nlcx-output",
         "config.yaml",
         "metrics.csv",
         "timeseries.csv",
@@ -148,36 +155,76 @@ def test_a_directory_nlcx_did_not_write_is_refused_in_one_line(tmp_path: Path) -
     }
 
 
+def _marked(directory: Path, kind: str = "sweep") -> Path:
+    """``directory`` written as nlcx writes an output: a file, then its manifest and mark."""
+    directory.mkdir(parents=True, exist_ok=True)
+    (directory / "sweep.csv").write_text("variant\n0\n")
+    manifests.write(directory, {rundir.MARKER: kind})
+    return directory
+
+
+def _copied_manifest(directory: Path) -> None:
+    """A manifest copied in from a marked directory, whose mark file stays behind."""
+    source = _marked(directory.parent / "source")
+    directory.mkdir()
+    (directory / "manifest.json").write_bytes((source / "manifest.json").read_bytes())
+
+
+def _other_id(directory: Path) -> None:
+    """A marked directory whose mark file names another id than its manifest."""
+    _marked(directory)
+    (directory / manifests.MARK).write_text(json.dumps({rundir.MARKER: "sweep", manifests.ID_KEY: "0" * 32}))
+
+
+def _named_like_ours(files: dict[str, str]) -> Callable[[Path], None]:
+    def make(directory: Path) -> None:
+        directory.mkdir()
+        for name, text in files.items():
+            (directory / name).parent.mkdir(parents=True, exist_ok=True)
+            (directory / name).write_text(text)
+
+    return make
+
+
 @pytest.mark.parametrize(
-    ("files", "ours"),
+    ("make", "ours"),
     [
-        ({"manifest.json": json.dumps({rundir.MARKER: "sweep"})}, True),
-        ({"manifest.json": json.dumps({"name": "x", "versions": {"nlcx": "0.1.0"}})}, True),  # before the marker
-        ({"parts/000000-0123456789.index.csv": "variant\n", "parts/x.metrics.csv": ""}, True),  # interrupted sweep
-        ({"parts/000000-0123456789.index.parquet": ""}, True),  # its batches' files in Parquet
-        ({"sweep.csv": "variant\n"}, True),
-        ({"sweep.parquet/part-000000000.parquet": ""}, True),  # a sweep's index as a Parquet dataset
-        ({"sweep.parquet": ""}, True),  # or as one Parquet file
-        ({"metrics.parquet/part-000000000.parquet": ""}, False),  # metrics alone: not a sweep's mark
-        ({"tables/table_2_3.csv": "", "claims.csv": ""}, True),  # a reproduction
-        ({"manifest.json": json.dumps({rundir.MARKER: "photos"})}, False),
-        ({"manifest.json": json.dumps({"name": "x", "versions": {"numpy": "2"}})}, False),
-        ({"manifest.json": "[1, 2]"}, False),
-        ({"claims.csv": ""}, False),
-        ({"tables/t.csv": ""}, False),
-        ({"parts/notes.csv": ""}, False),
+        (_marked, True),
+        (lambda d: _marked(d, "identification"), True),
+        (_copied_manifest, False),  # the manifest without its directory's mark
+        (_other_id, False),
+        (_named_like_ours({"manifest.json": json.dumps({rundir.MARKER: "sweep"})}), False),  # no id, no mark
+        (_named_like_ours({"manifest.json": json.dumps({"name": "x", "versions": {"nlcx": "0.1.0"}})}), False),
+        (_named_like_ours({"parts/000000-0123456789.index.csv": "variant\n", "parts/x.metrics.csv": ""}), False),
+        (_named_like_ours({"sweep.csv": "variant\n"}), False),
+        (_named_like_ours({"sweep.parquet/part-000000000.parquet": ""}), False),
+        (_named_like_ours({"tables/table_2_3.csv": "", "claims.csv": ""}), False),
+        (_named_like_ours({"manifest.json": "[1, 2]", manifests.MARK: "{}"}), False),
+    ],
+    ids=[
+        "marked",
+        "marked-in-place",
+        "copied-manifest",
+        "other-id",
+        "marker-without-id",
+        "old-manifest",
+        "old-sweep-parts",
+        "sweep-csv",
+        "sweep-parquet",
+        "reproduction-files",
+        "not-an-object",
     ],
 )
-def test_which_directories_nlcx_wrote(tmp_path: Path, files: dict[str, str], ours: bool) -> None:
+def test_which_directories_nlcx_wrote(tmp_path: Path, make: Callable[[Path], object], ours: bool) -> None:
+    """Only the mark makes a directory nlcx's: its manifest and its mark file name the same
+    random id; file names prove nothing (an output of an older nlcx is refused: removed by hand)."""
     directory = tmp_path / "d"
-    for name, text in files.items():
-        (directory / name).parent.mkdir(parents=True, exist_ok=True)
-        (directory / name).write_text(text)
+    make(directory)
     assert rundir.written_by_nlcx(directory) is ours
     if ours:
         rundir.check_target(directory)
     else:
-        with pytest.raises(rundir.OutputError, match="exists and is not an nlcx output directory"):
+        with pytest.raises(rundir.OutputError, match="carries no nlcx mark"):
             rundir.check_target(directory)
 
 
@@ -304,7 +351,7 @@ def test_save_run_writes_what_nlcx_run_writes(tmp_path: Path, monkeypatch: pytes
     command = runner.invoke(app, ["run", str(CONFIG), *overrides, "--out", str(tmp_path / "cli")])
     assert command.exit_code == 0, command.output
     assert calls == [tmp_path / "cli"]
-    names = {"config.yaml", "metrics.csv", "timeseries.csv", "figure.png", "gains.png", "manifest.json"}
+    names = {"config.yaml", "metrics.csv", "timeseries.csv", "figure.png", "gains.png", "manifest.json", ".nlcx-output"}
     for out in (tmp_path / "api", tmp_path / "cli"):
         assert {p.name for p in out.iterdir()} == names | {"report.html", "report.md"}
     for name in ("config.yaml", "metrics.csv", "timeseries.csv"):

@@ -42,6 +42,7 @@ from nlcx.analysis.linear import (
     poles_table,
 )
 from nlcx.errors import ConfigError
+from nlcx.limits import MAX_POINTS, check_count
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -421,8 +422,7 @@ def analyse(
     if along is not None:
         if along not in AXES:
             raise ConfigError("along", along, "allowed: t (time) or e (error)")
-        if isinstance(points, bool) or not isinstance(points, int) or points < 2:
-            raise ConfigError("points", points, "an integer >= 2")
+        check_count("points", points, 2, MAX_POINTS, "frozen points along the axis")
     setting = _setting(config, controller, overrides)
     _check_axes(setting, given, "at", at)
     result = _frozen(setting, point)

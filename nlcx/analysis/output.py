@@ -11,7 +11,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -20,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
+from nlcx import manifest as manifests
 from nlcx import rundir
 from nlcx.analysis.frozen import AXES, schedule_axes
 from nlcx.analysis.linear import pole_counts
@@ -59,7 +59,7 @@ def save_analysis(
         written.append(path)
         info = manifest(result, along, overrides, started)
         info["files"] = [p.name for p in written]
-        write_text(stage / "manifest.json", json.dumps(info, indent=2) + "\n")
+        manifests.write(stage, info)
     return out
 
 

@@ -15,6 +15,7 @@ import gc
 
 from nlcx.cli import analysis, experiments, inspecting
 from nlcx.cli._app import app, command_settings, one_line_errors
+from nlcx.terminal import echo
 
 __all__ = ["app", "command_settings", "main", "one_line_errors"]
 
@@ -24,11 +25,30 @@ _COMMANDS = (experiments, inspecting, analysis)  # imported for the commands the
 def main() -> None:  # pragma: no cover - console entry point
     """The ``nlcx`` command.
 
+    A misused command line (an unknown option or command, a missing argument) is one line on
+    stderr, ``usage error: ...; see nlcx COMMAND --help`` (exit 2), like every other refusal.
     When the interpreter exits, everything still alive is frozen first (:func:`_freeze_at_exit`),
     so its final collections do not walk the import graph of numba, pandas and matplotlib, a
     noticeable part of a short run."""
+    import sys
+
+    import typer
+
     _freeze_at_exit()
-    app()
+    command = typer.main.get_command(app)
+    try:
+        status = command.main(prog_name="nlcx", standalone_mode=False)
+    except typer.Abort:
+        echo("interrupted", err=True)
+        sys.exit(130)
+    except typer.TyperException as exc:  # the parser's errors: a usage error names its command
+        context = getattr(exc, "ctx", None)
+        message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+        where = f"; see {context.command_path} --help" if context is not None else ""
+        line = message.splitlines()[0].rstrip(".") if message else "bad command line"
+        echo(f"usage error: {line}{where}", err=True)
+        sys.exit(getattr(exc, "exit_code", 2))
+    sys.exit(status if isinstance(status, int) else 0)
 
 
 @functools.cache

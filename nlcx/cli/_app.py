@@ -17,6 +17,8 @@ import typer
 
 from nlcx import _numba_compat, compiled_cache
 from nlcx.errors import NlcxError
+from nlcx.limits import MAX_JOBS, check_count
+from nlcx.terminal import echo
 
 app = typer.Typer(
     add_completion=False,
@@ -31,7 +33,7 @@ def _print_version(value: bool) -> None:
     if value:
         from nlcx._version import __version__
 
-        typer.echo(f"nlcx {__version__}")
+        echo(f"nlcx {__version__}")
         raise typer.Exit()
 
 
@@ -101,7 +103,7 @@ def _one_line_warnings(show: Callable[..., None]) -> Callable[..., None]:
         line: str | None = None,
     ) -> None:
         if category.__module__.split(".")[0] == "nlcx":
-            typer.echo(f"warning: {message}", err=True)
+            echo(f"warning: {message}", err=True)
         else:
             show(message, category, filename, lineno, file, line)
 
@@ -120,10 +122,21 @@ OverridesArg = Annotated[
     ),
 ]
 NoReport = Annotated[bool, typer.Option("--no-report", help="Do not write report.html / report.md.")]
+AllowEnv = Annotated[
+    bool,
+    typer.Option(
+        "--allow-env",
+        help="Let the config's ${...} call every OmegaConf resolver, oc.env (the process's environment) "
+        "included; recorded in the manifest. Off, a config reads only its own values.",
+    ),
+]
 
 
 def one_line_errors(func: F) -> F:
-    """Report nlcx errors as one line on stderr (exit 2) instead of a traceback."""
+    """Report errors as one line on stderr instead of a traceback: an nlcx error as it words
+    itself (exit 2 for a refused input, 1 for work that failed: :attr:`NlcxError.exit_code`);
+    anything else as an internal error, without Python's name for it (exit 1). Every line is
+    made printable first (:func:`nlcx.terminal.printable`)."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -132,10 +145,10 @@ def one_line_errors(func: F) -> F:
         except (typer.Exit, typer.Abort):
             raise
         except NlcxError as exc:
-            typer.echo(str(exc), err=True)
-            raise typer.Exit(2) from None
+            echo(_first_line(str(exc)), err=True)
+            raise typer.Exit(exc.exit_code) from None
         except KeyboardInterrupt:
-            typer.echo(
+            echo(
                 "interrupted: the output directory was left as it was "
                 "(a sweep keeps its finished batches to resume from)",
                 err=True,
@@ -144,13 +157,31 @@ def one_line_errors(func: F) -> F:
         except BrokenPipeError:  # the reader stopped early (nlcx diff ... | head): nothing more to say
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             raise typer.Exit(1) from None
+        except MemoryError:
+            echo("error: out of memory; allowed: a smaller config, sweep or input", err=True)
+            raise typer.Exit(1) from None
         except Exception as exc:
             if os.environ.get("NLCX_DEBUG"):
                 raise
-            typer.echo(f"error: {type(exc).__name__}: {exc} (set NLCX_DEBUG=1 for a traceback)", err=True)
+            text = _first_line(str(exc)) or "no message"
+            echo(f"internal error: {text} (a defect of nlcx; set NLCX_DEBUG=1 for a traceback)", err=True)
             raise typer.Exit(1) from None
 
     return wrapper  # type: ignore[return-value]  # functools.wraps keeps the signature Typer reads
+
+
+def _first_line(text: str) -> str:
+    """The first line of ``text`` (an error's message is one line; anything below is dropped)."""
+    lines = text.splitlines()
+    return lines[0] if lines else ""
+
+
+def checked_jobs(jobs: int | None) -> int | None:
+    """``--jobs`` checked before any work: None (the command's default) or 1 to
+    :data:`nlcx.limits.MAX_JOBS`."""
+    if jobs is not None:
+        check_count("--jobs", jobs, 1, MAX_JOBS, "worker processes")
+    return jobs
 
 
 def _imported() -> None:

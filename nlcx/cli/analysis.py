@@ -10,8 +10,10 @@ from typing import Annotated
 
 import typer
 
+from nlcx import rundir
 from nlcx.cli._app import ConfigArg, OverridesArg, _imported, app, one_line_errors
 from nlcx.errors import ConfigError
+from nlcx.terminal import echo
 
 #: The arguments of :func:`nlcx.analysis.linearize` that are options of the command.
 _OPTIONS = ("controller", "at", "along", "points")
@@ -59,9 +61,11 @@ def linearize(
 
     _imported()
     start = time.perf_counter()
+    if out is not None:
+        rundir.check_target(out)  # refused before the analysis, not after
     with _as_options():
         result, sweep = analyse(config, controller, at, along, points=points, overrides=overrides or [])
     out_dir = out or Path("results") / "linearize" / result.experiment.name
     save_analysis(out_dir, result, sweep, overrides or [], start)
-    typer.echo("\n".join(summary(result)))
-    typer.echo(f"wrote {out_dir}/")
+    echo("\n".join(summary(result)))
+    echo(f"wrote {out_dir}/")

@@ -10,9 +10,21 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from nlcx.cli._app import ConfigArg, NoReport, OverridesArg, _fmt, _imported, app, one_line_errors
+from nlcx import safe_yaml
+from nlcx.cli._app import (
+    AllowEnv,
+    ConfigArg,
+    NoReport,
+    OverridesArg,
+    _fmt,
+    _imported,
+    app,
+    checked_jobs,
+    one_line_errors,
+)
 from nlcx.compiled_cache import CompileHelper
 from nlcx.errors import ConfigError, NlcxError
+from nlcx.terminal import echo
 
 if TYPE_CHECKING:
     from nlcx.drawing import Painter
@@ -91,6 +103,7 @@ def run(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only the run directory.")] = False,
     no_report: NoReport = False,
     device: DeviceOpt = None,
+    allow_env: AllowEnv = False,
 ) -> None:
     """Run an experiment: every controller of CONFIG on its plant, then write the run directory."""
     from nlcx import config as cfg
@@ -98,10 +111,12 @@ def run(
     overrides = _on_device(device, overrides)
     raw = cfg.apply_overrides(cfg.read_config(config), overrides or [])
     if "sweep" in raw:
-        _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report)
+        _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report, allow_env=allow_env)
         return
+    resolved = cfg.interpolate(raw, allow_env=allow_env)  # a refused resolver stops here, before any process starts
     painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
-    helper = CompileHelper([sys.executable, "-m", "nlcx.cli", "prewarm", str(config), *(overrides or [])])
+    flags = ["--allow-env"] if allow_env else []
+    helper = CompileHelper([sys.executable, "-m", "nlcx.cli", "prewarm", str(config), *flags, *(overrides or [])])
     try:
         from nlcx import engine, rundir
 
@@ -109,12 +124,15 @@ def run(
         with helper.watching():  # a slow load means an empty numba cache: `nlcx prewarm` compiles alongside
             engine.load_kernel()
         start = time.perf_counter()
-        exp = cfg.build(cfg.interpolate(raw))  # cfg.load's steps on the config already read
+        exp = cfg.build(resolved, allow_env=allow_env)  # cfg.load's steps on the config already read
         loaded = time.perf_counter()
         out_dir = out or Path(exp.section.outputs.dir or Path("results") / exp.name)
+        rundir.check_target(out_dir)  # a refused target before any work (tuners simulate)
+        prepared = engine.prepare(exp)  # every check of the config before the target's lock is taken
+        ready = time.perf_counter()
         with rundir.claim(out_dir):  # refused before simulating, not after
-            result = engine.run_experiment(exp)
-            timings = {"load": loaded - start, **result.timings}
+            result = engine.run_experiment(prepared)
+            timings = {"load": loaded - start, **result.timings, "prepare": ready - loaded}
             rundir.save_run(
                 result, out_dir, with_report=not no_report, overrides=overrides or [], timings=timings,
                 painter=painter, started=start,
@@ -126,25 +144,25 @@ def run(
     page = None if no_report else out_dir / "report.html"
     elapsed = time.perf_counter() - start
     if quiet:
-        typer.echo(str(out_dir))
+        echo(str(out_dir))
         return
-    typer.echo(
+    echo(
         f"{exp.name}: {exp.section.plant.name}, {len(result.runs)} controller(s), "
         f"{result.prepared.grid.n_steps} steps of {result.prepared.grid.dt:g} s"
     )
-    typer.echo(_summary(result))
-    typer.echo(f"wrote {out_dir}/ in {elapsed:.2f} s" + (f"; report {page}" if page else ""))
+    echo(_summary(result))
+    echo(f"wrote {out_dir}/ in {elapsed:.2f} s" + (f"; report {page}" if page else ""))
 
 
 @app.command(hidden=True)
 @one_line_errors
-def prewarm(config: ConfigArg, overrides: OverridesArg = None) -> None:
+def prewarm(config: ConfigArg, overrides: OverridesArg = None, allow_env: AllowEnv = False) -> None:
     """Compile what a run of CONFIG needs besides the kernel into numba's cache (``nlcx run``
     starts this beside itself when the cache is empty; see nlcx.engine.prewarm)."""
     from nlcx import config as cfg
     from nlcx import engine
 
-    engine.prewarm(cfg.load(config, overrides or []))
+    engine.prewarm(cfg.load(config, overrides or [], allow_env=allow_env))
 
 
 def _sweep(
@@ -158,6 +176,7 @@ def _sweep(
     dry_run: bool,
     with_report: bool = True,
     cluster_file: Path | None = None,
+    allow_env: bool = False,
 ) -> None:
     from rich.progress import (
         BarColumn,
@@ -178,20 +197,18 @@ def _sweep(
         executor, jobs = "dask", cluster.workers if cluster.kind == "local" else cluster.cores
 
     if dry_run:
-        base_raw, spec, base = sweep.load(config, overrides)
+        base_raw, spec, base = sweep.load(config, overrides, allow_env=allow_env)
         sizing.check(spec, base, None)  # the plan's memory, before it is expanded
         variants, hashes = sweep.plan(base_raw, spec)
-        typer.echo(f"{base.name}: {len(variants)} variant(s) x {len(base.controllers)} controller(s)")
+        echo(f"{base.name}: {len(variants)} variant(s) x {len(base.controllers)} controller(s)")
         for v, h in list(zip(variants, hashes, strict=True))[:20]:
             values = ", ".join(f"{k}={val!r}" for k, val in v.values.items())
-            typer.echo(f"  {v.index:>6}  seed {v.seed:>10}  {h}  {values}")
+            echo(f"  {v.index:>6}  seed {v.seed:>10}  {h}  {values}")
         if len(variants) > 20:
-            typer.echo(f"  ... {len(variants) - 20} more")
+            echo(f"  ... {len(variants) - 20} more")
         if cluster is not None:
-            typer.echo(
-                f"{cluster.kind} cluster: {cluster.jobs} job(s) of {cluster.cores} worker(s); each job's script:"
-            )
-            typer.echo(clusters.job_script(cluster).rstrip())
+            echo(f"{cluster.kind} cluster: {cluster.jobs} job(s) of {cluster.cores} worker(s); each job's script:")
+            echo(clusters.job_script(cluster).rstrip())
         return
     columns = (
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -207,22 +224,24 @@ def _sweep(
         bar.update(tasks[0], completed=done, total=total, failed=failed)
 
     try:
-        outcome = sweep.run(config, overrides, out, executor, jobs, scheduler, force, progress, with_report, cluster)
+        outcome = sweep.run(
+            config, overrides, out, executor, jobs, scheduler, force, progress, with_report, cluster, allow_env
+        )
     finally:
         bar.stop()
     counts = outcome.statuses
     summary = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
-    typer.echo(
+    echo(
         f"{outcome.computed + outcome.skipped} variants ({outcome.computed} computed, "
         f"{outcome.skipped} already done): {summary}; "
         f"{outcome.wall:.1f} s -> {outcome.out_dir}/"
     )
     if outcome.report is not None:
-        typer.echo(f"report {outcome.report} ({outcome.report_s:.2f} s)")
+        echo(f"report {outcome.report} ({outcome.report_s:.2f} s)")
     if counts.get("failed"):
         failed = outcome.index[outcome.index.status == "failed"].head(3)
         for row in failed.itertuples():
-            typer.echo(f"  variant {row.variant} failed: {row.message}", err=True)
+            echo(f"  variant {row.variant} failed: {row.message}", err=True)
         raise typer.Exit(1)
 
 
@@ -239,6 +258,7 @@ def sweep_command(
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Print the expansion and stop.")] = False,
     no_report: NoReport = False,
     device: DeviceOpt = None,
+    allow_env: AllowEnv = False,
     cluster: Annotated[
         Path | None,
         typer.Option(
@@ -251,15 +271,16 @@ def sweep_command(
     """Run the sweep of CONFIG (its sweep: section); a rerun resumes where it stopped."""
     if executor not in ("process", "serial", "dask"):
         raise NlcxError(f"--executor = {executor!r}: allowed values: process, serial, dask")
+    checked_jobs(jobs)
     overrides = _on_device(device, overrides)
     if cluster is not None and (scheduler or executor not in ("process", "dask")):
         raise NlcxError("--cluster: runs on Dask workers of its own; leave out --scheduler and --executor")
-    _sweep(config, overrides or [], out, executor, jobs, scheduler, force, dry_run, not no_report, cluster)
+    _sweep(config, overrides or [], out, executor, jobs, scheduler, force, dry_run, not no_report, cluster, allow_env)
 
 
 @app.command()
 @one_line_errors
-def validate(config: ConfigArg, overrides: OverridesArg = None) -> None:
+def validate(config: ConfigArg, overrides: OverridesArg = None, allow_env: AllowEnv = False) -> None:
     """Check CONFIG (with overrides) without running it; exit 2 with one line if invalid. A
     sweep config's base experiment, its sweep section and its plan's size are checked."""
     from nlcx import config as cfg
@@ -268,14 +289,14 @@ def validate(config: ConfigArg, overrides: OverridesArg = None) -> None:
     from nlcx.sweeps import planning, sizing
 
     if "sweep" in cfg.apply_overrides(cfg.read_config(config), overrides or []):
-        _, spec, exp = sweep.load(config, overrides or [])
+        _, spec, exp = sweep.load(config, overrides or [], allow_env=allow_env)
         size = sizing.check(spec, exp, None, columnar=spec.columnar and planning.numeric(spec))  # as a run sizes it
         planned = f"; a sweep of {size.variants:,} variants"
     else:
-        exp, planned = cfg.load(config, overrides or []), ""
+        exp, planned = cfg.load(config, overrides or [], allow_env=allow_env), ""
     engine.prepare(exp)
     labels = ", ".join(c.label for c in exp.controllers)
-    typer.echo(f"{config}: valid ({exp.section.plant.name}; controllers: {labels}{planned})")
+    echo(f"{config}: valid ({exp.section.plant.name}; controllers: {labels}{planned})")
 
 
 @app.command()
@@ -307,6 +328,7 @@ def reproduce(
     from nlcx.thesis import profiles
     from nlcx.thesis.reproduce import reproduce as run_reproduce
 
+    checked_jobs(jobs)
     _imported()
     chosen = profiles.load(profile or profiles.default_name(configs), configs)
 
@@ -318,26 +340,26 @@ def reproduce(
         done[0] += 1
         bad = [c for c, s in record.status.items() if s != "ok"]
         note = f" ({', '.join(bad)} unstable)" if bad else ""
-        typer.echo(f"  [{done[0]:>3}] {record.name:<12} {record.wall:5.2f} s{note}")
+        echo(f"  [{done[0]:>3}] {record.name:<12} {record.wall:5.2f} s{note}")
 
     with rundir.staged(out) as stage:  # renamed to OUT when complete, report included
         summary = run_reproduce(
             configs, stage, chapters=chapter, only=keys, jobs=jobs, progress=progress,
             overrides=tuple(set_ or ()), profile=chosen,
         )  # fmt: skip
-        typer.echo(
-            f"profile {chosen.name}: {len(summary['figures'])} figures, {len(summary['tables'])} tables -> {out}/"
-        )
+        echo(f"profile {chosen.name}: {len(summary['figures'])} figures, {len(summary['tables'])} tables -> {out}/")
         if "claims" in summary:
             counts = summary["claims"].reproduced.value_counts().to_dict()
-            typer.echo("claims: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+            echo("claims: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
         wall = time.perf_counter() - start
         write_reproduction_manifest(stage, chosen, wall, jobs, overrides=set_ or (), started=start)
-        typer.echo(f"done in {wall:.1f} s")
+        echo(f"done in {wall:.1f} s")
         t0 = time.perf_counter()
-        page = None if no_report else _write_report(stage, configs)
-    if page is not None:
-        typer.echo(f"report {out / page.name} ({time.perf_counter() - t0:.1f} s)")
+        failure = None if no_report else rundir.write_pages(stage, configs)
+    if failure is not None:
+        raise rundir.ReportError(out, failure)
+    if not no_report:
+        echo(f"report {out / 'report.html'} ({time.perf_counter() - t0:.1f} s)")
 
 
 def write_reproduction_manifest(
@@ -352,11 +374,10 @@ def write_reproduction_manifest(
     its ``overrides`` (``--set``), start and duration from the ``time.perf_counter()`` instant
     ``started`` (:func:`nlcx.report.provenance`), the profile, where it ran and the versions and
     commit (:func:`nlcx.report.environment`), the wall time ``wall`` and the workers."""
-    import json
     import os
     import sys
 
-    from nlcx import report
+    from nlcx import manifest, report
 
     record = {
         "nlcx_output": "reproduction",
@@ -368,15 +389,7 @@ def write_reproduction_manifest(
         "wall_s": round(wall, 2),
         "jobs": jobs or os.cpu_count(),
     }
-    report.write_text(out / "manifest.json", json.dumps(record, indent=2) + "\n")
-
-
-def _write_report(directory: Path, configs: Path | None = None) -> Path:
-    """DIR/report.html and report.md; returns the page's path."""
-    from nlcx.pages.render import write_report
-
-    html, _ = write_report(directory, configs)
-    return html
+    manifest.write(out, record)
 
 
 @app.command()
@@ -387,13 +400,17 @@ def report(
         "configs/thesis"
     ),
 ) -> None:
-    """Write DIR/report.html and DIR/report.md: one page summarising what DIR holds."""
+    """Write DIR/report.html and DIR/report.md: one page summarising what DIR holds (an output
+    directory nlcx wrote; every table it reads is checked against the manifest first)."""
     from nlcx import rundir
 
-    if not directory.is_dir():
-        raise ConfigError("DIR", str(directory), "an existing output directory")
+    rundir.check_marked(directory)  # before the lock: a refused directory gets no lock file beside it
     with rundir.locked(directory, key="DIR"):  # not while another process writes or replaces it
-        typer.echo(str(_write_report(directory, configs)))
+        rundir.check_marked(directory)
+        failure = rundir.write_pages(directory, configs, verify=True)
+    if failure is not None:
+        raise rundir.ReportError(directory, failure)
+    echo(str(directory / "report.html"))
 
 
 @app.command()
@@ -412,21 +429,22 @@ def calibrate(
     from nlcx.thesis.calibrate import calibrate as run_calibration
     from nlcx.thesis.calibrate import load_spec, write_back
 
+    checked_jobs(jobs)
     _imported()
 
     name = load_spec(spec, overrides or []).name
     out_dir = out or Path("results/calibration") / name
 
     def progress(generation: int, best: float) -> None:
-        typer.echo(f"  generation {generation:>3}: best loss {best:.5g}")
+        echo(f"  generation {generation:>3}: best loss {best:.5g}")
 
-    with rundir.locked(out_dir):
+    with rundir.claim_in_place(out_dir, "calibration"):
         outcome = run_calibration(spec, out_dir, jobs=jobs, overrides=overrides or [], progress=progress)
-    typer.echo(outcome["tuning"].to_string(index=False))
-    typer.echo(outcome["fit"].to_string(index=False))
+    echo(outcome["tuning"].to_string(index=False))
+    echo(outcome["fit"].to_string(index=False))
     if write:
-        typer.echo(f"wrote {write_back(spec, outcome)}")
-    typer.echo(f"loss {outcome['result'].f:.5g}; results in {out_dir}/")
+        echo(f"wrote {write_back(spec, outcome)}")
+    echo(f"loss {outcome['result'].f:.5g}; results in {out_dir}/")
 
 
 @app.command()
@@ -442,15 +460,15 @@ def identify(
     """Fit loop hypotheses to the train tables, rank them on validation (resumable).
     A spec with ``chapter: 5`` is chapter 5's study (Table 5.8), ranked by train loss; one with
     ``kind: consistency`` asks of each printed conventional column whether any loop gives it."""
-    import yaml
 
-    from nlcx import rundir
+    from nlcx import manifest, rundir
     from nlcx.thesis.consistency import consistency
     from nlcx.thesis.identify import identify as run_identify
     from nlcx.thesis.identify_cstr import identify_cstr
 
+    checked_jobs(jobs)
     _imported()
-    raw = yaml.safe_load(spec.read_text(encoding="utf-8")) if spec.is_file() else None
+    raw = safe_yaml.load_file(spec)
     if not isinstance(raw, dict) or not isinstance(raw.get("name"), str):
         raise ConfigError("spec", str(spec), "an identification spec: a YAML mapping with a name")
     out_dir = out or Path("results/identify") / raw["name"]
@@ -459,23 +477,24 @@ def identify(
         raise NlcxError(f"--device = {device!r}: a consistency or chapter 5 study runs on the cpu only")
 
     def progress(done: int, total: int, name: str) -> None:
-        typer.echo(f"  [{done}/{total}] {name}")
+        echo(f"  [{done}/{total}] {name}")
 
-    with rundir.locked(out_dir):  # resumed in place: locked, not staged
+    with rundir.claim_in_place(out_dir, "identification"):  # resumed in place: locked, not staged
         if raw.get("kind") == "consistency":
             table = consistency(spec, out_dir, jobs=jobs, progress=progress)
         elif raw.get("chapter") == 5:
             table = identify_cstr(spec, out_dir, jobs=jobs, progress=progress)
         else:
             table = run_identify(spec, out_dir, jobs=jobs, progress=progress, device=_checked_device(device))
+        manifest.update(out_dir, manifest.load(out_dir).get("checksums", {}))  # every file's checksum, anew
     if raw.get("kind") == "consistency":
         shown = table[["table", "definition", "loops", "most_cells_hit", "cells", "reproduced"]]
-        typer.echo(shown.to_string(index=False))
-        typer.echo(f"results in {out_dir}/")
+        echo(shown.to_string(index=False))
+        echo(f"results in {out_dir}/")
         return
     if raw.get("chapter") == 5:
         columns = ["rank", "hypothesis", "train_loss", "test_median_rel_error"]
     else:
         columns = ["rank", "hypothesis", "train_loss", "validation_median_rel_error", "validation_direction_agreement"]
-    typer.echo(table[columns].head(10).to_string(index=False))
-    typer.echo(f"{len(table)} hypotheses; results in {out_dir}/")
+    echo(table[columns].head(10).to_string(index=False))
+    echo(f"{len(table)} hypotheses; results in {out_dir}/")

@@ -26,6 +26,7 @@ from nlcx.cli.metric_files import (
     source_of,
 )
 from nlcx.errors import NlcxError
+from nlcx.terminal import echo
 
 
 @app.command()
@@ -60,12 +61,12 @@ def diff(
     from nlcx.diff import diff_dirs, parse_tolerances, render, summary
 
     tol = parse_tolerances(rtol or [], atol or [])
-    drifts, n_files = diff_dirs(base, new, tol, only or [])
-    if drifts:
-        typer.echo(render(drifts))
-        typer.echo(summary(drifts, n_files))
+    report = diff_dirs(base, new, tol, only or [])
+    if report.drifted:
+        echo(render(report))
+        echo(summary(report))
         raise typer.Exit(1)
-    typer.echo(f"no drift: {n_files} file(s) within rtol {tol.rtol} atol {tol.atol}")
+    echo(f"no drift: {report.n_files} file(s) within rtol {tol.rtol} atol {tol.atol}")
 
 
 # ----------------------------------------------------------------------------- nlcx metrics
@@ -228,13 +229,13 @@ def metrics_command(
     measured = [measure_block(b, file, names, sources, t_step, s) for b in blocks_of(frame, file, time_column)]
     own = CONTROLLER in columns or any(isinstance(v, str) for v in sources.values())
     for m in measured:
-        typer.echo(_heading(file, m))
-        typer.echo("\n".join(_table_lines(m)))
+        echo(_heading(file, m))
+        echo("\n".join(_table_lines(m)))
     for line in _notes(measured, s):
-        typer.echo(line)
+        echo(line)
     if out is not None:
         _write_metrics(out, _rows(measured), own)
-        typer.echo(f"wrote {out}")
+        echo(f"wrote {out}")
 
 
 # ----------------------------------------------------------------------------- nlcx list
@@ -304,12 +305,12 @@ def list_plugins(
         reg = registry.ALL[kinds[0]]
         if name not in reg.names():
             raise NlcxError(f"list error: NAME = {name}: {reg.unknown_message(name)}")
-        typer.echo("\n".join(_plugin_lines(reg.explain(name), _SECTIONS[kinds[0]])))
+        echo("\n".join(_plugin_lines(reg.explain(name), _SECTIONS[kinds[0]])))
         return
     for each in kinds:
-        typer.echo(f"{each}:")
+        echo(f"{each}:")
         for entry, summary in registry.ALL[each].describe():
-            typer.echo(f"  {entry:<20} {summary}")
+            echo(f"  {entry:<20} {summary}")
 
 
 # ----------------------------------------------------------------------------- nlcx schema
@@ -331,9 +332,9 @@ def schema_command(
 
     text = schema_text(experiment_schema())
     if out is None:
-        typer.echo(text, nl=False)
+        echo(text, nl=False)
         return
     from nlcx.drawing import atomic_write
 
     atomic_write(out, lambda tmp: tmp.write_text(text, encoding="utf-8"))
-    typer.echo(f"wrote {out}")
+    echo(f"wrote {out}")

@@ -62,6 +62,9 @@ __all__ = [
 ]
 
 
-def load(path: str | Path, overrides: list[str] | None = None) -> Experiment:
-    """Read, override, interpolate and validate an experiment config (the four steps above)."""
-    return build(interpolate(apply_overrides(read_config(path), overrides or [])))
+def load(path: str | Path, overrides: list[str] | None = None, *, allow_env: bool = False) -> Experiment:
+    """Read, override, interpolate and validate an experiment config (the four steps above);
+    ``allow_env``: every OmegaConf resolver on, ``oc.env`` included (:func:`interpolate`)."""
+    return build(
+        interpolate(apply_overrides(read_config(path), overrides or []), allow_env=allow_env), allow_env=allow_env
+    )

@@ -42,6 +42,8 @@ class Experiment:
     controllers: tuple[PluginSection, ...]
     uncertainties: tuple[PluginSection, ...]
     references: dict[str, PluginSection]
+    #: Whether its interpolation could read the process (``--allow-env``); recorded in the manifest.
+    allow_env: bool = False
 
     @property
     def name(self) -> str:
@@ -108,14 +110,15 @@ def controller_section(label: str, data: Any, path: str) -> PluginSection:
     return PluginSection(c.label, c.kind, c.model, config, tuners)
 
 
-def build(raw: dict[str, Any], like: Experiment | None = None) -> Experiment:
+def build(raw: dict[str, Any], like: Experiment | None = None, allow_env: bool = False) -> Experiment:
     """Validate a raw config mapping (after overrides).
 
     ``like`` is an experiment validated before, e.g. a sweep's base: its sections whose raw
     mapping equals ``raw``'s (top-level sections; controllers, uncertainties and references one
     by one) are taken over instead of validated again. Validation is deterministic, so the
     result equals ``build(raw)``; a sweep variant that changes a few numbers re-validates only
-    the sections holding them.
+    the sections holding them. ``allow_env`` is recorded: whether ``raw`` was interpolated
+    with every resolver on (:func:`nlcx.config.interpolate`).
     """
     same = _unchanged(raw, like)
     section = validate_model(ExperimentSection, _with_validated_sections(raw, like, same), "")
@@ -147,6 +150,7 @@ def build(raw: dict[str, Any], like: Experiment | None = None) -> Experiment:
         controllers=controllers,
         uncertainties=uncertainties,
         references=references,
+        allow_env=allow_env or (like is not None and like.allow_env),
     )
 
 

@@ -1,6 +1,7 @@
 """Reading config files: YAML parsed by PyYAML, and the files named by ``extends`` merged under them.
 
-YAML is parsed by ``yaml.safe_load`` (its numbers are the ones the configs were written for)
+YAML is parsed by :mod:`nlcx.safe_yaml` (``yaml.SafeLoader`` within limits of size, nodes,
+nesting and text; its numbers are the ones the configs were written for)
 and the files named by ``extends:`` are merged under the file's own keys by :func:`deep_merge`.
 The merge is written out here rather than done by ``OmegaConf.merge`` because of its one rule
 OmegaConf has no place for: a plugin section whose ``kind`` changes is replaced whole, not
@@ -14,8 +15,7 @@ import copy
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from nlcx import safe_yaml
 from nlcx.errors import ConfigError
 
 
@@ -41,8 +41,8 @@ def deep_merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
 def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any]:
     """Read a config file, first merging the files its ``extends`` key names.
 
-    ``extends`` is a path or a list of paths relative to the file; they are merged in order
-    and the file's own keys go on top (see :func:`deep_merge`).
+    ``extends`` is a YAML file (``.yaml`` or ``.yml``) or a list of them, relative to the file;
+    they are merged in order and the file's own keys go on top (see :func:`deep_merge`).
     """
     path = Path(path).resolve()
     if path in _seen:
@@ -53,23 +53,24 @@ def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any
         parents = [parents]
     if not isinstance(parents, list) or not all(isinstance(p, str) for p in parents):
         raise ConfigError("extends", parents, "must be a file path or a list of file paths")
+    for parent in parents:
+        if Path(parent).suffix.lower() not in YAML_SUFFIXES:
+            raise ConfigError("extends", parent, f"a YAML file ({' or '.join(YAML_SUFFIXES)}) relative to {path.name}")
     merged: dict[str, Any] = {}
     for parent in parents:
         merged = deep_merge(merged, read_config(path.parent / parent, (*_seen, path)))
     return deep_merge(merged, data)
 
 
+#: The suffixes of a file ``extends`` may name.
+YAML_SUFFIXES = (".yaml", ".yml")
+
+
 def read_yaml(path: str | Path) -> dict[str, Any]:
-    """Parse a YAML file with ``yaml.safe_load``; it must hold a mapping."""
+    """Parse a YAML file within the limits of :mod:`nlcx.safe_yaml`; it must hold a mapping.
+    No error quotes the file's content: a file that is not a config may be anything."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError("", str(path), "config file not found")
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
-        raise ConfigError("", str(path), f"not valid YAML{where}: {getattr(exc, 'problem', exc)}") from None
+    data = safe_yaml.load_file(path)
     if not isinstance(data, dict):
         raise ConfigError("", str(path), "a config file must hold a mapping of sections")
     return data

@@ -36,26 +36,79 @@ class _NotDirectError(Exception):
     """The direct walk of :func:`interpolate` stops: OmegaConf resolves the config (or reports its error)."""
 
 
-def interpolate(raw: dict[str, Any]) -> dict[str, Any]:
+def interpolate(raw: dict[str, Any], *, allow_env: bool = False) -> dict[str, Any]:
     """Resolve every ``${...}`` reference by OmegaConf's rules, then drop ``vars``.
 
     ``"${dotted.key}"`` is replaced by a copy of that key's value, ``"x_${a}"`` by a string,
     and references chain and nest. ``vars`` is a free section for named values that other
     keys refer to, e.g. the conventional gains shared by the x and y loops of the thesis's
-    pendulums.
+    pendulums. Of OmegaConf's resolvers only those that read the config itself
+    (:data:`CONFIG_RESOLVERS`) are on; ``allow_env`` turns on every resolver OmegaConf knows,
+    ``oc.env`` (which reads the process's environment) included.
 
     Raises
     ------
     ConfigError
         One line naming the key that holds the failing reference: it refers to a key that does
-        not exist, is part of a circular reference, or is not a valid interpolation.
+        not exist, is part of a circular reference, is not a valid interpolation, or calls a
+        resolver that is off.
     """
     try:
         out = _resolved_directly(raw)
     except _NotDirectError:
+        if not allow_env:
+            check_resolvers(raw)
         out = _resolved_by_omegaconf(raw)
     out.pop("vars", None)
     return out
+
+
+#: The resolvers on without ``allow_env``: they read nothing but the config's own keys.
+CONFIG_RESOLVERS = frozenset({"oc.select", "oc.dict.keys", "oc.dict.values"})
+
+
+def check_resolvers(node: Any, path: tuple[str, ...] = ()) -> None:
+    """Refuse (:class:`ConfigError`, naming the key) a string anywhere in ``node`` that calls a
+    resolver outside :data:`CONFIG_RESOLVERS`: ``oc.env`` reads the process's environment,
+    ``oc.decode`` and ``oc.create`` parse text outside the limits of :mod:`nlcx.safe_yaml`, and
+    a resolver registered by other code may read anything. Nothing of the process reaches a
+    config, and so an output, unless the user allows it (``--allow-env``)."""
+    if isinstance(node, dict):
+        for key, value in node.items():
+            check_resolvers(value, (*path, str(key)))
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            check_resolvers(value, (*path, str(i)))
+    elif isinstance(node, str) and "${" in node:
+        off = sorted(name for name in _resolvers_called(node) if name not in CONFIG_RESOLVERS)
+        if off:
+            raise ConfigError(
+                ".".join(path), node, f"calls the resolver {off[0]}, which is off: a config reads only its own "
+                f"values (references and {', '.join(sorted(CONFIG_RESOLVERS))}); --allow-env turns every resolver "
+                "on, oc.env included",
+            )  # fmt: skip
+
+
+def _resolvers_called(text: str) -> list[str]:
+    """The names of the resolvers ``text`` calls, as OmegaConf's grammar parses it (a name built
+    by an interpolation appears as its text, ``${...}``, and is never one that is on); none
+    where it does not parse (OmegaConf then reports it)."""
+    from omegaconf import grammar_parser
+    from omegaconf.errors import GrammarParseError
+    from omegaconf.grammar.gen.OmegaConfGrammarParser import OmegaConfGrammarParser
+
+    try:
+        tree = grammar_parser.parse(text)
+    except GrammarParseError:
+        return []
+    names: list[str] = []
+    stack: list[Any] = [tree]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, OmegaConfGrammarParser.InterpolationResolverContext):
+            names.append(node.resolverName().getText())
+        stack.extend(node.getChild(i) for i in range(getattr(node, "getChildCount", lambda: 0)()))
+    return names
 
 
 def _resolved_directly(raw: dict[str, Any]) -> dict[str, Any]:
@@ -155,9 +208,11 @@ class Interpolated:
     resolved: dict[str, Any]
     targets: frozenset[tuple[str, ...]]
 
+    allow_env: bool = False
+
     @classmethod
-    def of(cls, raw: dict[str, Any]) -> Interpolated:
-        return cls(raw, interpolate(raw), frozenset(_reference_targets(raw)))
+    def of(cls, raw: dict[str, Any], *, allow_env: bool = False) -> Interpolated:
+        return cls(raw, interpolate(raw, allow_env=allow_env), frozenset(_reference_targets(raw)), allow_env)
 
     def resolve(self, values: list[tuple[list[str], Any]]) -> dict[str, Any]:
         """``interpolate(set_values(raw, values))``: the values set on the interpolated config
@@ -165,7 +220,7 @@ class Interpolated:
         Both share unchanged parts with ``raw`` or ``resolved`` (treat them as read-only)."""
         if all(self._independent(parts, value) for parts, value in values):
             return set_values(self.resolved, values)
-        return interpolate(set_values(self.raw, values))
+        return interpolate(set_values(self.raw, values), allow_env=self.allow_env)
 
     def _independent(self, parts: list[str], value: Any) -> bool:
         """Whether setting ``value`` at ``parts`` commutes with interpolation: the value holds

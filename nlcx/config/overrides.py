@@ -13,8 +13,7 @@ import copy
 from dataclasses import dataclass
 from typing import Any, Literal
 
-import yaml
-
+from nlcx import safe_yaml
 from nlcx.errors import MISSING, ConfigError
 
 #: What an override may look like (Hydra's override grammar).
@@ -82,19 +81,8 @@ def parse_override(text: str) -> Override:
         raise ConfigError("", text, OVERRIDE_FORMS)
     if not sep:
         return Override(action, parts, MISSING, text)
-    try:
-        parsed = yaml.safe_load(value) if value.strip() else None
-    except yaml.YAMLError as exc:
-        raise ConfigError(key, value, f"not valid YAML: {_yaml_problem(exc)}") from None
+    parsed = safe_yaml.load_text(value, "override", key=key) if value.strip() else None
     return Override(action, parts, parsed, text)
-
-
-def _yaml_problem(exc: yaml.YAMLError) -> str:
-    """What ``exc`` says is wrong with the YAML, in one line: a parser's ``problem``, or the first
-    line of a reader's message (a character YAML does not allow, which has no ``problem``)."""
-    if isinstance(exc, yaml.MarkedYAMLError):
-        return str(exc.problem)
-    return str(exc).partition("\n")[0]
 
 
 def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]:

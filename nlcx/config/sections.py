@@ -11,7 +11,11 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
+
+#: The most integration steps a run may have (t_end / dt); memory refuses most runs far sooner
+#: (:mod:`nlcx.preflight`), this bounds the arithmetic that counts them.
+MAX_STEPS = 1e12
 
 
 class Section(BaseModel):
@@ -21,7 +25,7 @@ class Section(BaseModel):
     the configuration reference documents.
     """
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class PlantSection(Section):
@@ -69,6 +73,18 @@ class SimulationSection(Section):
             "exceeds its bound or becomes non-finite (plants add defaults, e.g. |theta| <= pi/2 for the pendulums)."
         ),
     )
+
+    @field_validator("dt")
+    @classmethod
+    def _countable_steps(cls, dt: float, info: ValidationInfo) -> float:
+        t_end = info.data.get("t_end")
+        steps = t_end / dt if isinstance(t_end, float) else 0.0
+        if not steps <= MAX_STEPS:
+            raise ValueError(
+                f"t_end / dt = {t_end:g} / {dt:g} = {steps:.3g} steps; allowed: at most {MAX_STEPS:.0e} steps "
+                "(a longer step, or a shorter run)"
+            )
+        return dt
 
     @field_validator("bounds")
     @classmethod

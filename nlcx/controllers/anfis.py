@@ -56,7 +56,7 @@ CONSEQUENT_SIZE = CONSEQUENT.size
 class AnfisModelConfig(BaseModel):
     """One trained ANFIS model (:meth:`nlcx.tuning.anfis.AnfisModel.to_config`)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     mf: Literal["gbell", "gauss"] = Field("gbell", description="membership functions: generalised bell or Gaussian")
     n_mfs: int = Field(ge=1, le=50, description="membership functions per input")
     ranges: tuple[tuple[float, float], tuple[float, float]] = Field(

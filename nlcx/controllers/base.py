@@ -16,7 +16,7 @@ from nlcx.validation import join
 class ControllerConfig(BaseModel):
     """Base of every controller's configuration: unknown keys are errors."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     kind: str
 
 

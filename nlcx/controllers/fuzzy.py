@@ -142,7 +142,7 @@ def _check_range(value: tuple[float, float], names: tuple[str, str]) -> tuple[fl
 class _VariableSets(BaseModel):
     """The five fuzzy sets of one variable: (lower, upper) crisp range each."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     @field_validator(*SET_NAMES, check_fields=False)
     @classmethod
@@ -178,7 +178,7 @@ else:
 class FuzzySets(BaseModel):
     """Fuzzy sets of every variable (defaults: Tables 5.3-5.7); a partial mapping overrides sets."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     e: ESets = Field(ESets(), description="fuzzy sets of the error e (Table 5.3)")
     de_dt: DeDtSets = Field(DeDtSets(), description="fuzzy sets of de/dt (Table 5.4)")
     kp1: Kp1Sets = Field(Kp1Sets(), description="fuzzy sets of the scaled gain k_p1 (Table 5.5)")
@@ -194,7 +194,7 @@ class FuzzySets(BaseModel):
 class FuzzyUniverses(BaseModel):
     """Universes of discourse of the inputs (Table 5.2); the outputs' universe is [0, 1]."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     e: tuple[float, float] = Field(E_UNIVERSE, description="universe of discourse of e, (min, max) (Table 5.2)")
     de_dt: tuple[float, float] = Field(
         DE_DT_UNIVERSE, description="universe of discourse of de/dt, (min, max) (Table 5.2)"

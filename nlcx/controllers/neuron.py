@@ -28,7 +28,7 @@ from nlcx.validation import join
 
 
 class LearningRates(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     p: float = Field(0.4, ge=0, description="learning rate eta_P of the proportional weight w1")
     i: float = Field(0.35, ge=0, description="learning rate eta_I of the integral weight w2")
     d: float = Field(0.4, ge=0, description="learning rate eta_D of the derivative weight w3")

@@ -22,7 +22,7 @@ from nlcx.validation import join, validate_model
 class DerivativeConfig(BaseModel):
     """How the derivative term is formed."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     method: Literal["backward", "filtered"] = Field(
         "backward",
         description=(
@@ -45,7 +45,7 @@ class LoopConfig(BaseModel):
     """One loop: which output it regulates, which input it drives, with which schedule, and the
     limits of its integrator."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     signal: str | None = Field(None, description="plant output regulated by this loop (default: the loop's key)")
     input: str | None = Field(
         None, description="plant input the loop drives (default: the plant's default input for this output)"
@@ -89,7 +89,7 @@ class SaturationConfig(BaseModel):
     drive it further; ``back_calculation`` adds K_b (u_sat - u) to the integrator input of
     every loop on that input (Astrom & Hagglund's tracking anti-windup, K_b = 1 / T_t)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     limits: dict[str, float] = Field(
         min_length=1,
         description=(

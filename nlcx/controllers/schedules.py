@@ -42,14 +42,14 @@ EA = ERROR_AGS.at
 
 
 class ScheduleConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     kind: str
 
 
 class GainRange(BaseModel):
     """The two end points of a scheduled gain, as the thesis's tables print them."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     min: float = Field(
         description="the range's printed min end point (a min above max reverses the direction of travel)"
     )
@@ -59,7 +59,7 @@ class GainRange(BaseModel):
 class Rates(BaseModel):
     """The rate constants k of the exponentials, one per gain (section 2.3)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     kp: float = Field(
         ge=0, description="rate constant k of k_p's exponential: 1/s for time_ags, 1/(unit of e) for error_ags"
     )

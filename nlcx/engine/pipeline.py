@@ -78,6 +78,7 @@ def prepare(exp: Experiment) -> Prepared:
         section = _tuned_section(exp, c, plant, tuning)
         controllers.append(section.model.build(c.label, section.config, plant, f"controllers.{c.label}", dt=sim.dt))
     preflight.check_references(exp.references, exp.references, plant, controllers)
+    preflight.check_reference_times(exp.references, sim.t_end, sim.dt)
     check_memory(exp, plant, [len(c.reference_signals) + len(c.log_names) for c in controllers])
     grid = time_grid(sim.t_end, sim.dt, sim.integrator)
     seed_sequence = np.random.SeedSequence(sec.seed)
@@ -123,8 +124,9 @@ def remeasure(results: Sequence[Result], metrics: Mapping[str, Any]) -> list[Res
     return [dataclasses.replace(r, prepared=p, rows=b) for r, p, b in zip(results, prepared, blocks, strict=True)]
 
 
-def run_experiment(exp: Experiment) -> Result:
-    """Prepare, simulate and measure one experiment (:func:`evaluate` of one); timings in seconds."""
+def run_experiment(exp: Experiment | Prepared) -> Result:
+    """Prepare (unless prepared already), simulate and measure one experiment (:func:`evaluate`
+    of one); timings in seconds."""
     (result,) = evaluate([exp])
     return result
 

@@ -115,6 +115,8 @@ def check_memory(exp: Experiment, plant: Plant, channels: list[int], copies: int
     n_samples = preflight.samples(sim.t_end, sim.dt)
     needed = preflight.run_bytes(n_samples, len(TABLEAUS[sim.integrator].b), plant, channels, copies)
     advice = f"{n_samples:.3g} samples of dt = {sim.dt} s: shorten simulation.t_end or raise simulation.dt"
+    if copies > 1:
+        advice += f" ({copies} variants at once: a batch on each worker; fewer --jobs or a smaller sweep.batch_size)"
     preflight.check_memory(needed, "simulation.t_end", sim.t_end, advice)
 
 

@@ -12,8 +12,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from nlcx import safe_yaml
 from nlcx.comparison import Comparison, Row, comparison
 
 
@@ -35,7 +34,7 @@ def _config(directory: Path) -> tuple[str, dict[str, Any]]:
     """config.yaml's text and its mapping (both empty when the directory has none)."""
     path = directory / "config.yaml"
     text = path.read_text(encoding="utf-8") if path.is_file() else ""
-    loaded = yaml.load(text, Loader=yaml.CSafeLoader) if text else None
+    loaded = safe_yaml.load_text(text, str(path)) if text else None
     return text, loaded if isinstance(loaded, dict) else {}
 
 

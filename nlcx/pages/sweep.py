@@ -15,9 +15,8 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-import yaml
 
-from nlcx import report
+from nlcx import report, safe_yaml
 from nlcx.pages import charts, sweep_charts
 from nlcx.pages.output_tables import STEMS, part_files, read_output_table, table_path
 
@@ -30,6 +29,8 @@ def summary(metrics: pd.DataFrame, index: pd.DataFrame) -> pd.DataFrame:
     run stopped: diverged) and failed (the variant did not run); a row per (controller,
     signal, metric) in the order they first appear (categorical text columns read fastest)."""
     failed = int((index.status == "failed").sum()) if "status" in index else 0
+    if metrics.empty or not {"controller", "signal", "metric", "value", "status"} <= set(metrics.columns):
+        return pd.DataFrame(columns=SUMMARY_COLUMNS)  # no variant measured anything
     groups, trios = sweep_charts.first_seen([metrics.controller, metrics.signal, metrics.metric])
     value = metrics.value.to_numpy(dtype=float)
     ok_status = (metrics.status == "ok").to_numpy()
@@ -48,7 +49,12 @@ def summary(metrics: pd.DataFrame, index: pd.DataFrame) -> pd.DataFrame:
             "min": float(ok.min()) if len(ok) else np.nan, "max": float(ok.max()) if len(ok) else np.nan,
             "undefined": int(np.isnan(ran).sum()), "unstable": int((~ok_status[members]).sum()), "failed": failed,
         })  # fmt: skip
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=SUMMARY_COLUMNS)
+
+
+#: The columns of the summary table (summary.csv), in order.
+SUMMARY_COLUMNS = ("controller", "signal", "metric", "unit", "n", "median", "q25", "q75", "iqr", "min", "max",
+                   "undefined", "unstable", "failed")  # fmt: skip
 
 
 def varied(index: pd.DataFrame) -> list[str]:
@@ -86,6 +92,8 @@ def read_tables(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     import pyarrow.parquet as pq
 
     files = part_files(path)
+    if not {"variant", *CATEGORIES, "value"} <= set(pq.read_schema(files[0]).names):  # no variant measured
+        return pd.DataFrame(columns=["variant", *CATEGORIES, "value"]), read_output_table(directory, "sweep")
     index_path = table_path(directory, "sweep")
     assert index_path is not None
     index_files = part_files(index_path)
@@ -130,15 +138,18 @@ def _metrics_frame(files: list[Path]) -> pd.DataFrame:
 
 
 def context(directory: Path) -> dict[str, Any]:
-    """Everything the sweep page shows; writes summary.csv, profiles.csv and the charts' SVG files beside it."""
+    """Everything the sweep page shows; writes summary.csv, profiles.csv and the charts' SVG files beside it.
+    ``usable`` is False when no variant measured any metric (every one failed or was unstable):
+    the page then says so first."""
     metrics, index = read_tables(directory)
     table = summary(metrics, index)
     report.write_csv(directory / "summary.csv", table)
     files = directory / FILES
-    colour = sweep_charts.controller_colours([str(c) for c in metrics.controller.unique()])
+    usable = bool(table["n"].sum()) if len(table) else False
+    colour = sweep_charts.controller_colours([str(c) for c in table.controller.unique()])
     distribution = sweep_charts.distribution_svg(table)
     report.write_text(files / "distributions.svg", str(distribution))
-    params = varied(index)
+    params = varied(index) if usable else []
     stride = sweep_charts.profile_stride(len(index))
     sampled = metrics if stride == 1 else metrics[metrics.variant.to_numpy() % stride == 0]
     plots, tables = [], []
@@ -156,13 +167,14 @@ def context(directory: Path) -> dict[str, Any]:
     if tables:
         report.write_csv(directory / "profiles.csv", pd.concat(tables, ignore_index=True))
     config = (directory / "config.yaml").read_text(encoding="utf-8") if (directory / "config.yaml").is_file() else ""
-    loaded = yaml.safe_load(config) if config else None
+    loaded = safe_yaml.load_text(config, str(directory / "config.yaml")) if config else None
     raw = loaded if isinstance(loaded, dict) else {}
     return {
         "kind": "sweep",
         "title": f"nlcx sweep: {raw.get('name', directory.name)}",
         "caption": str(raw.get("title") or ""),
         "summary": table.to_dict("records"),
+        "usable": usable,
         "variants": len(index),
         "profile_stride": stride,
         "status": index.status.value_counts().to_dict() if "status" in index else {},

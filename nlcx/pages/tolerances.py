@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field
 
+from nlcx import safe_yaml
 from nlcx.validation import validate_model
 
 
@@ -58,4 +58,4 @@ class Tolerances(BaseModel):
 
 
 def load(path: Path) -> Tolerances:
-    return validate_model(Tolerances, yaml.safe_load(path.read_text(encoding="utf-8")) or {}, "tolerances")
+    return validate_model(Tolerances, safe_yaml.load_file(path) or {}, "tolerances")

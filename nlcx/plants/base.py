@@ -25,7 +25,7 @@ from nlcx.errors import ConfigError
 class PlantParams(BaseModel):
     """Base of every plant's parameter model: unknown keys are errors."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 @dataclass(frozen=True)

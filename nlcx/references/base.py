@@ -10,7 +10,7 @@ from pydantic import BaseModel, ConfigDict
 
 
 class ReferenceConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     kind: str
 
 

@@ -8,7 +8,6 @@ read, merged and written, the same bytes.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -17,14 +16,9 @@ import numpy as np
 import pandas as pd
 
 from nlcx import config as cfg
+from nlcx import manifest
+from nlcx.sweeps import seals
 from nlcx.sweeps.planning import SweepSection, Variant
-
-
-def write_report(directory: Path) -> Path:
-    """``directory``'s report.html and report.md (:func:`nlcx.pages.render.write_report`); the page."""
-    from nlcx.pages.render import write_report
-
-    return write_report(directory)[0]
 
 
 def write_manifest(
@@ -41,19 +35,24 @@ def write_manifest(
     overrides: Sequence[str] = (),
     started: float | None = None,
     path: str = "",
+    allow_env: bool = False,
 ) -> None:
     """manifest.json: the run (name, kind ``nlcx_output``: sweep, command line, ``overrides``,
+    ``allow_env`` (whether the config could call every OmegaConf resolver),
     start and duration from ``started``, variants computed and skipped, statuses, seed,
     executor, and ``path``: how the variants ran, columnar or per-variant and why), the wall
     time of each phase (reading, planning and loading the kernel; the batches; assembling the
     tables), the host, the platform, the package
-    versions and the git commit (:func:`nlcx.report.provenance`, :func:`nlcx.report.environment`)."""
+    versions and the git commit (:func:`nlcx.report.provenance`, :func:`nlcx.report.environment`);
+    then the directory's mark and the checksum of every file (:func:`nlcx.manifest.write`; a
+    sealed part's as its seal holds it)."""
     from nlcx import report
 
     info = {
         "name": name,
         "nlcx_output": "sweep",
         **report.provenance(overrides, started),
+        "allow_env": allow_env,
         "variants": variants,
         "computed": computed,
         "skipped": variants - computed,
@@ -66,7 +65,7 @@ def write_manifest(
         "timings_s": {phase: round(seconds, 3) for phase, seconds in timings.items()},
         **report.environment(),
     }
-    report.write_text(out_dir / "manifest.json", json.dumps(info, indent=2, default=str) + "\n")
+    manifest.write(out_dir, info, known=seals.known(out_dir))
 
 
 def _in_plan_order(rows: pd.DataFrame, want: dict[str, int]) -> bool:
@@ -150,7 +149,7 @@ def assemble(
     from nlcx import report
 
     want = {h: v.index for v, h in zip(variants, hashes, strict=True)}
-    parts = [path.name.removesuffix(".index.csv") for path in sorted((out_dir / "parts").glob("*.index.csv"))]
+    parts = seals.sealed(out_dir)
     indexes = [
         pd.read_csv(out_dir / "parts" / f"{part}.index.csv", dtype={"config_hash": str}).assign(_part=part_no)
         for part_no, part in enumerate(parts)
@@ -191,7 +190,7 @@ def write_config(out_dir: Path, base_raw: dict[str, Any], spec: SweepSection) ->
 
     from nlcx import report
 
-    resolved = {**cfg.interpolate(base_raw), "sweep": spec.model_dump()}
+    resolved = {**cfg.interpolate(base_raw, allow_env=True), "sweep": spec.model_dump()}  # checked by planning.load
     report.write_text(out_dir / "config.yaml", yaml.safe_dump(resolved, sort_keys=False, allow_unicode=True))
 
 

@@ -2,7 +2,8 @@
 
 :func:`run_batch` is what a process pool's worker runs (pickled by its module path): it builds
 and prepares each variant, simulates them in one pipeline call and writes the batch's part
-files, the metrics first and the index last (which marks the batch complete).
+files, the metrics and the index, then their seal (:mod:`nlcx.sweeps.seals`), which marks the
+batch complete.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from nlcx import config as cfg
+from nlcx.sweeps import seals
 from nlcx.sweeps.planning import Variant
 
 if TYPE_CHECKING:
@@ -74,7 +76,7 @@ def _cell(value: Any) -> Any:
 
 
 def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
-    """Simulate a batch of variants and write its part files (the metrics, then the index).
+    """Simulate a batch of variants and write its part files (the metrics, the index, their seal).
 
     ``return_metrics=False`` leaves the metrics out of the result (a pool worker's result
     travels back pickled; the sweep reads the metrics from the part files). After the batch
@@ -91,7 +93,7 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
 
     rows: list[dict[str, Any]] = []
     prepared_of: dict[int, Any] = {}
-    interpolated = cfg.Interpolated.of(batch.base_raw)
+    interpolated = cfg.Interpolated.of(batch.base_raw, allow_env=True)  # checked by planning.load
     base = cfg.build(interpolated.resolved)  # valid: sweep.load built it
     for pos, (variant, digest) in enumerate(zip(batch.variants, batch.hashes, strict=True)):
         row: dict[str, Any] = {"variant": variant.index, "seed": variant.seed, "config_hash": digest}
@@ -105,6 +107,7 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
     # one pipeline call: variants on the same time grid go through the kernel together
     members = list(prepared_of)
     results = engine.evaluate([prepared_of[pos] for pos in members], record_logs=batch.timeseries)
+    written: list[Path] = []
     for pos, result in zip(members, results, strict=True):
         row = rows[pos]
         unstable = [run for run in result.runs if run.status != "ok"]
@@ -113,7 +116,7 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
         if batch.timeseries:
             stem = batch.out_dir / "timeseries" / f"variant_{batch.variants[pos].index:06d}"
             fmt = result.prepared.experiment.section.outputs.timeseries_format
-            report.write_timeseries(stem, report.timeseries_columns(result), fmt)
+            written.append(report.write_timeseries(stem, report.timeseries_columns(result), fmt))
     metrics = engine.shared_metrics(results)
     if batch.metrics is not None:
         metrics = metrics[metrics.metric.isin(batch.metrics)].reset_index(drop=True)
@@ -124,8 +127,10 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
     # an empty text (a metric's note when it has none) as a missing value, which is how
     # assemble reads it back: the file's rows are then metrics.csv's rows, byte for byte, and
     # assemble can join the files of a sweep computed in one go (nlcx.sweeps.assembly)
-    report.write_csv(batch.out_dir / "parts" / f"{part}.metrics.csv", metrics, empty_as_missing=True)
-    report.write_csv(batch.out_dir / "parts" / f"{part}.index.csv", pd.DataFrame(rows))  # last: marks it complete
+    parts = batch.out_dir / "parts"
+    report.write_csv(parts / f"{part}.metrics.csv", metrics, empty_as_missing=True)
+    report.write_csv(parts / f"{part}.index.csv", pd.DataFrame(rows))
+    seals.seal(batch.out_dir, part, [parts / f"{part}.metrics.csv", parts / f"{part}.index.csv", *written])  # last
     statuses = pd.Series([row["status"] for row in rows]).value_counts().to_dict()
     return BatchResult(
         rows, metrics if return_metrics else None, part, len(rows), {str(k): int(v) for k, v in statuses.items()}

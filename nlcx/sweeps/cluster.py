@@ -26,9 +26,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field
 
+from nlcx import safe_yaml
 from nlcx.errors import NlcxError
 from nlcx.validation import validate_model
 
@@ -69,7 +69,7 @@ def load(path: Path) -> ClusterSpec:
     """The cluster file ``path``, validated (one-line errors naming the key)."""
     if not path.is_file():
         raise NlcxError(f"--cluster: no such file: {path}")
-    return validate_model(ClusterSpec, yaml.safe_load(path.read_text(encoding="utf-8")) or {}, "cluster")
+    return validate_model(ClusterSpec, safe_yaml.load_file(path) or {}, "cluster")
 
 
 def _jobqueue_class(kind: str) -> Any:

@@ -34,6 +34,7 @@ import numpy as np
 
 from nlcx import config as cfg
 from nlcx.errors import NlcxError
+from nlcx.sweeps import seals
 from nlcx.sweeps.planning import ColumnPlan, SweepSection, Variant, variant_hash
 
 #: Up to this many varied keys every corner of their box is probed; above it, the two corners
@@ -65,7 +66,7 @@ class _Probe:
     """Templates of the sweep's base config with some values and a seed set."""
 
     def __init__(self, base_raw: dict[str, Any]) -> None:
-        self.interpolated = cfg.Interpolated.of(base_raw)
+        self.interpolated = cfg.Interpolated.of(base_raw, allow_env=True)  # checked by planning.load
         self.base = cfg.build(self.interpolated.resolved)
 
     def template(self, values: dict[str, Any], seed: int) -> Any:
@@ -292,8 +293,9 @@ def write_parquet_table(path: Path, table: Any) -> None:
 
 
 def run_column_batch(batch: ColumnBatch) -> Any:
-    """Simulate and measure a columnar batch; write its part files (the metrics, then the index,
-    which marks the batch complete). Returns the batch's :class:`~nlcx.sweeps.batches.BatchResult`."""
+    """Simulate and measure a columnar batch; write its part files (the metrics, the index, then
+    their seal, which marks the batch complete). Returns the batch's
+    :class:`~nlcx.sweeps.batches.BatchResult`."""
     from nlcx.engine.gpu import ensemble_metrics
     from nlcx.sweeps.batches import BatchResult, set_threads, settle_heap
 
@@ -304,8 +306,10 @@ def run_column_batch(batch: ColumnBatch) -> Any:
         status, message = _statuses(template, rows, batch.n)
         metrics = _metrics_table(batch, measured)
         parts = batch.out_dir / "parts"
-        write_parquet_table(parts / f"{batch.part}.metrics.parquet", metrics)
-        write_parquet_table(parts / f"{batch.part}.index.parquet", _index_table(batch, status, message))
+        files = (parts / f"{batch.part}.metrics.parquet", parts / f"{batch.part}.index.parquet")
+        write_parquet_table(files[0], metrics)
+        write_parquet_table(files[1], _index_table(batch, status, message))
+        seals.seal(batch.out_dir, batch.part, files)
         counts = dict(zip(*np.unique(status, return_counts=True), strict=True))
         return BatchResult(part=batch.part, variants=batch.n, statuses={str(k): int(v) for k, v in counts.items()})
     finally:

@@ -21,6 +21,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from nlcx import config as cfg
+from nlcx.config.interpolation import check_resolvers
 from nlcx.errors import ConfigError
 from nlcx.metrics.names import METRIC_UNITS
 from nlcx.sweeps.seeds import spawned_seeds
@@ -270,17 +271,23 @@ def variant_hash(base_digest: str, variant: Variant) -> str:
 
 
 def load(
-    path: str | Path | Mapping[str, Any], overrides: list[str] | None = None
+    path: str | Path | Mapping[str, Any], overrides: list[str] | None = None, *, allow_env: bool = False
 ) -> tuple[dict[str, Any], SweepSection, Any]:
     """(base raw config without ``sweep``, the sweep spec, the validated base experiment) of a
-    config file, or of a raw config mapping as a file holds it (:func:`nlcx.sweep`)."""
+    config file, or of a raw config mapping as a file holds it (:func:`nlcx.sweep`).
+
+    Unless ``allow_env``, a resolver that reads the process is refused here, anywhere in the
+    config, the sweep section included (:func:`nlcx.config.interpolation.check_resolvers`):
+    the sweep's later interpolations of the base and its variants then have every resolver on."""
     raw_config = copy.deepcopy(dict(path)) if isinstance(path, Mapping) else cfg.read_config(path)
     raw = cfg.apply_overrides(raw_config, overrides or [])
+    if not allow_env:
+        check_resolvers(raw)
     sweep_raw = raw.pop("sweep", None)
     if sweep_raw is None:
         raise ConfigError("sweep", None, "this config has no sweep section (use `nlcx run` for a single experiment)")
     spec = validate_model(SweepSection, sweep_raw, "sweep")
-    base = cfg.build(cfg.interpolate(raw))
+    base = cfg.build(cfg.interpolate(raw, allow_env=True), allow_env=allow_env)
     return raw, spec, base
 
 
@@ -292,6 +299,6 @@ def base_digest(base_raw: dict[str, Any], spec: SweepSection) -> str:
 
 def plan(base_raw: dict[str, Any], spec: SweepSection) -> tuple[list[Variant], list[str]]:
     """The variants and the hash of each one's resolved config."""
-    variants = expand(spec, cfg.interpolate(base_raw))
+    variants = expand(spec, cfg.interpolate(base_raw, allow_env=True))  # checked by load
     digest = base_digest(base_raw, spec)
     return variants, [variant_hash(digest, v) for v in variants]

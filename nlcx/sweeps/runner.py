@@ -16,7 +16,8 @@ import pandas as pd
 
 import nlcx.sweeps.columnar as columnar
 from nlcx.errors import NlcxError
-from nlcx.sweeps.assembly import assemble, assemble_columns, write_manifest, write_report
+from nlcx.sweeps import seals
+from nlcx.sweeps.assembly import assemble, assemble_columns, write_manifest
 from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, run_batch, set_threads
 from nlcx.sweeps.cluster import ClusterSpec
 from nlcx.sweeps.cluster import make as make_cluster
@@ -189,6 +190,7 @@ def run(
     progress: Callable[[int, int, int], None] | None = None,
     with_report: bool = True,
     cluster: ClusterSpec | None = None,
+    allow_env: bool = False,
 ) -> SweepOutcome:
     """Run (or resume) a sweep; write the tables sweep and metrics (``sweep.format``),
     config.yaml, manifest.json and, ``with_report``, the report, and rename the whole directory
@@ -196,15 +198,16 @@ def run(
     (:mod:`nlcx.sweeps.columnar`), else config by config.
     ``out_dir`` is claimed (:func:`nlcx.rundir.claim`) before any variant is computed;
     ``progress(finished, total, failed)`` is called before the first batch and after each;
-    ``cluster`` (with ``executor="dask"``): where the workers run (:mod:`nlcx.sweeps.cluster`)."""
+    ``cluster`` (with ``executor="dask"``): where the workers run (:mod:`nlcx.sweeps.cluster`);
+    ``allow_env``: the config may call every OmegaConf resolver (:func:`nlcx.config.interpolate`)."""
     from nlcx import config as cfg
 
     start = time.perf_counter()
-    base_raw, spec, base = load(path, overrides)
+    base_raw, spec, base = load(path, overrides, allow_env=allow_env)
     out_dir = Path(out_dir or base.section.outputs.dir or Path("results") / base.name)
     as_columns = spec.columnar and numeric(spec)
     check_plan_size(spec, base, out_dir, columnar=as_columns)  # before anything is expanded
-    columns = expand_columns(spec, cfg.interpolate(base_raw)) if as_columns else None
+    columns = expand_columns(spec, cfg.interpolate(base_raw, allow_env=True)) if as_columns else None  # checked by load
     found = columnar.packing(base_raw, spec, columns) if spec.columnar else "sweep.columnar is false"
     job = _Job(
         base_raw, spec, base, out_dir, executor, jobs, scheduler, force, progress, cluster, overrides or [], start
@@ -255,7 +258,8 @@ class _Job:
 
     def _finish(self, staging: Path, statuses: dict[str, int], timings: dict[str, float], variants: int,
                 computed: int, how: str, with_report: bool) -> SweepOutcome:  # fmt: skip
-        """manifest.json, the report, the directory renamed into place."""
+        """manifest.json, the report (its failure recorded, the results installed all the same),
+        the directory renamed into place."""
         from nlcx import rundir
 
         end = time.perf_counter()
@@ -263,13 +267,16 @@ class _Job:
         write_manifest(
             staging, statuses, self.spec, timings, name=self.base.name, variants=variants, computed=computed,
             executor=self.executor, jobs=self.jobs, overrides=self.overrides, started=self.start, path=how,
+            allow_env=self.base.allow_env,
         )  # fmt: skip
-        page = write_report(staging) if with_report and variants else None
+        failure = rundir.write_pages(staging) if with_report and variants else None
         reported = time.perf_counter()
         rundir.install(staging, self.out_dir)
-        report = self.out_dir / page.name if page is not None else None
+        if failure is not None:
+            raise rundir.ReportError(self.out_dir, failure)
+        report = self.out_dir / "report.html" if with_report and variants else None
         return SweepOutcome(self.out_dir, computed, variants - computed, end - self.start, statuses, report,
-                            reported - end if page else 0.0, how)  # fmt: skip
+                            reported - end if report else 0.0, how)  # fmt: skip
 
     def columnar(self, plan: ColumnPlan, found: Any, with_report: bool) -> SweepOutcome:
         """The variants packed from columns, in batches of :func:`~nlcx.sweeps.columnar.batch_size`."""
@@ -285,7 +292,8 @@ class _Job:
             batches = columnar.column_batches(
                 self.base_raw, plan, found, base_digest(self.base_raw, self.spec), staging, size, metrics
             )
-            todo = [b for b in batches if not (staging / "parts" / f"{b.part}.index.parquet").exists()]
+            finished = set(seals.sealed(staging))
+            todo = [b for b in batches if b.part not in finished]
             tally = _Tally(plan.n, plan.n - sum(b.n for b in todo), self.progress)
             planned = self._run(todo, tally, columnar.run_column_batch, overlap=True)
             simulated = time.perf_counter()

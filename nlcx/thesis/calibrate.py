@@ -20,7 +20,6 @@ generation is simulated in one batched kernel call.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -33,7 +32,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nlcx import config as cfg
-from nlcx import engine
+from nlcx import engine, manifest, safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.thesis import catalog
 from nlcx.thesis.tables import lookup_value, metric_lookup
@@ -190,7 +189,7 @@ def calibrate(
         **report.provenance(overrides or [], start),
         **report.environment(),
     }
-    report.write_text(out_dir / "manifest.json", json.dumps(info, indent=2) + "\n")
+    manifest.write(out_dir, {manifest.MARKER: "calibration", **info})
     return {
         "spec": spec,
         "result": result,
@@ -226,7 +225,7 @@ def write_back(spec_path: Path, outcome: dict[str, Any]) -> Path:
     path = (spec_path.parent / spec.write.file).resolve()
     text = path.read_text(encoding="utf-8")
     header = "".join(line + "\n" for line in text.splitlines() if line.startswith("#"))
-    data = cfg.deep_merge(yaml.safe_load(text) or {}, outcome["block"])
+    data = cfg.deep_merge(safe_yaml.load_text(text, str(path)) or {}, outcome["block"])
     from nlcx import report
 
     body = yaml.safe_dump(data, sort_keys=False, default_flow_style=None)

@@ -38,11 +38,10 @@ from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nlcx import config as cfg
-from nlcx import engine, report
+from nlcx import engine, report, safe_yaml
 from nlcx.pages import tolerances
 from nlcx.thesis import catalog, hypotheses
 from nlcx.thesis.fitting import DEFINITIONS, FLOORS, TableRuns, cell_values, measure_cells, train_loss, write_study
@@ -347,7 +346,7 @@ def digest(spec: ConsistencySpec) -> str:
 
 
 def load_spec(path: Path) -> ConsistencySpec:
-    return validate_model(ConsistencySpec, yaml.safe_load(path.read_text(encoding="utf-8")) or {}, "")
+    return validate_model(ConsistencySpec, safe_yaml.load_file(path) or {}, "")
 
 
 def consistency(

@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-import yaml
 
+from nlcx import safe_yaml
 from nlcx.thesis import catalog
 
 #: Table 5.8 column -> (nlcx metric, unit).
@@ -151,7 +151,7 @@ def zn_variants(root: Path, out_dir: Path) -> pd.DataFrame:
     from nlcx import config as cfg
     from nlcx import engine, report
 
-    spec = yaml.safe_load((root / "ch5" / "zn_variants.yaml").read_text(encoding="utf-8"))
+    spec = safe_yaml.load_file(root / "ch5" / "zn_variants.yaml")
     printed = catalog.cstr_table().set_index("method").loc["ZN"]
     rows = []
     for name, variant in spec["variants"].items():

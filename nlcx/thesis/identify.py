@@ -53,7 +53,7 @@ import pandas as pd
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from nlcx import report
+from nlcx import report, safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.thesis import hypotheses, lockstep, profiles, split
 from nlcx.thesis.fitting import (
@@ -160,7 +160,7 @@ def fit_hypothesis(
 
 
 def load_spec(path: Path) -> IdentifySpec:
-    return validate_model(IdentifySpec, yaml.safe_load(path.read_text(encoding="utf-8")) or {}, "")
+    return validate_model(IdentifySpec, safe_yaml.load_file(path) or {}, "")
 
 
 def spec_digest(spec: BaseModel, spec_split: split.Split) -> str:

@@ -25,7 +25,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nlcx import config as cfg
-from nlcx import engine, report
+from nlcx import engine, report, safe_yaml
 from nlcx.errors import NlcxError
 from nlcx.thesis import catalog, hypotheses, profiles, split
 from nlcx.thesis.cstr import CSTR_METRICS, _value
@@ -150,7 +150,7 @@ def identify_cstr(
 ) -> pd.DataFrame:
     """Fit every chapter-5 hypothesis of spec ``path`` (resuming: each finished fit is written
     at once); ranking.csv (by train loss) and profile.yaml."""
-    spec = validate_model(CstrSpec, yaml.safe_load(path.read_text(encoding="utf-8")) or {}, "")
+    spec = validate_model(CstrSpec, safe_yaml.load_file(path) or {}, "")
     spec_split = split.load((path.parent / spec.split).resolve())
     cells = all_cells(spec_split)
     root = root or Path("configs") / "thesis"

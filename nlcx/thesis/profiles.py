@@ -23,10 +23,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nlcx import config as cfg
+from nlcx import safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.thesis import hypotheses
 from nlcx.validation import validate_model
@@ -124,7 +124,7 @@ def load(name: str, root: Path) -> Profile:
     if not path.is_file():
         known = sorted(p.stem for p in (root / "profiles").glob("*.yaml"))
         raise ConfigError("--profile", name, f"no such profile; allowed: {', '.join(known)}")
-    return validate_model(Profile, yaml.safe_load(path.read_text(encoding="utf-8")) or {}, "")
+    return validate_model(Profile, safe_yaml.load_file(path) or {}, "")
 
 
 def experiment(path: Path, overrides: list[str], profile: Profile | None) -> cfg.Experiment:

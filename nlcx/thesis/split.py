@@ -10,9 +10,9 @@ from pathlib import Path
 from typing import Literal
 
 import pandas as pd
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from nlcx import safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.thesis import catalog
 from nlcx.validation import validate_model
@@ -51,7 +51,7 @@ class Split(BaseModel):
 
 def load(path: Path) -> Split:
     """The split in ``path``, validated; every named table or row must exist in the thesis."""
-    split = validate_model(Split, yaml.safe_load(path.read_text(encoding="utf-8")) or {}, "")
+    split = validate_model(Split, safe_yaml.load_file(path) or {}, "")
     tables = set(catalog.thesis_metrics().table)
     methods = set(catalog.cstr_table().method)
     for kind, known in (("pendulum", tables), ("cstr", methods)):

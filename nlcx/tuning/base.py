@@ -32,7 +32,7 @@ from nlcx.plants.base import Plant
 
 
 class TunerConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     kind: str
 
 

@@ -29,7 +29,7 @@ from nlcx.plants.base import Plant
 
 
 class UncertaintyConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     kind: str
 
 
