@@ -10,7 +10,7 @@ JOBS ?= 2
 BASELINE_TABLES := table-2.3,table-2.5,table-3.2,table-3.7,table-4.2,table-4.4,table-5.1,table-5.8
 
 .PHONY: install dev-install run test lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
-	baseline baseline-diff sweep-demo bench bench-gpu docs clean typecheck
+	baseline baseline-diff baselines sweep-demo bench bench-gpu docs clean typecheck
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,6 +20,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m compileall -q nlcx
 	# compile the main job's kernels into numba's disk cache and build matplotlib's font cache
 	# now, so that the first nlcx run does not wait for them (a short run of the main job)
+	rm -rf $(VENV)/warm-up  # the make file's own scratch run (an older nlcx's is unmarked)
 	$(BIN)/nlcx run configs/xyz_error_ags.yaml simulation.t_end=0.1 --out $(VENV)/warm-up --no-report -q
 	touch $(STAMP)
 
@@ -116,6 +117,11 @@ identify: install
 	cp results/identify/fidelity.md docs/fidelity.md
 	cp results/identify/consistency/consistency.png docs/img/consistency.png
 	cp results/identify/pendulum_all/ranking.png docs/img/identify_ranking.png
+
+## baselines: the four pendulums under conventional and AGS PID, LQR and sliding mode, in the thesis's
+## scenarios and a robustness sweep (docs/baselines.md): results/baselines/ and its report
+baselines: install
+	$(BIN)/nlcx baselines --jobs $(JOBS) --out results/baselines
 
 ## calibrate: refit the unprinted conventional gains (writes configs/thesis/gains/conventional.yaml)
 calibrate: install

@@ -29,6 +29,10 @@ the table from a saved output without running anything.
     <= 2 GB, <= 10 us a variant outside the kernel), its first 10 000 variants checked against the
     per-variant path; and the parent's serial time (target <= 0.5 s + 1 us a variant).
 (e) with --fresh-clone: `make run` in a fresh clone with pip's cache off (target <= 90 s).
+(i) (b)'s 10 000-variant sweep with its PID replaced by an LQR law written in plain Python
+    (`@nlcx.controller`, named by the config's `imports:`), alternated in one run with (b)'s
+    sweep (the built-in PID), the default command (report on): their wall times and their
+    ratio (target <= 1.3).
 (h) `nlcx identify benchmarks/identify_subset.yaml --jobs 2`: eight hypotheses of the pendulum
     identification study, the literal fit first (best of two runs, its kernels compiled).
 Machines are noisy: each timing is the best of a few repeats, and ratios come from one run.
@@ -269,6 +273,54 @@ def bench_b(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
         "kernel_cpu_s": 1e-9 * alone["ns"]["nlcx"] * steps, "serial_s": nlcx_s - batches_s,
         "report_s": reports[best], "report_share": reports[best] / nlcx_s,
     }  # fmt: skip
+
+
+#: The LQR law of (i): the x pendulum's Bryson LQR with integral action (configs/baselines/x_lqr.yaml's K).
+LAW = """
+import nlcx
+
+K = (-23.938507, -23.652606, -113.277674, -20.235708, -10.0)
+
+
+@nlcx.controller("bench_lqi", measures=["x", "x_dot", "theta", "theta_dot"], references=["x", "theta"],
+                 inputs=["F_x"], states={"z": 0.0}, params=dict(zip(("k1", "k2", "k3", "k4", "ki"), K)))
+def bench_lqi(t, dt, y, r, s, p):
+    u = -(p.k1 * (y[0] - r[0]) + p.k2 * y[1] + p.k3 * (y[2] - r[1]) + p.k4 * y[3] + p.ki * s[0])
+    return (u,), (s[0] + dt * (y[0] - r[0]),)
+"""
+
+
+def bench_i(n: int = 10_000, repeats: int = 2) -> dict[str, Any]:
+    """(b)'s sweep with its PID and with the LQR law of :data:`LAW`, alternated: wall times and ratio."""
+    work = scratch()
+    (work / "law.py").write_text(LAW)
+    pid = sweep_config(n)
+    law = {**pid, "imports": ["law.py"], "controllers": {"lqi": {"kind": "bench_lqi"}}}
+    for name, raw in (("pid", pid), ("law", law)):
+        (work / f"{name}.yaml").write_text(yaml.safe_dump(raw))
+    walls: dict[str, list[float]] = {"pid": [], "law": []}
+    summaries = {}
+    for repeat in range(repeats + 1):  # the first of each compiles what it needs: not counted
+        for name in ("pid", "law") if repeat % 2 == 0 else ("law", "pid"):
+            wall, out = run_timed([*NLCX, "sweep", str(work / f"{name}.yaml"), "--jobs", "2",
+                                   "--out", str(work / f"{name}{repeat}")], ROOT)  # fmt: skip
+            summaries[name] = next(line for line in out.splitlines() if " variants (" in line)
+            if repeat:
+                walls[name].append(wall)
+    return {"variants": n, "pid_s": min(walls["pid"]), "law_s": min(walls["law"]), "walls": walls,
+            "ratio": min(walls["law"]) / min(walls["pid"]),
+            "summaries": {k: v.replace(str(work), "<tmp>") for k, v in summaries.items()}}  # fmt: skip
+
+
+def print_i(g: dict[str, Any]) -> None:
+    walls = {k: ", ".join(f"{w:.1f}" for w in v) for k, v in g["walls"].items()}
+    print(
+        f"(i) {g['variants']} variants of (b) with an LQR law written in plain Python (@nlcx.controller, imports:), "
+        f"`nlcx sweep --jobs 2` (report on): {g['law_s']:.1f} s (best of {walls['law']}); the same sweep with the "
+        f"built-in PID {g['pid_s']:.1f} s (best of {walls['pid']}), alternated; ratio law / PID {g['ratio']:.2f} "
+        "[target <= 1.3]"
+    )
+    print(f"    law: {g['summaries']['law']}; PID: {g['summaries']['pid']}")
 
 
 def bench_f(n: int = 1_000_000, subset: int = 10_000) -> dict[str, Any]:
@@ -700,6 +752,8 @@ FIGURE_PATTERNS = {
     "f_peak_mb": r"^\(f\) .*? peak (\d+) MB",
     "f_outside_us": r"the rest \(start, .*?\) ([\d.]+) us a variant",
     "h_wall_s": r"^\(h\) .*?: ([\d.]+) s wall",
+    "i_ratio": r"^\(i\) .*? ratio law / PID ([\d.]+)",
+    "i_law_s": r"^\(i\) .*?\(report on\): ([\d.]+) s",
 }
 
 
@@ -717,7 +771,7 @@ def figures_from_text(text: str) -> dict[str, Any]:
 def figures_measured(
     a: dict[str, float] | None, b: dict[str, Any] | None, c: dict[str, float] | None,
     d: dict[str, float] | None, e: dict[str, Any] | None, f: dict[str, Any] | None = None,
-    h: dict[str, Any] | None = None,
+    h: dict[str, Any] | None = None, i: dict[str, Any] | None = None,
 ) -> dict[str, Any]:  # fmt: skip
     """The speed table's figures from the benchmarks' results, rounded as the output prints them."""
     figures: dict[str, Any] = {"machine": machine()}
@@ -739,6 +793,8 @@ def figures_measured(
                     "f_outside_us": round(f["outside_us"], 1)}  # fmt: skip
     if h:
         figures |= {"h_wall_s": round(h["wall_s"], 1)}
+    if i:
+        figures |= {"i_ratio": round(i["ratio"], 2), "i_law_s": round(i["law_s"], 1)}
     return figures
 
 
@@ -787,6 +843,10 @@ def table_rows(f: dict[str, Any]) -> list[tuple[str, str, str, str]]:
             ("f", "that sweep's CPU time a variant outside the kernel and the report",
              f"{f['f_outside_us']:.1f} µs", "≤ 10 µs"),
         ]  # fmt: skip
+    if "i_ratio" in f:
+        rows.append(("i", "(b)'s sweep with an LQR law in plain Python (`@nlcx.controller`) in place of the PID: "
+                     "wall time, and over (b)'s PID sweep in the same run", f"{f['i_law_s']:.1f} s, "
+                     f"{f['i_ratio']:.2f}×", "≤ 1.3×"))  # fmt: skip
     if "h_wall_s" in f:
         rows.append(("h", "`nlcx identify benchmarks/identify_subset.yaml --jobs 2`: eight hypotheses of the "
                      "identification study, GA 30 × 15 then 18 × 10", f"{f['h_wall_s']:.1f} s", "–"))  # fmt: skip
@@ -817,7 +877,7 @@ def write_speed_table(figures: dict[str, Any], readme: Path = README) -> bool:
         return False
     measured = {bench for bench, *_ in table_rows(figures)}
     body = text[start + len(TABLE_START) : end]
-    rows = (re.match(r"^\| \(([a-h]|gpu)\) \|", line) for line in body.splitlines())
+    rows = (re.match(r"^\| \(([a-i]|gpu)\) \|", line) for line in body.splitlines())
     kept = [row.string for row in rows if row and row.group(1) not in measured]
     before = re.search(r"Measured by `make bench` on (.*?) \(`benchmarks", body)
     if before and "machine" not in figures:
@@ -837,7 +897,7 @@ def machine() -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description="nlcx speed benchmarks (latest output: benchmarks/latest.txt)")
     parser.add_argument(
-        "--only", default="a,d,c,b,f,h", help="benchmarks to run, comma-separated (default a,d,c,b,f,h)"
+        "--only", default="a,d,c,b,f,h,i", help="benchmarks to run, comma-separated (default a,d,c,b,f,h,i)"
     )
     parser.add_argument("--fresh-clone", action="store_true", help="also time make run in a fresh clone (downloads)")
     parser.add_argument(
@@ -853,7 +913,7 @@ def main() -> None:
     sys.path.insert(0, str(ROOT / "benchmarks"))
     os.chdir(ROOT)
     print(f"nlcx benchmarks, {time.strftime('%Y-%m-%d')}, {machine()}")
-    a = b = c = d = e = f = h = None
+    a = b = c = d = e = f = h = i = None
     if "a" in chosen:
         a = bench_a()
         print_a(a)
@@ -896,7 +956,10 @@ def main() -> None:
             f"(e) make run in a fresh clone, pip's cache off (install, warm-up compile, main job): "
             f"{e['make_run_s']:.0f} s [target <= 90]; the next nlcx run {e['next_run_s']:.1f} s"
         )
-    if write_speed_table(figures_measured(a, b, c, d, e, f, h)):
+    if "i" in chosen:
+        i = bench_i()
+        print_i(i)
+    if write_speed_table(figures_measured(a, b, c, d, e, f, h, i)):
         print("README.md speed table rewritten", file=sys.stderr)
 
 

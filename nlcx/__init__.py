@@ -33,6 +33,7 @@ _HOMES = {
     "NlcxError": "nlcx.errors",
     "step_info": "nlcx.metrics",
     "plant": "nlcx.plants.scalar",
+    "controller": "nlcx.controllers.law",
     "linearize": "nlcx.analysis",
 }
 

@@ -9,6 +9,7 @@ from nlcx.api import run as run
 from nlcx.api import sweep as sweep
 from nlcx.comparison import compare as compare
 from nlcx.comparison import improvement as improvement
+from nlcx.controllers.law import controller as controller
 from nlcx.errors import ConfigError as ConfigError
 from nlcx.errors import NlcxError as NlcxError
 from nlcx.metrics import step_info as step_info
@@ -24,6 +25,7 @@ __all__ = [
     "SweepResult",
     "__version__",
     "compare",
+    "controller",
     "experiment",
     "improvement",
     "linearize",

@@ -20,6 +20,7 @@ from nlcx import compiled_cache
 from nlcx._numba_compat import quiet_first_class_functions
 from nlcx.errors import ConfigError
 from nlcx.limits import MAX_JOBS, check_count
+from nlcx.plugins import load_config_imports
 from nlcx.results import Result, SweepResult, load_run, read_output_table
 
 if TYPE_CHECKING:
@@ -96,7 +97,7 @@ def experiment(config: ConfigLike, overrides: OverridesLike = None, *, allow_env
     compiled_cache.ready()  # before a plugin's compiled functions are loaded
     from nlcx import config as cfg
 
-    raw = _with_overrides(_raw(config), overrides)
+    raw = load_config_imports(_with_overrides(_raw(config), overrides))
     if "sweep" in raw:
         raise ConfigError("sweep", "...", "a config with a sweep section runs with nlcx.sweep, not nlcx.run")
     return cfg.build(cfg.interpolate(raw, allow_env=allow_env), allow_env=allow_env)

@@ -60,9 +60,9 @@ MARK = ".nlcx-output"
 MARKER = "nlcx_output"
 #: The manifest key holding the directory's random id (32 hex digits), the same as the mark file's.
 ID_KEY = "output_id"
-#: The kinds of output directory: the first four are written whole and replaced whole
+#: The kinds of output directory: the first five are written whole and replaced whole
 #: (:mod:`nlcx.rundir`); the others are written in place and resumed.
-KINDS = ("run", "sweep", "reproduction", "linearize", "identification", "calibration")
+KINDS = ("run", "sweep", "reproduction", "linearize", "baselines", "identification", "calibration")
 #: The largest manifest read (a sweep of many variants lists many part files).
 MAX_MANIFEST_BYTES = 64 * 1024 * 1024
 #: Bytes read at a time when hashing a file.

@@ -156,7 +156,10 @@ class Registry(Generic[T]):
             close = difflib.get_close_matches(name, names, n=1)
             if close:
                 message += f" (did you mean {close[0]!r}?)"
-        return message
+        return message + (
+            f"; one of your own: name its file in the config's imports: [my_{self.kind}s.py] (or --plugins FILE), "
+            f"or install a package that declares it under the entry-point group {self.group}"
+        )
 
     def describe(self) -> list[tuple[str, str]]:
         """(name, first line of the plugin's docstring) for ``nlcx list``."""
@@ -376,6 +379,10 @@ def register_builtins() -> None:
     controllers.register("open_loop", "nlcx.controllers.open_loop:OpenLoop")
     controllers.register("single_neuron", "nlcx.controllers.neuron:SingleNeuron")
     controllers.register("preview", "nlcx.controllers.preview:Preview")
+    controllers.register("state_feedback", "nlcx.controllers.feedback:StateFeedback")
+    controllers.register("lqr", "nlcx.controllers.feedback:LQR")
+    controllers.register("pole_placement", "nlcx.controllers.feedback:PolePlacement")
+    controllers.register("sliding_mode", "nlcx.controllers.sliding_mode:SlidingMode")
     schedules.register("constant", "nlcx.controllers.schedules:Constant")
     schedules.register("time_ags", "nlcx.controllers.schedules:TimeAGS")
     schedules.register("error_ags", "nlcx.controllers.schedules:ErrorAGS")

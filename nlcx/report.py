@@ -22,6 +22,7 @@ import numpy as np
 import yaml
 
 from nlcx import manifest as manifests
+from nlcx import plugins
 from nlcx._version import __version__
 from nlcx.drawing import FigurePlan, Line, Painter, Panel, atomic_write, draw, draw_all
 from nlcx.engine import METRIC_COLUMNS, Result, Run
@@ -378,6 +379,7 @@ def manifest(
         "nlcx_output": "run",
         **provenance(overrides, started),
         "allow_env": exp.allow_env,
+        "imports": plugins.loaded(),
         **(environment() if where is None else where),
         "seed": {
             "entropy": int(cast(int, ss.entropy)),  # prepare seeds it with the config's integer seed
@@ -385,6 +387,10 @@ def manifest(
             "uncertainty_spawn_keys": [[*ss.spawn_key, i] for i in range(ss.n_children_spawned)],
         },
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
+        "outputs": [[s.name, s.unit, s.label] for s in result.prepared.plant.outputs],
+        "states": result.prepared.plant.state_names,
+        "inputs": result.prepared.plant.input_names,
+        "output_matrix": result.prepared.plant.C.tolist(),
         "runs": [
             {
                 "controller": run.label,

@@ -23,6 +23,7 @@ from nlcx.errors import ConfigError
 from nlcx.pages.output_tables import read_output_table
 
 if TYPE_CHECKING:
+    import control as ct
     import pandas as pd
     from matplotlib.figure import Figure
 
@@ -87,6 +88,7 @@ class Result:
         *,
         source: engine.Result | None = None,
         directory: Path | None = None,
+        signals: Mapping[str, Sequence[Any]] | None = None,
     ) -> None:
         self.name = name
         self.config = config
@@ -96,6 +98,8 @@ class Result:
         self._outputs = outputs
         self._source = source
         self.directory = directory
+        #: The plant's ``states`` and ``inputs`` by name, in its order, and its ``output_matrix`` C.
+        self._signals = {kind: list(values) for kind, values in (signals or {}).items()}
 
     @classmethod
     def from_engine(cls, result: engine.Result) -> Result:
@@ -112,6 +116,7 @@ class Result:
             trajectories=trajectories,
             outputs=[(s.name, s.unit, s.label) for s in plant.outputs],
             source=result,
+            signals={"states": plant.state_names, "inputs": plant.input_names, "output_matrix": plant.C.tolist()},
         )
 
     @property
@@ -197,6 +202,49 @@ class Result:
                 "trajectory", controller, "this run was written without time series (outputs.timeseries: false)"
             )
         return self._trajectories[controller].copy()
+
+    def response(self, controller: str) -> ct.TimeResponseData:
+        """One controller's run as python-control's ``TimeResponseData``: its outputs, inputs and
+        states over time, named as the plant names them, so that python-control's plotting
+        (``.plot()``) and ``step_info`` (of ``.outputs[i]`` over ``.time``) work on it.
+
+        Parameters
+        ----------
+        controller : str
+            A label of :attr:`controllers`.
+
+        Returns
+        -------
+        control.TimeResponseData
+            ``time``; ``outputs`` (one row per plant output), ``inputs`` and ``states`` likewise;
+            a run that diverged ends where it stopped.
+
+        Examples
+        --------
+        >>> import control, nlcx
+        >>> response = nlcx.run("configs/x_error_ags.yaml", ["simulation.t_end=20"]).response("proposed")
+        >>> response.output_labels, response.input_labels
+        (['x', 'theta'], ['F_x'])
+        >>> info = control.step_info(response.y[0], response.time, final_output=1.0)
+        >>> round(info["Overshoot"], 2)
+        28.31
+        """
+        import control as ct
+
+        frame = self.trajectory(controller)
+        outputs = [name for name, _, _ in self._outputs]
+        states, inputs = list(self._signals.get("states", [])), list(self._signals.get("inputs", []))
+        missing = [name for name in (*states, *inputs) if name not in frame.columns]
+        if missing or not states:
+            wanted = "a run whose plant's states and inputs nlcx recorded (an output of this nlcx)"
+            raise ConfigError("controller", controller, f"{wanted}; missing: {', '.join(missing) or 'its signals'}")
+        x = frame[states].to_numpy().T
+        y = np.asarray(self._signals["output_matrix"], dtype=float) @ x
+        return ct.TimeResponseData(
+            frame.t.to_numpy(), y, states=x,
+            inputs=frame[inputs].to_numpy().T, output_labels=outputs, state_labels=states, input_labels=inputs,
+            title=f"{self.name}: {controller}", sysname=controller,
+        )  # fmt: skip
 
     def plot(self, signals: Sequence[str] | None = None, *, title: str | None = None) -> Figure:
         """The thesis's figure layout: one axes per output, every controller overlaid, the
@@ -329,6 +377,17 @@ def _read_timeseries(path: Path | None) -> dict[str, pd.DataFrame] | None:
     return out
 
 
+def _recorded_outputs(record: Mapping[str, Any]) -> list[tuple[str, str, str]] | None:
+    """(name, unit, label) of the plant's outputs as the manifest records them; None when it
+    records none (nothing is then imported to find them: the plant is built, if it is known)."""
+    outputs = record.get("outputs")
+    if not isinstance(outputs, list) or not all(
+        isinstance(o, list) and len(o) == 3 and all(isinstance(v, str) for v in o) for o in outputs
+    ):
+        return None
+    return [(str(n), str(u), str(label)) for n, u, label in outputs]
+
+
 def _outputs_of(config: Mapping[str, Any]) -> list[tuple[str, str, str]]:
     """(name, unit, label) of the plant's outputs, from the registered plant of ``config``."""
     from nlcx import config as cfg
@@ -398,9 +457,14 @@ def load_run(directory: str | os.PathLike[str]) -> Result:
         metrics=metrics,
         statuses=statuses,
         trajectories=_read_timeseries(series),
-        outputs=_outputs_of(config),
+        outputs=_recorded_outputs(record) or _outputs_of(config),
         directory=path,
+        signals={kind: record[kind] for kind in _SIGNALS if isinstance(record.get(kind), list)},
     )
+
+
+#: What the manifest records of the plant besides its outputs: its states and inputs by name, C.
+_SIGNALS = ("states", "inputs", "output_matrix")
 
 
 def _copy_run(source: Path, target: Path) -> None:

@@ -59,7 +59,7 @@ if TYPE_CHECKING:
     from nlcx.engine import Result
 
 #: The kinds of output directory nlcx writes whole, as its manifest names them under :data:`MARKER`.
-KINDS = ("run", "sweep", "reproduction", "linearize")
+KINDS = ("run", "sweep", "reproduction", "linearize", "baselines")
 #: The manifest.json key that marks a directory nlcx wrote; its value is one of :data:`manifest.KINDS`.
 MARKER = manifest.MARKER
 #: What an output directory may be.

@@ -83,7 +83,9 @@ def test_list_a_controller_shows_its_configuration() -> None:
         (
             ["list", "plants", "x_pendulm"],
             "list error: NAME = x_pendulm: unknown plant; allowed: cstr, transfer_function, x_pendulum, xy_pendulum, "
-            "xyz_pendulum, xz_pendulum (did you mean 'x_pendulum'?)",
+            "xyz_pendulum, xz_pendulum (did you mean 'x_pendulum'?); one of your own: name its file in the config's "
+            "imports: [my_plants.py] (or --plugins FILE), or install a package that declares it under the "
+            "entry-point group nlcx.plants",
         ),
         (
             ["list", "controler"],

@@ -64,10 +64,10 @@ CASES = [
         "not an output of x_pendulum; allowed: x, theta",
     ),
     (
-        ["controllers.proposed.kind=lqr"],
+        ["controllers.proposed.kind=lqg"],
         "controllers.proposed.kind",
-        "'lqr'",
-        "unknown controller; allowed: open_loop, pid",
+        "'lqg'",
+        "unknown controller; allowed: lqr, open_loop, pid",
     ),
     (
         ["reference.x.kind=ramp"],

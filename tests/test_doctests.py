@@ -18,6 +18,9 @@ MODULES = (
     "nlcx.comparison",
     "nlcx.metrics.step",
     "nlcx.plants.scalar",
+    "nlcx.plants.lti",
+    "nlcx.controllers.law",
+    "nlcx.terminal",
     "nlcx.analysis.linearization",
 )
 

@@ -12,8 +12,10 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 NOTEBOOKS = sorted(EXAMPLES.glob("*.ipynb"))
 
 
-def test_there_are_the_three_example_notebooks() -> None:
-    assert [p.name for p in NOTEBOOKS] == ["01_quick_start.ipynb", "02_custom_plant.ipynb", "03_robustness_sweep.ipynb"]
+def test_there_are_the_four_example_notebooks() -> None:
+    assert [p.name for p in NOTEBOOKS] == [
+        "01_quick_start.ipynb", "02_custom_plant.ipynb", "03_robustness_sweep.ipynb", "04_own_controller.ipynb",
+    ]  # fmt: skip
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])

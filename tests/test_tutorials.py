@@ -237,9 +237,10 @@ def reader_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path
             del sys.modules[name]
 
 
-def test_there_are_the_five_tutorials() -> None:
+def test_there_are_the_six_tutorials() -> None:
     assert [p.stem for p in TUTORIALS] == [
         "fit-hypotheses",
+        "own-controller",
         "plant-plugin",
         "reproduce-a-table",
         "robustness-sweep",

@@ -122,8 +122,10 @@ def schedule_axes(kind: str) -> tuple[str, ...]:
 
 
 def loop_schedules(controller: ControllerInstance) -> dict[str, str]:
-    """Each loop's schedule kind, by loop name, in the order of the parameter row."""
-    return {name: str(loop["schedule"]["kind"]) for name, loop in controller.config["loops"].items()}
+    """Each loop's schedule kind, by loop name, in the order of the parameter row (none for a
+    controller without loops: a control law)."""
+    loops = controller.config.get("loops", {})
+    return {name: str(loop["schedule"]["kind"]) for name, loop in loops.items()}
 
 
 def varying_axes(controller: ControllerInstance) -> tuple[str, ...]:

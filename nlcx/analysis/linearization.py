@@ -1,11 +1,13 @@
-"""Frozen-gain linear analysis of a configured PID loop: ``nlcx.linearize`` and ``nlcx linearize``.
+"""Frozen-gain linear analysis of a configured PID loop or control law: ``nlcx.linearize`` and ``nlcx linearize``.
 
 The plant is linearised about its operating point (:func:`nlcx.plants.base.linearize`), the
 PID's gain schedules are frozen at one point (t, e) (:mod:`nlcx.analysis.frozen`), and the
 loop is closed (:mod:`nlcx.analysis.linear`): its closed-loop poles and its margins with the
 loop broken at the plant input are those of the linear time-invariant loop the scheduled PID
 would be if its gains stopped moving there. :func:`linearize_along` repeats this along the
-schedule's argument.
+schedule's argument. A control law (:mod:`nlcx.controllers.law`: a user's law, LQR, pole
+placement, state feedback, sliding mode) is linearised numerically about the operating point
+instead (:mod:`nlcx.analysis.law`); it has no schedule to freeze.
 
 What the linear model leaves out, each result says in its ``notes``: the uncertainty
 sections (disturbances, noise, friction, actuator lag and saturation), the PID's actuator
@@ -107,13 +109,18 @@ class Linearization:
     margins: pd.DataFrame
     loop_transfers: dict[str, ct.StateSpace] = field(repr=False)
     notes: tuple[str, ...] = ()
+    #: A control law's linear gains (:func:`nlcx.analysis.law.law_gains`); None for a PID.
+    law_gains: pd.DataFrame | None = field(default=None, repr=False)
 
     @property
     def gains(self) -> pd.DataFrame:
         """Each loop's frozen gains: its output, input, sign, scale, schedule, the parallel gains
-        k_p, k_i, k_d it acts with, its derivative (filtered or backward) and filter N."""
+        k_p, k_i, k_d it acts with, its derivative (filtered or backward) and filter N; for a
+        control law, d u / d (each measure, reference and state of the law): input, of, gain."""
         import pandas as pd
 
+        if self.law_gains is not None:
+            return self.law_gains.copy()
         fields = ("name", "output", "input", "sign", "scale", "schedule", "kp", "ki", "kd", "derivative", "N")
         rows = [{("loop" if f == "name" else f): getattr(loop, f) for f in fields} for loop in self.loops]
         return pd.DataFrame(rows)
@@ -196,6 +203,12 @@ def _is_pid(section: PluginSection) -> bool:
     return section.kind == "pid"
 
 
+def _is_law(section: PluginSection) -> bool:
+    from nlcx.controllers.law import LawController
+
+    return isinstance(section.model, LawController)
+
+
 def _scheduled(section: PluginSection) -> bool:
     """Whether some loop of a PID section has a schedule that varies."""
     for loop in section.config.loops.values():
@@ -213,14 +226,19 @@ def _chosen(exp: Experiment, controller: str | None) -> PluginSection:
         section = next((c for c in exp.controllers if c.label == controller), None)
         if section is None:
             raise ConfigError("controller", controller, f"not a controller of {exp.name}; allowed: {', '.join(labels)}")
-        if not _is_pid(section):
+        if not (_is_pid(section) or _is_law(section)):
             raise ConfigError(
-                f"controllers.{controller}.kind", section.kind, "linearize analyses PID controllers (pid)"
-            )
+                f"controllers.{controller}.kind", section.kind, "linearize analyses PID controllers (pid) and control "
+                "laws (nlcx.controller, lqr, pole_placement, state_feedback, sliding_mode); it cannot freeze this one",
+            )  # fmt: skip
         return section
     pids = [c for c in exp.controllers if _is_pid(c)]
     if not pids:
-        raise ConfigError("controllers", labels, "linearize analyses PID controllers (kind: pid); this config has none")
+        laws = [c for c in exp.controllers if _is_law(c)]
+        if laws:
+            return laws[0]
+        raise ConfigError("controllers", labels, "linearize analyses PID controllers (kind: pid) and control laws; "
+                          "this config has none")  # fmt: skip
     return next((c for c in pids if _scheduled(c)), pids[0])
 
 
@@ -230,6 +248,9 @@ def _notes(exp: Experiment, controller: ControllerInstance) -> tuple[str, ...]:
     if exp.uncertainties:
         names = ", ".join(u.label for u in exp.uncertainties)
         notes.append(f"the uncertainty sections ({names}) are not part of the linear model (nominal plant)")
+    if controller.law is not None:
+        return (*notes, "the law is linearised numerically about the operating point (central differences); "
+                "its update every period T is modelled as continuous, ds/dt = (s_next - s) / T")  # fmt: skip
     config = controller.config
     if config.get("saturation"):
         notes.append("the PID's actuator saturation is not part of the linear model (linear below its limits)")
@@ -260,6 +281,8 @@ def _frozen(setting: _Setting, at: FrozenPoint) -> Linearization:
     plant = setting.prepared.plant
     outputs, inputs = plant.output_names, plant.input_names
     dt = setting.experiment.section.simulation.dt
+    if setting.controller.law is not None:
+        return _law_linearization(setting, at, dt)
     loops = frozen_loops(setting.controller, at, outputs, inputs, dt)
     controller = controller_system(loops, outputs, inputs)
     closed = closed_loop_system(setting.plant, controller)
@@ -269,6 +292,25 @@ def _frozen(setting: _Setting, at: FrozenPoint) -> Linearization:
         period=update_period(setting.controller, dt), plant=setting.plant,
         controller=controller, closed_loop=closed, poles=poles_table(closed), margins=margins,
         loop_transfers=transfers, notes=setting.notes,
+    )  # fmt: skip
+
+
+def _law_linearization(setting: _Setting, at: FrozenPoint, dt: float) -> Linearization:
+    """The analysis of a control law (:mod:`nlcx.analysis.law`): nothing to freeze."""
+    from nlcx.analysis import law
+
+    plant, built = setting.prepared.plant, setting.controller
+    controller = law.law_system(built, plant, dt)
+    measured = law.measured_plant(setting.plant, built, plant)
+    closed = law.law_closed_loop(measured, controller, plant.output_names)
+    shape = built.law.shape
+    driven = [plant.input_names[int(i)] for i in built.cp[shape.n_y : shape.n_y + shape.n_u]]
+    margins, transfers = law.law_margins(measured, controller, driven)
+    period = float(built.cp[shape.hold + 1]) or dt
+    return Linearization(
+        experiment=setting.experiment, label=built.label, at=at, loops=(), period=period, plant=setting.plant,
+        controller=controller, closed_loop=closed, poles=poles_table(closed), margins=margins,
+        loop_transfers=transfers, notes=setting.notes, law_gains=law.law_gains(built, plant),
     )  # fmt: skip
 
 

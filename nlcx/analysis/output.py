@@ -20,7 +20,7 @@ import numpy as np
 import yaml
 
 from nlcx import manifest as manifests
-from nlcx import rundir
+from nlcx import plugins, rundir
 from nlcx.analysis.frozen import AXES, schedule_axes
 from nlcx.analysis.linear import pole_counts
 from nlcx.drawing import new_figure, write_figure
@@ -96,6 +96,7 @@ def manifest(
         "at": {"t": result.at.t, "e": result.at.e},
         "along": sweep,
         "notes": list(result.notes),
+        "imports": plugins.loaded(),
         **provenance(overrides, started),
         **environment(),
         "files": [],
@@ -167,8 +168,13 @@ def summary(result: Linearization, rows: int = MODES) -> list[str]:
     varying = {axis for loop in result.loops for axis in schedule_axes(loop.schedule)}
     axes = tuple(axis for axis in AXES if axis in varying)
     where = f"frozen at {result.at.describe(axes)}" if axes else "constant gains"
-    lines = [f"{result.experiment.name}: controller {result.label}, {where}"]
-    lines.append(f"  {'loop':<10}{'input':<8}{'kp':>10}{'ki':>10}{'kd':>10}  derivative")
+    if result.law_gains is not None:
+        lines = [f"{result.experiment.name}: controller {result.label}, a control law linearised numerically"]
+        lines.append(f"  {'input':<8}{'of':<14}{'gain':>12}   (d u / d signal; an LQR's are -K)")
+        lines += [f"  {row.input:<8}{row.of:<14}{row.gain:>12.5g}" for row in result.law_gains.itertuples()]
+    else:
+        lines = [f"{result.experiment.name}: controller {result.label}, {where}"]
+        lines.append(f"  {'loop':<10}{'input':<8}{'kp':>10}{'ki':>10}{'kd':>10}  derivative")
     for loop in result.loops:
         derivative = f"{loop.derivative}, N = {loop.N:.4g} 1/s" if loop.kd else "none"
         lines.append(f"  {loop.name:<10}{loop.input:<8}{loop.kp:>10.4g}{loop.ki:>10.4g}{loop.kd:>10.4g}  {derivative}")

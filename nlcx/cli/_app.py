@@ -176,6 +176,26 @@ def _first_line(text: str) -> str:
     return lines[0] if lines else ""
 
 
+PluginsOpt = Annotated[
+    list[Path] | None,
+    typer.Option(
+        "--plugins",
+        help="A Python file of plugins (plants, controllers) to import first, as a config's imports: does; "
+        "repeat for several.",
+        show_default=False,
+    ),
+]
+
+
+def load_plugins(files: list[Path] | None) -> None:
+    """Import the ``--plugins`` files (relative to the working directory) before the command reads
+    anything (:mod:`nlcx.plugins`; the manifest records them with the config's own ``imports``)."""
+    if files:
+        from nlcx import plugins
+
+        plugins.load(plugins.resolved([str(f) for f in files], Path.cwd(), key="--plugins"), key="--plugins")
+
+
 def checked_jobs(jobs: int | None) -> int | None:
     """``--jobs`` checked before any work: None (the command's default) or 1 to
     :data:`nlcx.limits.MAX_JOBS`."""

@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 
 from nlcx import rundir
-from nlcx.cli._app import ConfigArg, OverridesArg, _imported, app, one_line_errors
+from nlcx.cli._app import ConfigArg, OverridesArg, PluginsOpt, _imported, app, load_plugins, one_line_errors
 from nlcx.errors import ConfigError
 from nlcx.terminal import echo
 
@@ -53,6 +53,7 @@ def linearize(
     out: Annotated[
         Path | None, typer.Option("--out", help="Output directory (default results/linearize/<name>).")
     ] = None,
+    plugins: PluginsOpt = None,
 ) -> None:
     """Linearise CONFIG's plant about its operating point, freeze its PID's gain schedules and
     write the closed-loop poles and the margins with the loop broken at the plant input."""
@@ -60,6 +61,7 @@ def linearize(
     from nlcx.analysis.output import save_analysis, summary
 
     _imported()
+    load_plugins(plugins)
     start = time.perf_counter()
     if out is not None:
         rundir.check_target(out)  # refused before the analysis, not after

@@ -16,14 +16,17 @@ from nlcx.cli._app import (
     ConfigArg,
     NoReport,
     OverridesArg,
+    PluginsOpt,
     _fmt,
     _imported,
     app,
     checked_jobs,
+    load_plugins,
     one_line_errors,
 )
 from nlcx.compiled_cache import CompileHelper
 from nlcx.errors import ConfigError, NlcxError
+from nlcx.plugins import load_config_imports
 from nlcx.terminal import echo
 
 if TYPE_CHECKING:
@@ -104,18 +107,21 @@ def run(
     no_report: NoReport = False,
     device: DeviceOpt = None,
     allow_env: AllowEnv = False,
+    plugins: PluginsOpt = None,
 ) -> None:
     """Run an experiment: every controller of CONFIG on its plant, then write the run directory."""
     from nlcx import config as cfg
 
+    load_plugins(plugins)
     overrides = _on_device(device, overrides)
-    raw = cfg.apply_overrides(cfg.read_config(config), overrides or [])
+    raw = load_config_imports(cfg.apply_overrides(cfg.read_config(config), overrides or []))
     if "sweep" in raw:
         _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report, allow_env=allow_env)
         return
     resolved = cfg.interpolate(raw, allow_env=allow_env)  # a refused resolver stops here, before any process starts
     painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
     flags = ["--allow-env"] if allow_env else []
+    flags += [item for file in plugins or [] for item in ("--plugins", str(file.resolve()))]
     helper = CompileHelper([sys.executable, "-m", "nlcx.cli", "prewarm", str(config), *flags, *(overrides or [])])
     try:
         from nlcx import engine, rundir
@@ -156,12 +162,15 @@ def run(
 
 @app.command(hidden=True)
 @one_line_errors
-def prewarm(config: ConfigArg, overrides: OverridesArg = None, allow_env: AllowEnv = False) -> None:
+def prewarm(
+    config: ConfigArg, overrides: OverridesArg = None, allow_env: AllowEnv = False, plugins: PluginsOpt = None
+) -> None:
     """Compile what a run of CONFIG needs besides the kernel into numba's cache (``nlcx run``
     starts this beside itself when the cache is empty; see nlcx.engine.prewarm)."""
     from nlcx import config as cfg
     from nlcx import engine
 
+    load_plugins(plugins)
     engine.prewarm(cfg.load(config, overrides or [], allow_env=allow_env))
 
 
@@ -259,6 +268,7 @@ def sweep_command(
     no_report: NoReport = False,
     device: DeviceOpt = None,
     allow_env: AllowEnv = False,
+    plugins: PluginsOpt = None,
     cluster: Annotated[
         Path | None,
         typer.Option(
@@ -272,6 +282,7 @@ def sweep_command(
     if executor not in ("process", "serial", "dask"):
         raise NlcxError(f"--executor = {executor!r}: allowed values: process, serial, dask")
     checked_jobs(jobs)
+    load_plugins(plugins)
     overrides = _on_device(device, overrides)
     if cluster is not None and (scheduler or executor not in ("process", "dask")):
         raise NlcxError("--cluster: runs on Dask workers of its own; leave out --scheduler and --executor")
@@ -280,7 +291,9 @@ def sweep_command(
 
 @app.command()
 @one_line_errors
-def validate(config: ConfigArg, overrides: OverridesArg = None, allow_env: AllowEnv = False) -> None:
+def validate(
+    config: ConfigArg, overrides: OverridesArg = None, allow_env: AllowEnv = False, plugins: PluginsOpt = None
+) -> None:
     """Check CONFIG (with overrides) without running it; exit 2 with one line if invalid. A
     sweep config's base experiment, its sweep section and its plan's size are checked."""
     from nlcx import config as cfg
@@ -288,6 +301,7 @@ def validate(config: ConfigArg, overrides: OverridesArg = None, allow_env: Allow
     from nlcx import sweeps as sweep
     from nlcx.sweeps import planning, sizing
 
+    load_plugins(plugins)
     if "sweep" in cfg.apply_overrides(cfg.read_config(config), overrides or []):
         _, spec, exp = sweep.load(config, overrides or [], allow_env=allow_env)
         size = sizing.check(spec, exp, None, columnar=spec.columnar and planning.numeric(spec))  # as a run sizes it
@@ -360,6 +374,56 @@ def reproduce(
         raise rundir.ReportError(out, failure)
     if not no_report:
         echo(f"report {out / 'report.html'} ({time.perf_counter() - t0:.1f} s)")
+
+
+@app.command()
+@one_line_errors
+def baselines(
+    configs: Annotated[Path, typer.Option("--configs", help="The baseline configs.")] = Path("configs/baselines"),
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("results/baselines"),
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Worker processes of the sweeps.")] = 2,
+    only: Annotated[
+        str | None, typer.Option("--only", help="Comma-separated pendulums (x, xy, xz, xyz); default: all.")
+    ] = None,
+    variants: Annotated[int, typer.Option("--variants", help="Variants of each pendulum's robustness sweep.")] = 200,
+    set_: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="Override for every config, e.g. simulation.t_end=5."),
+    ] = None,
+    no_report: NoReport = False,
+) -> None:
+    """AGS PID against the baselines (LQR, sliding mode) on the four pendulums, in the thesis's
+    scenarios and a robustness sweep (docs/baselines.md): one directory, one report."""
+    from nlcx import rundir
+    from nlcx.limits import check_count
+    from nlcx.thesis import baselines as study
+
+    checked_jobs(jobs)
+    check_count("--variants", variants, 1, 100_000, "variants of each robustness sweep")
+    pendulums = [p.strip() for p in (only or ",".join(study.PENDULUMS)).split(",") if p.strip()]
+    study.check_pendulums(pendulums)
+    study.configs_of(configs, pendulums)  # every config there, before any work
+    _imported()
+    start = time.perf_counter()
+
+    def progress(what: str, seconds: float) -> None:
+        echo(f"  {what:<40} {seconds:6.2f} s")
+
+    with rundir.staged(out) as stage:
+        study.run(configs, stage, pendulums=pendulums, variants=variants, jobs=jobs, overrides=tuple(set_ or ()),
+                  progress=progress)  # fmt: skip
+        wall = time.perf_counter() - start
+        from nlcx import manifest, report
+
+        record = {"nlcx_output": "baselines", "command": "nlcx " + " ".join(sys.argv[1:]),
+                  **report.provenance(set_ or (), start), "pendulums": pendulums, "variants": variants,
+                  **report.environment(), "wall_s": round(wall, 2), "jobs": jobs}  # fmt: skip
+        manifest.write(stage, record)
+        echo(f"done in {wall:.1f} s")
+        failure = None if no_report else rundir.write_pages(stage)
+    if failure is not None:
+        raise rundir.ReportError(out, failure)
+    echo(f"wrote {out}/" + ("" if no_report else f"; report {out / 'report.html'}"))
 
 
 def write_reproduction_manifest(

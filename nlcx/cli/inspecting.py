@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from nlcx import registry
-from nlcx.cli._app import _fmt, app, one_line_errors
+from nlcx.cli._app import PluginsOpt, _fmt, app, load_plugins, one_line_errors
 from nlcx.cli.metric_files import (
     CONTROLLER,
     Measured,
@@ -295,11 +295,13 @@ def list_plugins(
         str | None,
         typer.Argument(help="A registered name: show its signals and parameters.", show_default=False),
     ] = None,
+    plugins: PluginsOpt = None,
 ) -> None:
     """List the registered plants, controllers, gain schedules, uncertainties, references and tuners.
 
     With KIND and NAME: that plugin's states, inputs and outputs (plants) and the fields of its
     parameters or configuration, with their types, units, defaults and descriptions."""
+    load_plugins(plugins)
     kinds = [_kind(kind)] if kind else list(registry.ALL)
     if name is not None:
         reg = registry.ALL[kinds[0]]
@@ -323,6 +325,7 @@ def schema_command(
         Path | None,
         typer.Option("--out", help="Write the schema to this file (default: print it).", show_default=False),
     ] = None,
+    plugins: PluginsOpt = None,
 ) -> None:
     """The JSON Schema of an experiment config, for an editor to complete and check the YAML.
 
@@ -330,6 +333,7 @@ def schema_command(
     controller, gain schedule, uncertainty, reference and tuner by its kind."""
     from nlcx.schema import experiment_schema, schema_text
 
+    load_plugins(plugins)
     text = schema_text(experiment_schema())
     if out is None:
         echo(text, nl=False)

@@ -36,6 +36,7 @@ from nlcx.config.sections import (
     Section,
     SimulationSection,
 )
+from nlcx.plugins import load_config_imports
 
 __all__ = [
     "OVERRIDE_FORMS",
@@ -63,8 +64,8 @@ __all__ = [
 
 
 def load(path: str | Path, overrides: list[str] | None = None, *, allow_env: bool = False) -> Experiment:
-    """Read, override, interpolate and validate an experiment config (the four steps above);
+    """Read, override, interpolate and validate an experiment config (the four steps above),
+    its plugins imported before it is validated (:func:`nlcx.plugins.load_config_imports`);
     ``allow_env``: every OmegaConf resolver on, ``oc.env`` included (:func:`interpolate`)."""
-    return build(
-        interpolate(apply_overrides(read_config(path), overrides or []), allow_env=allow_env), allow_env=allow_env
-    )
+    raw = load_config_imports(apply_overrides(read_config(path), overrides or []))
+    return build(interpolate(raw, allow_env=allow_env), allow_env=allow_env)

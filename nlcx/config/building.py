@@ -53,6 +53,7 @@ class Experiment:
         """The configuration with every default filled in, as written to config.yaml."""
         sec = self.section
         return {
+            **({"imports": list(sec.imports)} if sec.imports else {}),
             "name": sec.name,
             "title": sec.title,
             "seed": sec.seed,

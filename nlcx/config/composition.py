@@ -17,6 +17,7 @@ from typing import Any
 
 from nlcx import safe_yaml
 from nlcx.errors import ConfigError
+from nlcx.plugins import IMPORTS, resolved
 
 
 def deep_merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
@@ -43,11 +44,15 @@ def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any
 
     ``extends`` is a YAML file (``.yaml`` or ``.yml``) or a list of them, relative to the file;
     they are merged in order and the file's own keys go on top (see :func:`deep_merge`).
+    ``imports`` (plugin files and modules, :mod:`nlcx.plugins`) is made absolute against each
+    file's directory and gathered along the chain, the extended files' first; nothing is
+    imported here.
     """
     path = Path(path).resolve()
     if path in _seen:
         raise ConfigError("extends", str(path), "circular extends")
     data = read_yaml(path)
+    own_imports = resolved(data.pop(IMPORTS, None), path.parent, key=IMPORTS)
     parents = data.pop("extends", [])
     if isinstance(parents, str):
         parents = [parents]
@@ -59,7 +64,9 @@ def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any
     merged: dict[str, Any] = {}
     for parent in parents:
         merged = deep_merge(merged, read_config(path.parent / parent, (*_seen, path)))
-    return deep_merge(merged, data)
+    imports = list(dict.fromkeys([*merged.pop(IMPORTS, []), *own_imports]))
+    out = deep_merge(merged, data)
+    return {IMPORTS: imports, **out} if imports else out
 
 
 #: The suffixes of a file ``extends`` may name.

@@ -176,6 +176,11 @@ class ExperimentSection(Section):
     :func:`build` validates each by the model of the plugin its ``kind`` selects.
     """
 
+    imports: list[str] = Field(
+        default=[],
+        description="Plugin files (a .py file relative to the config) and modules to import before the config is "
+        "validated, so the plants and controllers they register can be named here.",
+    )
     name: str = Field(
         pattern=r"^[A-Za-z0-9_.\-]+$",
         description="Experiment name (letters, digits, _, . and -); the default run directory is results/<name>.",

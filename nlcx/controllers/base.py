@@ -50,6 +50,9 @@ class ControllerInstance:
     #: the step of the same arithmetic for rows of any structure of its kind, which the engine
     #: runs when controllers of several structures share a kernel call of few rows.
     general_step: Any = None
+    #: The law a controller written as one runs (:class:`~nlcx.controllers.law.LawController`:
+    #: its compiled law, shape and parameters' type), which ``nlcx linearize`` differentiates.
+    law: Any = None
 
 
 class ControllerModel:

@@ -26,8 +26,11 @@ TEMPLATES = Path(__file__).parent / "templates"
 
 
 def kind_of(directory: Path) -> str:
-    """reproduction, sweep or run, by the files the directory holds: a sweep's tables
-    ``sweep`` and ``metrics`` in either form (:func:`~nlcx.pages.output_tables.has_table`)."""
+    """baselines, reproduction, sweep or run: baselines by the kind its manifest names, the
+    others by the files the directory holds: a sweep's tables ``sweep`` and ``metrics`` in either
+    form (:func:`~nlcx.pages.output_tables.has_table`)."""
+    if (directory / "tables" / "robustness.csv").is_file() and (directory / "tables" / "comparison.csv").is_file():
+        return "baselines"
     if (directory / "claims.csv").is_file() or (directory / "tables").is_dir():
         return "reproduction"
     if has_table(directory, "sweep") and has_table(directory, "metrics"):
@@ -114,6 +117,10 @@ def write_report(directory: Path, configs: Path | None = None) -> tuple[Path, Pa
         from nlcx.pages import sweep
 
         ctx = sweep.context(directory)
+    elif kind == "baselines":
+        from nlcx.pages import baselines
+
+        ctx = baselines.context(directory)
     else:
         from nlcx.pages import run  # a run's page needs neither pandas nor the thesis pages
 

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from nlcx import config as cfg
-from nlcx import manifest
+from nlcx import manifest, plugins
 from nlcx.sweeps import seals
 from nlcx.sweeps.planning import SweepSection, Variant
 
@@ -53,6 +53,7 @@ def write_manifest(
         "nlcx_output": "sweep",
         **report.provenance(overrides, started),
         "allow_env": allow_env,
+        "imports": plugins.loaded(),
         "variants": variants,
         "computed": computed,
         "skipped": variants - computed,

@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from nlcx import config as cfg
+from nlcx import plugins
 from nlcx.sweeps import seals
 from nlcx.sweeps.planning import Variant
 
@@ -93,6 +94,7 @@ def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
 
     rows: list[dict[str, Any]] = []
     prepared_of: dict[int, Any] = {}
+    plugins.load(batch.base_raw.get(plugins.IMPORTS, []))  # a worker that did not fork from the sweep's process
     interpolated = cfg.Interpolated.of(batch.base_raw, allow_env=True)  # checked by planning.load
     base = cfg.build(interpolated.resolved)  # valid: sweep.load built it
     for pos, (variant, digest) in enumerate(zip(batch.variants, batch.hashes, strict=True)):

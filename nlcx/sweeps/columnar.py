@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from nlcx import config as cfg
+from nlcx import plugins
 from nlcx.errors import NlcxError
 from nlcx.sweeps import seals
 from nlcx.sweeps.planning import ColumnPlan, SweepSection, Variant, variant_hash
@@ -66,6 +67,7 @@ class _Probe:
     """Templates of the sweep's base config with some values and a seed set."""
 
     def __init__(self, base_raw: dict[str, Any]) -> None:
+        plugins.load(base_raw.get(plugins.IMPORTS, []))  # a worker that did not fork from the sweep's process
         self.interpolated = cfg.Interpolated.of(base_raw, allow_env=True)  # checked by planning.load
         self.base = cfg.build(self.interpolated.resolved)
 

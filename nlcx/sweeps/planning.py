@@ -24,6 +24,7 @@ from nlcx import config as cfg
 from nlcx.config.interpolation import check_resolvers
 from nlcx.errors import ConfigError
 from nlcx.metrics.names import METRIC_UNITS
+from nlcx.plugins import load_config_imports
 from nlcx.sweeps.seeds import spawned_seeds
 from nlcx.validation import validate_model
 
@@ -280,7 +281,7 @@ def load(
     config, the sweep section included (:func:`nlcx.config.interpolation.check_resolvers`):
     the sweep's later interpolations of the base and its variants then have every resolver on."""
     raw_config = copy.deepcopy(dict(path)) if isinstance(path, Mapping) else cfg.read_config(path)
-    raw = cfg.apply_overrides(raw_config, overrides or [])
+    raw = load_config_imports(cfg.apply_overrides(raw_config, overrides or []))
     if not allow_env:
         check_resolvers(raw)
     sweep_raw = raw.pop("sweep", None)
