@@ -46,7 +46,7 @@ def check_reference_times(references: Mapping[str, Any], t_end: float, dt: float
     samples of the run after it: its time at most ``t_end - dt``."""
     latest = t_end - dt
     for signal, ref in references.items():
-        plan = ref.model.metric_plan(ref.config)
+        plan = ref.model.signal_plan(ref.config)
         if plan.kind == "step" and plan.t_step > latest + 1e-9 * dt:
             raise ConfigError(
                 f"reference.{signal}.time",

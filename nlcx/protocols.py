@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
     from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
     from nlcx.plants.base import Plant, PlantModel, PlantParams, Signal
-    from nlcx.references.base import MetricPlan, ReferenceConfig, ReferenceModel
+    from nlcx.references.base import ReferenceConfig, ReferenceModel, SignalPlan
     from nlcx.tuning.base import TuneContext, TunerConfig, TunerModel
     from nlcx.uncertainty.base import Hooks, UncertaintyConfig, UncertaintyModel
 
@@ -139,7 +139,7 @@ class ReferencePlugin(Protocol):
         """r(t) at the times ``t``."""
         ...
 
-    def metric_plan(self, cfg: Any) -> MetricPlan:
+    def signal_plan(self, cfg: Any) -> SignalPlan:
         """Step, regulation or tracking metrics for a signal following this reference."""
         ...
 

@@ -234,10 +234,10 @@ def test_t_end_must_be_whole_steps(x_time_raw: dict) -> None:
 
 @pytest.mark.parametrize("rows", [1, 3])
 def test_metrics_measured_in_blocks_of_runs_equal_one_block(x_error_raw: dict, monkeypatch, rows: int) -> None:
-    """The engine gathers the rows it measures (outputs, errors, inputs) a block of runs at a
-    time (:func:`nlcx.metrics.rows_per_block`); every metric of every run is the same to the
-    last bit whatever the block size."""
-    from nlcx import metrics
+    """The engine gathers the rows it measures (outputs, references, inputs) a block of runs at
+    a time (:data:`nlcx.engine.measure.ROWS_ELEMENTS` samples); every metric of every run is the
+    same to the last bit whatever the block size."""
+    from nlcx.engine import measure
 
     prepared = []
     for k, M in enumerate((0.8, 1.0, 1.2, 1.4, 9.0)):
@@ -250,8 +250,8 @@ def test_metrics_measured_in_blocks_of_runs_equal_one_block(x_error_raw: dict, m
     whole = engine.shared_metrics(results)
     assert len({r.prepared.plant.p.tobytes() for r in results}) == 5 and len(whole) > 100
     runs = [run for r in results for run in r.runs]
-    monkeypatch.setattr(metrics.rows, "_CHUNK_ELEMENTS", rows * runs[0].t.size)
-    assert metrics.rows_per_block(runs[0].t.size) == rows
+    monkeypatch.setattr(measure, "ROWS_ELEMENTS", rows * runs[0].t.size)
+    assert len(measure._blocks(list(range(len(runs))), runs[0].t.size)[0]) == rows
     blocks = engine.shared_metrics(engine.remeasure(results, {}))
     assert whole.equals(blocks)
     assert (whole.status == "ok").any() and not whole.value.isna().all()

@@ -49,7 +49,7 @@ def test_a_prefiltered_step_rises_exponentially_and_is_measured_as_the_step() ->
     np.testing.assert_allclose(run.u[:, 0], expected, atol=1e-15)
     prep = engine.prepare(config.build(raw))
     model, cfg = prep.references["F_x"]
-    plan = model.metric_plan(cfg)
+    plan = model.signal_plan(cfg)
     assert (plan.kind, plan.final, plan.t_step) == ("step", 1.0, 0.2)
 
 

@@ -12,7 +12,7 @@ from nlcx import config
 from nlcx import sweeps as sweep
 from nlcx.engine.ensembles import failure_rows
 from nlcx.engine.metric_rows import TEXT_COLUMNS, Categories, failed_block, ok_block, ordered
-from nlcx.engine.simulate import _failure_reason
+from nlcx.engine.simulate import failure_reason
 from nlcx.kernel.abi import STATUS_BOUND, STATUS_NONFINITE
 from nlcx.sweeps import columnar, planning
 
@@ -48,7 +48,15 @@ def test_rows_are_laid_out_by_variant_then_loop_then_row() -> None:
     stopped0 = np.array([1, 4, 5])
     blocks = [
         ok_block(ok0, 0, value0, rows0, cats, "proposed"),
-        failed_block(stopped0, 0, np.array([0.5, 1.25, 2.0]), ["a", "b", "a"], ["x", "theta"], cats, "proposed"),
+        failed_block(
+            stopped0,
+            0,
+            np.array([0.5, 1.25, 2.0]),
+            ["a", "b", "a"],
+            [("all", "t_fail", "s"), ("x", "settling_time", "s"), ("theta", "settling_time", "s")],
+            cats,
+            "proposed",
+        ),
         ok_block(np.arange(n_variants), 1, rng.normal(size=(n_variants, 2)), rows0[:2], cats, "conventional"),
     ]
     out = ordered(blocks, cats, n_variants, 2)
@@ -91,7 +99,7 @@ def test_stopped_runs_share_a_reason_only_when_it_is_the_same_text(tmp_path: Pat
             bounds[::3] *= 2.0
         rows = failure_rows(template, status, n_valid, fail_index, bounds)
         grid = template.prepared.grid
-        expected = [_failure_reason(plant, int(status[e]), int(fail_index[e]), float(grid.t[n_valid[e] - 1] + grid.dt),
+        expected = [failure_reason(plant, int(status[e]), int(fail_index[e]), float(grid.t[n_valid[e] - 1] + grid.dt),
                                     bounds[e]) for e in np.flatnonzero(status != 0)]  # fmt: skip
         assert rows.reasons == expected
         assert len(set(expected)) < len(expected)  # some are shared

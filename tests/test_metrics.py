@@ -264,11 +264,8 @@ def _batch() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t, y, final, initial
 
 
-@pytest.mark.parametrize("chunk", [None, 3])
-def test_batch_equals_single_exactly(monkeypatch, chunk):
+def test_batch_equals_single_exactly():
     t, y, final, initial = _batch()
-    if chunk is not None:  # force several row blocks
-        monkeypatch.setattr(metrics.rows, "_CHUNK_ELEMENTS", chunk * t.size)
     calls = [
         (step_response_metrics, {"final": final}, True),
         (step_response_metrics, {"final": final, "initial": initial, "t_step": 0.3}, True),

@@ -25,7 +25,7 @@ from nlcx.protocols import (
     missing_members,
     protocol_members,
 )
-from nlcx.references.base import MetricPlan, ReferenceConfig
+from nlcx.references.base import ReferenceConfig, SignalPlan
 
 #: Each kind's protocol and what it declares, written out here from what the engine and the
 #: config loader call on a plugin of that kind (not read from nlcx.protocols).
@@ -34,7 +34,7 @@ DECLARED = {
     "controllers": (ControllerPlugin, ("Config",), ("normalize", "build")),
     "schedules": (SchedulePlugin, ("Config", "gains"), ("pack",)),
     "uncertainties": (UncertaintyPlugin, ("Config",), ("apply",)),
-    "references": (ReferencePlugin, ("Config",), ("values", "metric_plan")),
+    "references": (ReferencePlugin, ("Config",), ("values", "signal_plan")),
     "tuners": (TunerPlugin, ("Config",), ("tune",)),
 }
 KINDS = list(DECLARED)
@@ -123,7 +123,7 @@ def test_a_lazy_entry_point_is_imported_and_checked_on_first_get_only() -> None:
 
 def test_a_class_that_needs_arguments_is_refused_in_one_line() -> None:
     reg = fresh("references")
-    reg.register("plan", MetricPlan)  # a dataclass whose kind is required
+    reg.register("plan", SignalPlan)  # a dataclass whose kind is required
     with pytest.raises(ConfigError, match="cannot be made without arguments") as caught:
         reg.get("plan", path="reference.x.kind")
     assert "\n" not in str(caught.value)
@@ -216,8 +216,8 @@ def test_a_reference_that_subclasses_nothing_is_taken_by_the_config_loader(x_err
         def values(self, cfg: RampConfig, t: np.ndarray) -> np.ndarray:
             return cfg.slope * t
 
-        def metric_plan(self, cfg: RampConfig) -> MetricPlan:
-            return MetricPlan("tracking")
+        def signal_plan(self, cfg: RampConfig) -> SignalPlan:
+            return SignalPlan("tracking")
 
     registry.references.register("ramp", Ramp)
     try:

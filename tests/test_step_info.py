@@ -8,7 +8,6 @@ import control
 import numpy as np
 import pytest
 
-from nlcx import metrics
 from nlcx.metrics import STEP_INFO_UNITS, step_info, step_response_metrics
 
 # python-control's step_info keys for ours.
@@ -222,16 +221,13 @@ def _batch() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return t, np.vstack(rows), reference, initial
 
 
-@pytest.mark.parametrize("chunk", [None, 2])
 @pytest.mark.parametrize(
     "kwargs",
     [{}, {"reference": "rows"}, {"reference": 1.0, "y_initial": "rows", "t_step": 0.123}],
     ids=["own_final", "reference_per_row", "scalar_reference_t_step"],
 )
-def test_batch_equals_single_exactly(monkeypatch: pytest.MonkeyPatch, chunk: int | None, kwargs: dict) -> None:
+def test_batch_equals_single_exactly(kwargs: dict) -> None:
     t, y, reference, initial = _batch()
-    if chunk is not None:  # force several row blocks
-        monkeypatch.setattr(metrics.rows, "_CHUNK_ELEMENTS", chunk * t.size)
     rows_of = {"reference": reference, "y_initial": initial}
     batch_kw = {k: rows_of[k] if v == "rows" else v for k, v in kwargs.items()}
     batched = step_info(t, y, **batch_kw)

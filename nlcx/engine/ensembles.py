@@ -21,30 +21,20 @@ from typing import Any
 
 import numpy as np
 
-from nlcx import metrics as m
-from nlcx.controllers.base import ControllerInstance
 from nlcx.engine.batching import MIN_ROWS_PER_STEP, group_key, groups_of
-from nlcx.engine.measure import (
-    _NAN_NOTES,
-    _input_step,
-    _measured_outputs,
-    _metric_plans,
-    _metric_unit,
-    _selected_state,
-    _signal_metrics,
-    _step_characteristics,
-)
-from nlcx.engine.metric_rows import Block, Categories, MetricColumns, failed_block, ok_block, ordered
+from nlcx.engine.measure import signal_values
+from nlcx.engine.metric_rows import Categories, MetricColumns, RowBlock, failed_block, ok_block, ordered
+from nlcx.engine.plan import MeasuredSignal, MetricPlan, signal_plans
 from nlcx.engine.prepared import TABLEAUS, Item, Prepared, items_of
 from nlcx.engine.simulate import (
-    _controller_call,
-    _failure_reason,
-    _loop_elements,
-    _plant_call,
-    _plant_forces,
-    _records,
+    controller_call,
     element_params,
     element_states,
+    empty_records,
+    failure_reason,
+    loop_elements,
+    plant_call,
+    plant_forces,
 )
 from nlcx.kernel.friction import FRICTIONAL, FRICTIONLESS, any_friction
 from nlcx.kernel.structures import Integration, Outcome, method_of
@@ -81,10 +71,13 @@ class Template:
 
     prepared: Prepared
     items: list[Item]
+    #: The metric rows of each loop (built once, with the template).
+    plan: MetricPlan
 
     @classmethod
     def of(cls, prepared: Prepared) -> Template:
-        return cls(prepared, items_of(prepared))
+        items = items_of(prepared)
+        return cls(prepared, items, MetricPlan.of(prepared, [item.controller for item in items]))
 
     def arrays(self) -> list[dict[str, np.ndarray | None]]:
         """Each loop's arrays (:data:`ITEM_FIELDS`)."""
@@ -102,7 +95,7 @@ class Template:
              it.controller.reference_offsets, it.controller.log_names)
             for it in self.items
         )  # fmt: skip
-        plans = tuple(sorted((s, repr(plan)) for s, plan in _metric_plans(p).items()))
+        plans = tuple(sorted((s, repr(plan)) for s, plan in signal_plans(p).items()))
         sec = p.experiment.section
         plant = p.plant
         signals = tuple((s, plant.unit_of(s)) for s in [*plant.state_names, *plant.input_names])
@@ -225,7 +218,7 @@ def ensemble_calls(items: list[Item], n_variants: int) -> list[tuple[np.ndarray,
     return calls
 
 
-def _call_arguments(
+def call_arguments(
     template: Template, pattern: np.ndarray, step: Any, n_variants: int,
     slots: Mapping[str, Sequence[Slot]], columns: Mapping[str, np.ndarray],
 ) -> tuple[Any, Any, Any, Any]:  # fmt: skip
@@ -233,10 +226,10 @@ def _call_arguments(
     repeated per variant, each slot's positions written from its column."""
     group = [template.items[i] for i in pattern]
     parts: dict[str, Any] = {
-        "plant": _plant_call(group),
-        "controller": _controller_call(group, step),
-        "elements": _loop_elements(group),
-        "forces": _plant_forces(group),
+        "plant": plant_call(group),
+        "controller": controller_call(group, step),
+        "elements": loop_elements(group),
+        "forces": plant_forces(group),
     }
     n_rows = len(group)
     filled: dict[tuple[str, str], np.ndarray] = {}
@@ -286,9 +279,9 @@ def simulate_ensemble(
     items = template.items
     calls = []
     for pattern, step in ensemble_calls(items, n_variants):
-        plant, controller, elements, forces = _call_arguments(template, pattern, step, n_variants, slots, columns)
+        plant, controller, elements, forces = call_arguments(template, pattern, step, n_variants, slots, columns)
         n_b = n_variants * pattern.size
-        records = _records([items[i] for i in pattern], grid.t.size, 1, n_rows=n_b)
+        records = empty_records([items[i] for i in pattern], grid.t.size, 1, n_rows=n_b)
         outcome = Outcome(*(np.zeros(n_b, dtype=np.int64) for _ in range(3)))
         simulate(integration, plant, controller, elements, forces, records, outcome,
                  FRICTIONAL if any_friction(forces.friction) else FRICTIONLESS)  # fmt: skip
@@ -350,7 +343,7 @@ def _reasons(
     plant: Any, stopped: np.ndarray, status: np.ndarray, fail_index: np.ndarray, n_valid: np.ndarray,
     t_fail: np.ndarray, bounds: np.ndarray,
 ) -> list[str]:  # fmt: skip
-    """Each stopped run's reason (:func:`~nlcx.engine.simulate._failure_reason`), written once
+    """Each stopped run's reason (:func:`~nlcx.engine.simulate.failure_reason`), written once
     per distinct (status, failing index, time, bounds): runs that stop alike share their text."""
     if not stopped.size:
         return []
@@ -362,77 +355,45 @@ def _reasons(
     for part in (n_valid[stopped], fail_index[stopped], status[stopped]):  # one integer per distinct tuple
         key = key * (int(part.max()) + 1) + part
     _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
-    texts = [_failure_reason(plant, int(status[stopped[k]]), int(fail_index[stopped[k]]), float(t_fail[k]),
+    texts = [failure_reason(plant, int(status[stopped[k]]), int(fail_index[stopped[k]]), float(t_fail[k]),
                              bounds[stopped[k]]) for k in first]  # fmt: skip
     return [texts[j] for j in inverse]
 
 
-def _ok_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> tuple[list[tuple[str, str]], np.ndarray]:
-    """The (signal, metric) rows of loop i, in the order :func:`nlcx.engine.measure_runs` writes
-    them (the outputs it follows, the other outputs after an input step, the inputs), and their
-    values over the runs that finished (a column per row)."""
-    p = template.prepared
-    plant, cfg, run = p.plant, p.experiment.section.metrics, _RunView(template.items[i].controller)
-    plans = _metric_plans(p)
-    t = p.grid.t
-    n_samples = t.size
-    X, U = rows.X, rows.U
-    take: slice | np.ndarray = slice(None) if ok.all() else np.flatnonzero(ok)  # the runs that finished
-    out: list[tuple[str, str, np.ndarray]] = []
-
-    def blocked(fn: Callable[[np.ndarray], Mapping[str, np.ndarray]], signal: str, data: np.ndarray) -> None:
-        size = m.rows_per_block(n_samples)
-        pieces = [fn(data[k : k + size]) for k in range(0, data.shape[0], size)]
-        for name in pieces[0]:
-            out.append((signal, name, np.concatenate([np.asarray(piece[name], dtype=float) for piece in pieces])))
-
-    followed = _measured_outputs(run, plant)
+def loop_values(template: Template, i: int, rows: LoopRows, ok: np.ndarray) -> np.ndarray:
+    """The metric values of loop i over its runs that finished (runs, width of its
+    :class:`~nlcx.engine.plan.LoopPlan`), a column per metric row in the plan's order."""
+    plan = template.plan.loops[i]
+    picked = np.flatnonzero(ok)
     ref = template.items[i].ref
-    for s in followed:
-        j = plant.output_names.index(s)
-        r = ref[:, template.items[i].controller.reference_signals.index(s)]
-
-        def tracking(y: np.ndarray, s: str = s, r: np.ndarray = r) -> Mapping[str, np.ndarray]:
-            return _signal_metrics(t, y, r, plans[s], cfg)
-
-        blocked(tracking, s, _output_rows(X, take, plant.C[j]))
-    step = _input_step(run, plant, plans)
-    if step is not None:
-        for s in [s for s in plant.output_names if s not in followed]:
-            j = plant.output_names.index(s)
-
-            def info(y: np.ndarray, t_step: float = step.t_step) -> Mapping[str, np.ndarray]:
-                return _step_characteristics(t, y, t_step, cfg)
-
-            blocked(info, s, _output_rows(X, take, plant.C[j]))
-    for j, name in enumerate(plant.input_names):
-        blocked(lambda u: m.input_metrics(t, u), name, np.ascontiguousarray(U[take, :, j]))
-    return [(s, name) for s, name, _ in out], np.stack([v for *_, v in out], axis=1)
+    values = np.empty((picked.size, plan.width))
+    o = 0
+    for signal in plan.signals:
+        width = len(signal.metrics)
+        y, taken = _signal_rows(template, signal, rows, picked)
+        r = ref[:, signal.reference] if signal.reference >= 0 else y[:1]
+        values[:, o : o + width] = signal_values(signal, template.plan.t, y, r, taken)
+        o += width
+    return values
 
 
-class _RunView:
-    """The part of a :class:`~nlcx.engine.Run` the measuring helpers read: its controller."""
-
-    def __init__(self, controller: ControllerInstance) -> None:
-        self._controller = controller
-
-    @property
-    def controller(self) -> ControllerInstance:
-        return self._controller
-
-
-def _output_rows(X: np.ndarray, take: slice | np.ndarray, c_row: np.ndarray) -> np.ndarray:
-    """y = x c of the runs ``take`` (rows), as :func:`nlcx.engine.measure._outputs` forms it: a
-    row of C that selects one state gathers that state's column alone."""
-    state = _selected_state(c_row)
-    if state is not None:
-        return np.ascontiguousarray(X[take, :, state])
-    return np.stack([x @ c_row for x in X[take]])
+def _signal_rows(
+    template: Template, signal: MeasuredSignal, rows: LoopRows, picked: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(samples, rows of them to measure) of ``signal`` in the runs ``picked``: a state's or an
+    input's column of the records (a view), or the outputs y = x C_j of those runs formed."""
+    where, index = signal.source
+    if where == "state":
+        return rows.X[:, :, index], picked
+    if where == "input":
+        return rows.U[:, :, index], picked
+    c_row = template.prepared.plant.C[index]
+    return np.stack([x @ c_row for x in rows.X[picked]]).reshape(picked.size, -1), np.arange(picked.size)
 
 
-#: The (signal, metric) rows of a loop in measure_runs's order, and their values over the runs
-#: that finished (runs, rows).
-OkValues = Callable[[Template, int, LoopRows, np.ndarray], tuple[list[tuple[str, str]], np.ndarray]]
+#: Where the metric values of a loop's runs that finished come from (:func:`loop_values`, or
+#: the GPU's: :func:`nlcx.engine.gpu.simulate_measure`).
+OkValues = Callable[[Template, int, LoopRows, np.ndarray], np.ndarray]
 
 
 def measure_ensemble(
@@ -440,21 +401,19 @@ def measure_ensemble(
 ) -> MetricColumns:
     """The metric rows of every variant's runs (:func:`nlcx.engine.measure_runs`'s rows, with
     the variant's position in the column ``variant``), as columns: by variant, then loop (the
-    template's order), then row. ``ok_values``: where the values of the runs that finished
-    come from (default: measured here from the rows' records; the GPU's, measured there:
-    :func:`nlcx.engine.gpu.simulate_measure`)."""
-    plant = template.prepared.plant
+    template's order), then row (the template's :class:`~nlcx.engine.plan.MetricPlan`).
+    ``ok_values``: where the values of the runs that finished come from (default: measured
+    here from the rows' records, :func:`loop_values`)."""
     cats = Categories()
-    blocks: list[Block] = []
+    blocks: list[RowBlock] = []
     for i, loop in enumerate(rows):
-        label = template.items[i].controller.label
+        plan = template.plan.loops[i]
         ok = loop.status == 0
         if ok.any():
-            labels, value = (ok_values or _ok_values)(template, i, loop, ok)
-            described = [(s, name, _metric_unit(name, plant.unit_of(s)), _NAN_NOTES.get(name, "undefined"))
-                         for s, name in labels]  # fmt: skip
-            blocks.append(ok_block(np.flatnonzero(ok), i, value, described, cats, label))
+            value = (ok_values or loop_values)(template, i, loop, ok)
+            blocks.append(ok_block(np.flatnonzero(ok), i, value, plan.rows(), cats, plan.label))
         if (~ok).any():
-            followed = _measured_outputs(_RunView(template.items[i].controller), plant)
-            blocks.append(failed_block(loop.stopped, i, loop.t_fail, loop.reasons, followed, cats, label))
+            blocks.append(
+                failed_block(loop.stopped, i, loop.t_fail, loop.reasons, plan.failed_rows(), cats, plan.label)
+            )
     return ordered(blocks, cats, n_variants, len(rows))

@@ -30,15 +30,13 @@ from nlcx.engine.ensembles import (
     OkValues,
     Slot,
     Template,
-    _call_arguments,
-    _RunView,
+    call_arguments,
     ensemble_calls,
     failure_rows,
     loop_rows,
     measure_ensemble,
     simulate_ensemble,
 )
-from nlcx.engine.measure import _input_step, _measured_outputs, _metric_plans, _selected_state, _time_origin
 from nlcx.engine.metric_rows import MetricColumns
 from nlcx.engine.prepared import TABLEAUS
 from nlcx.kernel.device import refused
@@ -51,64 +49,28 @@ MEMORY_SHARE = 0.6
 _ON_DEVICE = threading.Lock()
 
 
-def _blocks(template: Template, i: int, recorded: list[tuple[int, int]]) -> list[tuple[str, Any]]:
-    """(signal, metric block) of loop i (:class:`nlcx.kernel.cuda_metrics.Block`), in the order
-    of :func:`nlcx.engine.measure_runs`: the outputs the loop follows, the others after a step on
-    an input, the inputs; the signals they read are added to ``recorded``."""
+def _measured(template: Template, i: int, recorded: list[tuple[int, int]]) -> tuple[tuple[Any, ...], np.ndarray]:
+    """The measured signals of loop i as the GPU's metric kernel reads them
+    (:class:`nlcx.kernel.cuda_metrics.MeasuredRecord`, in the order of the loop's
+    :class:`~nlcx.engine.plan.LoopPlan`), and their reference table (rows of K+1 samples); the
+    signals they read are added to ``recorded``."""
     from nlcx.kernel.cuda_loop import INPUT, OUTPUT, STATE
-    from nlcx.kernel.cuda_metrics import Block
+    from nlcx.kernel.cuda_metrics import MeasuredRecord
 
-    p = template.prepared
-    plant, cfg, run = p.plant, p.experiment.section.metrics, _RunView(template.items[i].controller)
-    plans = _metric_plans(p)
-    lo, hi = cfg.rise_limits
-
-    def signal(kind: int, index: int) -> int:
-        if (kind, index) not in recorded:
-            recorded.append((kind, index))
-        return recorded.index((kind, index))
-
-    def output(s: str) -> int:
-        """The record of output s: its state where its row of C selects one, else y = C x."""
-        j = plant.output_names.index(s)
-        state = _selected_state(plant.C[j])
-        return signal(STATE, state) if state is not None else signal(OUTPUT, j)
-
-    followed = _measured_outputs(run, plant)
-    blocks = []
-    for s in followed:
-        plan = plans[s]
-        block = Block(plan.kind, output(s), -1, plan.t_step, plan.final, cfg.settling_band, window=cfg.ss_window)
-        if plan.kind == "step":
-            block = block._replace(rise_low=lo, rise_high=hi, origin=_time_origin(plan.t_step, cfg))
-        elif plan.kind == "regulation":
-            block = block._replace(abs_tol=cfg.regulation_abs_tol)
-        blocks.append((s, block))
-    step = _input_step(run, plant, plans)
-    if step is not None:
-        origin = _time_origin(step.t_step, cfg)
-        blocks += [
-            (s, Block("info", output(s), -1, step.t_step, band=cfg.settling_band, rise_low=lo, rise_high=hi,
-                      origin=origin))
-            for s in plant.output_names if s not in followed
-        ]  # fmt: skip
-    blocks += [(s, Block("input", signal(INPUT, j), -1)) for j, s in enumerate(plant.input_names)]
-    return blocks
-
-
-def _references(template: Template, i: int, blocks: list[tuple[str, Any]]) -> tuple[tuple[Any, ...], np.ndarray]:
-    """The blocks with their reference rows, and the reference table (rows of K+1 samples)."""
-    item = template.items[i]
-    n_k = template.prepared.grid.t.size
+    item, n_k = template.items[i], template.plan.t.size
+    kinds = {"state": STATE, "output": OUTPUT, "input": INPUT}
     rows: list[np.ndarray] = []
-    out: list[Any] = []
-    for s, b in blocks:
-        if b.kind in ("input", "info"):
-            out.append(b)
-            continue
-        column = item.ref[:, item.controller.reference_signals.index(s)]
-        rows.append(np.broadcast_to(column, (n_k,)))
-        out.append(b._replace(ref_row=len(rows) - 1))
+    out = []
+    for signal in template.plan.loops[i].signals:
+        where, index = signal.source
+        if (kinds[where], index) not in recorded:
+            recorded.append((kinds[where], index))
+        ref_row = -1
+        if signal.reference >= 0:
+            rows.append(np.broadcast_to(item.ref[:, signal.reference], (n_k,)))
+            ref_row = len(rows) - 1
+        out.append(MeasuredRecord(signal.kind, recorded.index((kinds[where], index)), ref_row, signal.final,
+                                  signal.timing, len(signal.metrics)))  # fmt: skip
     table = np.ascontiguousarray(np.stack(rows)) if rows else np.zeros((1, n_k))
     return tuple(out), table
 
@@ -158,7 +120,6 @@ class _Call:
     t: np.ndarray
     recorded: np.ndarray
     measuring: dict[int, tuple[tuple[Any, ...], np.ndarray]]
-    names: dict[int, list[tuple[str, str]]]
     n_rows: int
     n_u: int
     n_log: int
@@ -202,7 +163,7 @@ def _simulate_measure_all(ensembles: Sequence[Ensemble]) -> list[tuple[list[Loop
 def _calls(ensemble: Ensemble) -> list[_Call]:
     """The GPU calls of an ensemble (one per call of :func:`ensemble_calls`), not yet run; a
     plugin that cannot run on the GPU is refused in one line."""
-    from nlcx.kernel import cuda_loop, cuda_metrics
+    from nlcx.kernel import cuda_loop
 
     template, slots, columns, n_variants = ensemble
     p = template.prepared
@@ -211,21 +172,16 @@ def _calls(ensemble: Ensemble) -> list[_Call]:
     integration = Integration(method=method_of(sim.integrator), rk_a=tableau.a, rk_b=tableau.b, dt=grid.dt)
     out = []
     for pattern, step in ensemble_calls(items, n_variants):
-        arguments = _call_arguments(template, pattern, step, n_variants, slots, columns)
+        arguments = call_arguments(template, pattern, step, n_variants, slots, columns)
         why = cuda_loop.unsupported(*arguments[:3])
         if why is not None:
             raise refused(f"{why}; use device: cpu")
         recorded: list[tuple[int, int]] = []
-        labelled = {int(i): _blocks(template, int(i), recorded) for i in pattern}
-        measuring = {i: _references(template, i, blocks) for i, blocks in labelled.items()}
-        names = {
-            i: [(s, name) for s, b in blocks for name in cuda_metrics.BLOCK_NAMES[b.kind]]
-            for i, blocks in labelled.items()
-        }
+        measuring = {int(i): _measured(template, int(i), recorded) for i in pattern}
         rec = np.array(recorded, dtype=np.int64).reshape(-1, 2)
         n_log = len(items[int(pattern[0])].controller.log_names)
         signature = tuple((measuring[int(i)][0], _digest(measuring[int(i)][1])) for i in pattern)
-        out.append(_Call(pattern, arguments, integration, grid.t, rec, measuring, names,
+        out.append(_Call(pattern, arguments, integration, grid.t, rec, measuring,
                          n_variants * pattern.size, len(p.plant.inputs), n_log, signature))  # fmt: skip
     return out
 
@@ -278,10 +234,10 @@ def _joined(group: list[_Call]) -> tuple[Any, ...]:
 
 
 class _MetricRun(NamedTuple):
-    """One metric launch of a loop launch: the blocks and reference table it measures with, over
+    """One metric launch of a loop launch: the measured records and reference table it measures with, over
     the launch's rows [start, stop), which are the rows of ``members`` (call, loop, first row)."""
 
-    blocks: tuple[Any, ...]
+    records: tuple[Any, ...]
     table: np.ndarray
     digest: str  # the table's
     start: int
@@ -326,8 +282,8 @@ def _run_group(group: list[_Call]) -> None:
     for run in _metric_runs(group, offsets):
         if run.digest not in tables:
             tables[run.digest] = gpu.to_device(run.table)
-        width = sum(len(cuda_metrics.BLOCK_NAMES[b.kind]) for b in run.blocks)
-        measuring.append((run, cuda_metrics.metrics_kernel(run.blocks, one.t), tables[run.digest], width))
+        width = sum(record.width for record in run.records)
+        measuring.append((run, cuda_metrics.metrics_kernel(run.records, one.t), tables[run.digest], width))
     for call in group:
         call.pieces = {int(i): [] for i in call.pattern}
     outcome = tuple(np.empty(n_rows, dtype=np.int64) for _ in range(3))
@@ -360,7 +316,6 @@ def _run_group(group: list[_Call]) -> None:
 def _assembled(ensemble: Ensemble, calls: list[_Call]) -> tuple[list[LoopRows], OkValues]:
     """An ensemble's loop rows and metric values from its calls, once run."""
     template, n_variants = ensemble.template, ensemble.n_variants
-    names: dict[int, list[tuple[str, str]]] = {}
     values: dict[int, np.ndarray] = {}
     rows: dict[int, LoopRows] = {}
     for call in calls:
@@ -369,12 +324,12 @@ def _assembled(ensemble: Ensemble, calls: list[_Call]) -> tuple[list[LoopRows], 
         bounds = np.broadcast_to(bounds, (call.n_rows, bounds.shape[-1]))
         for i in map(int, call.pattern):
             mine = loops == i
-            names[i], values[i] = call.names[i], np.concatenate(call.pieces[i])[mine]
+            values[i] = np.concatenate(call.pieces[i])[mine]
             status, n_valid, fail_index = (array[mine] for array in call.outcome)
             rows[i] = failure_rows(template, status, n_valid, fail_index, bounds[mine])
 
-    def ok_values(template: Template, i: int, loop: LoopRows, ok: np.ndarray) -> tuple[list[tuple[str, str]], Any]:
-        return names[i], values[i][ok]
+    def ok_values(template: Template, i: int, loop: LoopRows, ok: np.ndarray) -> np.ndarray:
+        return values[i][ok]
 
     return [rows[i] for i in range(len(template.items))], ok_values
 

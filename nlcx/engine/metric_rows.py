@@ -1,6 +1,6 @@
 """An ensemble's metric rows laid out as columns: the long form of metrics.csv, written in one pass.
 
-:func:`nlcx.engine.ensembles.measure_ensemble` measures each loop's runs as a :class:`Block`:
+:func:`nlcx.engine.ensembles.measure_ensemble` measures each loop's runs as a :class:`RowBlock`:
 the runs that finished (:func:`ok_block`, a row per metric) or those that stopped
 (:func:`failed_block`: ``t_fail`` and a missing settling time per followed output). A block's
 text columns repeat one pattern per run (its rows' controller, signal, metric, unit and
@@ -51,7 +51,7 @@ class Categories:
 
 
 @dataclass
-class Block:
+class RowBlock:
     """One loop's rows for some variants: the same ``w`` rows for each variant.
 
     ``value`` is (variants, w); ``pattern`` (w, 5) holds each row's controller, signal, metric,
@@ -78,27 +78,27 @@ def _pattern(cats: Categories, label: str, status: str, rows: Sequence[tuple[str
 def ok_block(
     variants: np.ndarray, loop: int, value: np.ndarray, rows: Sequence[tuple[str, str, str, str]],
     cats: Categories, label: str,
-) -> Block:  # fmt: skip
+) -> RowBlock:  # fmt: skip
     """The rows of the runs that finished: ``value`` (variants, w), ``rows`` each row's signal,
     metric, unit and the note of a missing value."""
     nan_note = np.array([cats.code("note", note) for *_, note in rows], dtype=np.int32)
     pattern = _pattern(cats, label, "ok", [(s, name, unit) for s, name, unit, _ in rows])
     note = np.full(variants.size, -1, dtype=np.int32)
-    return Block(variants, loop, np.ascontiguousarray(value, dtype=float), pattern, nan_note, note)
+    return RowBlock(variants, loop, np.ascontiguousarray(value, dtype=float), pattern, nan_note, note)
 
 
 def failed_block(
-    variants: np.ndarray, loop: int, t_fail: np.ndarray, reasons: Sequence[str], followed: Sequence[str],
-    cats: Categories, label: str,
-) -> Block:  # fmt: skip
-    """The rows of the runs that stopped: ``t_fail``, and a missing settling time per followed
-    output; each row's note the run's reason."""
+    variants: np.ndarray, loop: int, t_fail: np.ndarray, reasons: Sequence[str],
+    rows: Sequence[tuple[str, str, str]], cats: Categories, label: str,
+) -> RowBlock:  # fmt: skip
+    """The rows of the runs that stopped, given as (signal, metric, unit): ``t_fail`` first,
+    then missing values (:meth:`nlcx.engine.plan.LoopPlan.failed_rows`); each row's note the
+    run's reason."""
     note = np.array([cats.code("note", reason) for reason in reasons], dtype=np.int32)
-    rows = [("all", "t_fail", "s"), *((s, "settling_time", "s") for s in followed)]
     value = np.full((variants.size, len(rows)), np.nan)
     value[:, 0] = t_fail
     pattern = _pattern(cats, label, "unstable", rows)
-    return Block(variants, loop, value, pattern, np.full(len(rows), -1, dtype=np.int32), note)
+    return RowBlock(variants, loop, value, pattern, np.full(len(rows), -1, dtype=np.int32), note)
 
 
 @njit(cache=True, nogil=True)
@@ -126,7 +126,7 @@ def _place(
             out_codes[5, at + r] = fixed if fixed >= 0 else (nan_note[r] if np.isnan(v) else -1)
 
 
-def ordered(blocks: list[Block], cats: Categories, n_variants: int, n_loops: int) -> MetricColumns:
+def ordered(blocks: list[RowBlock], cats: Categories, n_variants: int, n_loops: int) -> MetricColumns:
     """The blocks' rows in :func:`nlcx.engine.measure_runs`'s order (by variant, then loop, then
     row), each row put in its place."""
     counts = np.zeros((n_variants, n_loops), dtype=np.int64)

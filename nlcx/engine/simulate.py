@@ -75,13 +75,13 @@ def simulate_items(
     for call in kernel_calls(groups_of([group_key(item) for item in items]), items):
         group = [items[i] for i in call.indices]
         check_rows(group[0].plant)
-        records = _records(group, grid.t.size, grid.t.size if record_logs else 1)
+        records = empty_records(group, grid.t.size, grid.t.size if record_logs else 1)
         outcome = Outcome(
             status=np.zeros(len(group), dtype=np.int64), n_valid=np.zeros(len(group), dtype=np.int64),
             fail_index=np.zeros(len(group), dtype=np.int64),
         )  # fmt: skip
-        plant, controller = _plant_call(group), _controller_call(group, call.step)
-        arguments = (plant, controller, _loop_elements(group), _plant_forces(group))
+        plant, controller = plant_call(group), controller_call(group, call.step)
+        arguments = (plant, controller, loop_elements(group), plant_forces(group))
         if device == "cuda":
             on_gpu(integration, *arguments, records, outcome)
         else:
@@ -108,7 +108,7 @@ def on_gpu(
     cuda_loop.simulate(integration, plant, controller, elements, forces, records, outcome)
 
 
-def _plant_call(group: list[Item]) -> PlantCall:
+def plant_call(group: list[Item]) -> PlantCall:
     """The plant of a kernel call: the first item's equations, every item's arrays."""
     plant, plants = group[0].plant, [g.plant for g in group]
     return PlantCall(
@@ -120,7 +120,7 @@ def _plant_call(group: list[Item]) -> PlantCall:
     )
 
 
-def _controller_call(group: list[Item], step: Any) -> ControllerCall:
+def controller_call(group: list[Item], step: Any) -> ControllerCall:
     """The controller of a kernel call: ``step``, the first item's callbacks, every item's arrays."""
     return ControllerCall(
         step=step,
@@ -131,7 +131,7 @@ def _controller_call(group: list[Item], step: Any) -> ControllerCall:
     )
 
 
-def _loop_elements(group: list[Item]) -> LoopElements:
+def loop_elements(group: list[Item]) -> LoopElements:
     """The loop elements of a group of items that share their element structure (hooks,
     functions and block sizes); rows are the items."""
     elements = group[0].elements
@@ -165,7 +165,7 @@ def element_states(item: Item) -> np.ndarray:
     return np.concatenate([np.zeros(0), *(e.state for e in item.elements)])
 
 
-def _plant_forces(group: list[Item]) -> PlantForces:
+def plant_forces(group: list[Item]) -> PlantForces:
     """The disturbances and friction axes of a kernel call's items."""
     return PlantForces(
         dist=_stack([g.dist for g in group], group[0].dist.shape),
@@ -179,7 +179,7 @@ def _friction_path(group: list[Item]) -> FrictionPath:
     return FRICTIONAL if any(any_friction(g.friction) for g in group) else FRICTIONLESS
 
 
-def _records(group: list[Item], n_k: int, n_rec: int, n_rows: int | None = None) -> Records:
+def empty_records(group: list[Item], n_k: int, n_rec: int, n_rows: int | None = None) -> Records:
     """The records of a group of items (``n_rows`` of them, by default one a member): states and
     inputs at the n_k samples, controller logs and friction forces at n_rec (1: not recorded).
     The kernel writes every sample up to where a run stops; the rest is never read."""
@@ -199,7 +199,7 @@ def _run(item: Item, j: int, records: Records, outcome: Outcome, grid: TimeGrid,
     return Run(
         controller=item.controller,
         status="unstable" if status else "ok",
-        reason=_failure_reason(item.plant, status, int(outcome.fail_index[j]), t_fail),
+        reason=failure_reason(item.plant, status, int(outcome.fail_index[j]), t_fail),
         t=grid.t[:k],
         x=records.X[j, :k],
         u=records.U[j, :k],
@@ -210,7 +210,7 @@ def _run(item: Item, j: int, records: Records, outcome: Outcome, grid: TimeGrid,
     )
 
 
-def _failure_reason(plant: Plant, status: int, index: int, t_fail: float, bounds: np.ndarray | None = None) -> str:
+def failure_reason(plant: Plant, status: int, index: int, t_fail: float, bounds: np.ndarray | None = None) -> str:
     """Why a run stopped (``status``: the kernel's, ``index``: its failing state or input), or ''
     (``bounds``: the run's divergence bounds, when not the plant's own)."""
     n = len(plant.states)

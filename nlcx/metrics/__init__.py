@@ -3,14 +3,12 @@
 Every function takes a strictly increasing, not necessarily uniform, time grid ``t`` of
 shape ``(T,)`` and a signal of shape ``(T,)`` or ``(B, T)``.  It returns a
 ``dict[str, np.ndarray]`` whose values have shape ``()`` for a 1-D signal and ``(B,)`` for
-a 2-D one (:func:`step_info` returns floats for a 1-D signal).  The searches along a row
-(crossings, last exits, extremes) and the terms of the trapezoidal sums are compiled row
-scans (:mod:`nlcx.metrics.scans`), each one pass that stops as early as it can; the sums are
-numpy's (pairwise), so every value is the numpy formulation's to the last bit
-(tests/test_metrics_scans.py).  The batch axis is processed in blocks of rows
-(:func:`rows_per_block`, :mod:`nlcx.metrics.rows`) so that temporaries stay bounded when
-``B * T`` is large.  Each row is computed by the same row-wise operations whatever the block
-it falls in, so a batched call equals the corresponding 1-D calls exactly.
+a 2-D one (:func:`step_info` returns floats for a 1-D signal).  Each row is measured by the
+compiled kernels of :mod:`nlcx.metrics.kernels`, the one implementation of every metric on
+the CPU and the GPU: searches along the row (:mod:`nlcx.metrics.scans`) that stop as early
+as they can, and trapezoidal sums added in numpy's pairwise order (:mod:`nlcx.metrics.sums`),
+so every value is the numpy formulation's to the last bit (tests/test_metrics_kernels.py),
+and a batched call equals the corresponding 1-D calls exactly.
 
 Crossing times are interpolated linearly between samples (the signal is treated as
 piecewise linear), so they are not quantised to the grid.  Peaks are sample values.
@@ -40,7 +38,7 @@ from nlcx.metrics.names import (
     STEP_METRICS,
 )
 from nlcx.metrics.regulation import error_integrals, input_metrics, regulation_metrics
-from nlcx.metrics.rows import FloatArray, MetricDict, rows_per_block
+from nlcx.metrics.rows import FloatArray, MetricDict
 from nlcx.metrics.step import StepInfo, measured_from, step_info, step_response_metrics
 
 __all__ = [
@@ -59,7 +57,6 @@ __all__ = [
     "input_metrics",
     "measured_from",
     "regulation_metrics",
-    "rows_per_block",
     "step_info",
     "step_response_metrics",
 ]

@@ -5,18 +5,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from nlcx.metrics.batch import error_integral_rows, input_rows, regulation_rows
+from nlcx.metrics.kernels import timing
 from nlcx.metrics.names import ERROR_METRICS, INPUT_METRICS, REGULATION_METRICS
-from nlcx.metrics.rows import (
-    FloatArray,
-    MetricDict,
-    check_band,
-    check_window,
-    per_row,
-    prepare,
-    run_batched,
-    window_mean,
-)
-from nlcx.metrics.scans import deviation_peak, error_terms, input_terms, last_exit
+from nlcx.metrics.rows import MetricDict, by_name, check_band, check_window, per_row, prepare
 
 
 def regulation_metrics(
@@ -47,20 +39,10 @@ def regulation_metrics(
     tol = float(abs_tol)
     if not (np.isfinite(tol) and tol >= 0):
         raise ValueError(f"abs_tol must be a non-negative number, got {abs_tol!r}")
-    tau = t_arr - t_arr[0]
-    params = {"reference": per_row(reference, y2.shape[0], "reference")}
-
-    def block(yb: FloatArray, reference: FloatArray) -> MetricDict:
-        ipk, peak_dev = deviation_peak(yb, reference)
-        band_abs = np.maximum(b * peak_dev, tol)
-        return {
-            "peak_deviation": peak_dev,
-            "peak_time": tau[ipk],
-            "settling_time": last_exit(tau, yb, reference, band_abs),
-            "steady_state_error": reference - window_mean(t_arr, yb, w),
-        }
-
-    return run_batched(block, y2, REGULATION_METRICS, squeeze, params)
+    g = timing(t_arr, t_arr[0], band=b, window=w, abs_tol=tol)
+    out = np.empty((y2.shape[0], len(REGULATION_METRICS)))
+    regulation_rows(t_arr, y2, g, per_row(reference, y2.shape[0], "reference"), out)
+    return by_name(out, REGULATION_METRICS, squeeze)
 
 
 def error_integrals(t: ArrayLike, e: ArrayLike, *, t0: float = 0.0) -> MetricDict:
@@ -80,21 +62,9 @@ def error_integrals(t: ArrayLike, e: ArrayLike, *, t0: float = 0.0) -> MetricDic
     i0 = int(np.searchsorted(t_arr, start, side="left"))
     if t_arr.size - i0 < 2:
         raise ValueError(f"need at least two samples at or after t0 = {start}")
-    t_c = t_arr[i0:]
-    duration = t_c[-1] - t_c[0]
-
-    def block(eb: FloatArray) -> MetricDict:
-        squared, absolute, weighted, max_abs = error_terms(t_c, eb[:, i0:], start)
-        ise = np.sum(squared, axis=-1)
-        return {
-            "ise": ise,
-            "iae": np.sum(absolute, axis=-1),
-            "itae": np.sum(weighted, axis=-1),
-            "max_abs_error": max_abs,
-            "rms_error": np.sqrt(ise / duration),
-        }
-
-    return run_batched(block, e2, ERROR_METRICS, squeeze)
+    out = np.empty((e2.shape[0], len(ERROR_METRICS)))
+    error_integral_rows(t_arr, e2, i0, start, out)
+    return by_name(out, ERROR_METRICS, squeeze)
 
 
 def input_metrics(t: ArrayLike, u: ArrayLike) -> MetricDict:
@@ -106,13 +76,6 @@ def input_metrics(t: ArrayLike, u: ArrayLike) -> MetricDict:
       for a signal that switches at every sample).
     """
     t_arr, u2, squeeze = prepare(t, u, "u")
-
-    def block(ub: FloatArray) -> MetricDict:
-        squared, steps, peak = input_terms(t_arr, ub)
-        return {
-            "control_effort": np.sum(squared, axis=-1),
-            "peak_input": peak,
-            "total_variation": np.sum(steps, axis=-1),
-        }
-
-    return run_batched(block, u2, INPUT_METRICS, squeeze)
+    out = np.empty((u2.shape[0], len(INPUT_METRICS)))
+    input_rows(t_arr, u2, out)
+    return by_name(out, INPUT_METRICS, squeeze)

@@ -1,27 +1,17 @@
-"""What every metric function shares: its inputs checked, its rows processed in blocks, time averages.
+"""What every public metric function shares: its inputs checked, and its results by name.
 
-A signal of shape ``(T,)`` is one row, ``(B, T)`` is B rows on the grid ``t``. The rows are
-processed in blocks of about ``_CHUNK_ELEMENTS`` samples (:func:`rows_per_block`) so that
-temporaries stay bounded when ``B * T`` is large; each row is computed by the same row-wise
-operations whatever the block it falls in, so a batched call equals the corresponding 1-D
-calls exactly. Integrals use the trapezoidal rule on the given grid.
+A signal of shape ``(T,)`` is one row, ``(B, T)`` is B rows on the grid ``t``; each row is
+measured by the same kernel (:mod:`nlcx.metrics.kernels`), so a batched call equals the
+corresponding 1-D calls exactly.
 """
 
 from __future__ import annotations
-
-from collections.abc import Callable, Mapping
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 MetricDict = dict[str, FloatArray]
-
-
-# Rows per block = max(1, _CHUNK_ELEMENTS // T): bounds the size of the temporaries. 2 MB
-# blocks stay in cache and are reused by the allocator; much larger blocks are memory-bound,
-# every temporary freshly mapped. Blocks never change a result.
-_CHUNK_ELEMENTS = 1 << 18
 
 
 def prepare(t: ArrayLike, y: ArrayLike, name: str) -> tuple[FloatArray, FloatArray, bool]:
@@ -53,61 +43,11 @@ def per_row(value: ArrayLike, n_rows: int, name: str) -> FloatArray:
     raise ValueError(f"{name} must be a scalar or have shape ({n_rows},), got {arr.shape}")
 
 
-def rows_per_block(n_samples: int) -> int:
-    """How many rows of ``n_samples`` samples the functions here process together: a caller
-    that forms the rows it passes (outputs gathered from states, errors) does so block by
-    block, and its temporaries stay as small as these functions' own."""
-    return max(1, _CHUNK_ELEMENTS // max(n_samples, 1))
-
-
-def run_batched(
-    block: Callable[..., Mapping[str, FloatArray]],
-    y: FloatArray,
-    keys: tuple[str, ...],
-    squeeze: bool,
-    row_params: Mapping[str, FloatArray] | None = None,
-) -> MetricDict:
-    """Apply ``block(y_rows, **params_rows)`` to blocks of rows and assemble the result."""
-    n_rows, n_cols = y.shape
-    params = row_params or {}
-    step = rows_per_block(n_cols)
-    parts: dict[str, list[FloatArray]] = {k: [] for k in keys}
-    for start in range(0, n_rows, step):
-        rows = slice(start, start + step)
-        out = block(y[rows], **{k: v[rows] for k, v in params.items()})
-        for k in keys:
-            parts[k].append(np.asarray(out[k], dtype=np.float64))
-    result = {k: np.concatenate(v) if v else np.empty(0, dtype=np.float64) for k, v in parts.items()}
-    if squeeze:
-        result = {k: v.reshape(()) for k, v in result.items()}
-    return result
-
-
-def trapz(t: FloatArray, y: FloatArray) -> FloatArray:
-    """Trapezoidal integral of each row: sum_k (t_k - t_{k-1}) * (y_k + y_{k-1}) / 2."""
-    dt = np.diff(t)
-    s = np.add(y[:, 1:], y[:, :-1])  # in place from here: one temporary, the same arithmetic
-    s *= 0.5
-    s *= dt
-    return np.sum(s, axis=-1)
-
-
-def window_mean(t: FloatArray, y: FloatArray, window: float) -> FloatArray:
-    """Time-weighted (trapezoidal) mean of each row over ``[t[-1] - window, t[-1]]``.
-
-    The window start is generally between samples; ``y`` there is interpolated linearly so
-    the window has exactly the requested length.  If the record is shorter than the window
-    the whole record ``[t[0], t[-1]]`` is used.
-    """
-    t_end = t[-1]
-    w_start = t_end - window
-    if w_start <= t[0]:
-        return trapz(t, y) / (t_end - t[0])
-    j = int(np.searchsorted(t, w_start, side="right"))  # t[j-1] <= w_start < t[j]
-    a = (w_start - t[j - 1]) / (t[j] - t[j - 1])
-    y_start = y[:, j - 1] + a * (y[:, j] - y[:, j - 1])
-    head = 0.5 * (t[j] - w_start) * (y_start + y[:, j])
-    return (head + trapz(t[j:], y[:, j:])) / window
+def by_name(values: FloatArray, names: tuple[str, ...], squeeze: bool) -> MetricDict:
+    """The columns of ``values`` (B, len(names)), one a metric, by name; of shape () each when
+    ``squeeze`` (a 1-D signal's)."""
+    result = {name: np.ascontiguousarray(values[:, i]) for i, name in enumerate(names)}
+    return {k: v.reshape(()) for k, v in result.items()} if squeeze else result
 
 
 def check_window(ss_window: float) -> float:

@@ -1,35 +1,26 @@
-"""The compiled row scans behind the metrics: searches along each row and the terms of its sums.
+"""The searches along one row of samples that the metrics are made of.
 
-The searches along a row (crossings, last exits, extremes) and the terms of the trapezoidal
-sums are each one pass that stops as early as it can; the sums are numpy's (pairwise), so
-every value is the numpy formulation's to the last bit (tests/test_metrics_scans.py).
-Crossing times are interpolated linearly between samples (the signal is treated as
-piecewise linear), so they are not quantised to the grid.
+Each function reads one row ``y`` (a 1-D array: a signal's samples on the grid ``t``) from
+sample ``first`` to its end, and stops as early as it can. Times are measured from an origin
+``t0`` (tau = t - t0, formed sample by sample); crossing times are interpolated linearly
+between samples (the signal is treated as piecewise linear), so they are not quantised to the
+grid. Comparisons follow numpy's: a maximum is the first one, or the first NaN (np.argmax),
+and :func:`np_maximum`/:func:`np_minimum` are np.maximum/np.minimum of two values.
+
+The same functions run on the CPU, called by :mod:`nlcx.metrics.kernels`, and on the GPU,
+compiled from this source as device functions (:class:`nlcx.kernel.device.Retarget`): they use
+only scalar arithmetic and :mod:`math`.
 """
 
 from __future__ import annotations
 
-import numpy as np
+import math
+
 from numba import njit
 
 
 @njit(cache=True, error_model="numpy")
-def _argmax(a):  # pragma: no cover - compiled
-    """numpy's argmax of a row: the first maximum, or the first NaN."""
-    best, at = a[0], 0
-    if best != best:
-        return 0
-    for i in range(1, a.shape[0]):
-        v = a[i]
-        if v != v:
-            return i
-        if v > best:
-            best, at = v, i
-    return at
-
-
-@njit(cache=True, error_model="numpy")
-def _clip01(x):  # pragma: no cover - compiled
+def clip01(x):  # pragma: no cover - compiled
     """np.clip(x, 0, 1): NaN stays NaN, -0.0 stays -0.0."""
     if x < 0.0:
         return 0.0
@@ -39,155 +30,137 @@ def _clip01(x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _first_crossing_row(tau, y, s, s_level):  # pragma: no cover - compiled
-    """(time, index) of the first sample of the row ``y`` with s*y >= s_level, the time
-    interpolated linearly from the sample before; (NaN, 0) if none."""
-    for i in range(y.shape[0]):
-        if s * y[i] >= s_level:
-            if i == 0:
-                return tau[0] + 0.0 * (tau[0] - tau[0]), 0
-            prev = s * y[i - 1]
-            frac = _clip01((s_level - prev) / (s * y[i] - prev))
-            return tau[i - 1] + frac * (tau[i] - tau[i - 1]), i
-    return np.nan, 0
+def sign(x):  # pragma: no cover - compiled
+    """np.sign(x): -1, 0 or 1, NaN for NaN."""
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    if x == 0.0:
+        return 0.0
+    return math.nan
 
 
 @njit(cache=True, error_model="numpy")
-def first_crossing(tau, y, s, s_level):  # pragma: no cover - compiled
-    """First time each row of ``y`` reaches its level: s*y >= s_level, with s = ``s[b]`` and
-    s_level = ``s_level[b]`` (s = sign of the step, so s*(y - level) >= 0).  If the first
-    sample already satisfies it the result is ``tau[0]``; otherwise the crossing is
-    interpolated linearly between the last sample before and the first sample that satisfies
-    it.  NaN if it is never reached.  Also returns the index of that first sample (0 where
-    the time is NaN)."""
-    n_rows = y.shape[0]
-    t_cross = np.empty(n_rows)
-    index = np.zeros(n_rows, dtype=np.intp)
-    for b in range(n_rows):
-        t_cross[b], index[b] = _first_crossing_row(tau, y[b], s[b], s_level[b])
-    return t_cross, index
+def np_maximum(a, b):  # pragma: no cover - compiled
+    """np.maximum(a, b): NaN if either is NaN, else a where a > b, else b (of two equal
+    values, +0.0 and -0.0 among them, numpy returns the second)."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a > b else b
 
 
 @njit(cache=True, error_model="numpy")
-def last_exit(tau, y, center, band_abs):  # pragma: no cover - compiled
-    """Time of the last exit of each row from ``|y - center| <= band_abs`` (last-exit rule).
+def np_minimum(a, b):  # pragma: no cover - compiled
+    """np.minimum(a, b): NaN if either is NaN, else a where a < b, else b."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a < b else b
 
-    With k the last index where ``|y_k - center| > band_abs``: no such k gives 0, k the last
-    sample gives NaN (not settled within the record), otherwise the time where the piecewise
-    linear signal between samples k and k+1 meets the band edge on the side of ``y_k``,
-    ``center + sign(y_k - center) * band_abs``.
-    """
-    n_rows, n = y.shape
-    out = np.empty(n_rows)
-    for b in range(n_rows):
-        c, band = center[b], band_abs[b]
-        k = n - 1
-        while k >= 0 and not abs(y[b, k] - c) > band:
-            k -= 1
-        if k < 0:
-            out[b] = 0.0
-        elif k == n - 1:
-            out[b] = np.nan
+
+@njit(cache=True, error_model="numpy")
+def search_right(t, first, value):  # pragma: no cover - compiled
+    """np.searchsorted(t, value, side="right") over t[first:], as an index of t: the first
+    sample after ``value`` (len(t) if none), by bisection."""
+    lo, hi = first, t.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if t[mid] <= value:
+            lo = mid + 1
         else:
-            d_k, d_k1 = y[b, k] - c, y[b, k + 1] - c
-            edge = (1.0 if d_k > 0.0 else -1.0) * band
-            out[b] = tau[k] + _clip01((d_k - edge) / (d_k - d_k1)) * (tau[k + 1] - tau[k])
-    return out
+            hi = mid
+    return lo
 
 
 @njit(cache=True, error_model="numpy")
-def extremes(y, s, s_final, s_initial):  # pragma: no cover - compiled
-    """Per row b: max(s*y - s_final) and max(s_initial - s*y), each NaN if a term is NaN (as
-    np.max), and the index of the first maximum of s*y (as np.argmax); s = ``s[b]``."""
-    n_rows, n = y.shape
-    over, under = np.empty(n_rows), np.empty(n_rows)
-    peak = np.zeros(n_rows, dtype=np.intp)
-    sy = np.empty(n)
-    for b in range(n_rows):
-        hi, lo, hi_nan, lo_nan = -np.inf, -np.inf, False, False
-        s_b, final_b, initial_b = s[b], s_final[b], s_initial[b]
-        for i in range(n):
-            v = s_b * y[b, i]
-            sy[i] = v
-            a, c = v - final_b, initial_b - v
-            hi_nan, lo_nan = hi_nan or a != a, lo_nan or c != c
-            hi = a if a > hi else hi
-            lo = c if c > lo else lo
-        over[b] = np.nan if hi_nan else hi
-        under[b] = np.nan if lo_nan else lo
-        peak[b] = _argmax(sy)
-    return over, under, peak
+def first_crossing(t, y, first, t0, s, s_level):  # pragma: no cover - compiled
+    """(time from t0, index from ``first``) of the first sample with s*y >= s_level (s: the
+    sign of the step, so s*(y - level) >= 0): tau of ``first`` if that sample satisfies it,
+    otherwise interpolated linearly between the last sample before and the first one that
+    satisfies it; (NaN, 0) if it is never reached."""
+    for i in range(first, y.shape[0]):
+        if s * y[i] >= s_level:
+            if i == first:
+                tau0 = t[first] - t0
+                return tau0 + 0.0 * (tau0 - tau0), 0
+            prev = s * y[i - 1]
+            frac = clip01((s_level - prev) / (s * y[i] - prev))
+            tau_prev = t[i - 1] - t0
+            return tau_prev + frac * ((t[i] - t0) - tau_prev), i - first
+    return math.nan, 0
 
 
 @njit(cache=True, error_model="numpy")
-def deviation_peak(y, reference):  # pragma: no cover - compiled
-    """Per row b: the index of the first maximum of |y - reference[b]| (or of its first NaN,
-    as np.argmax) and that deviation."""
-    n_rows, n = y.shape
-    index = np.zeros(n_rows, dtype=np.intp)
-    peak = np.empty(n_rows)
-    dev = np.empty(n)
-    for b in range(n_rows):
-        for i in range(n):
-            dev[i] = abs(y[b, i] - reference[b])
-        index[b] = _argmax(dev)
-        peak[b] = dev[index[b]]
-    return index, peak
+def last_exit(t, y, first, t0, center, band):  # pragma: no cover - compiled
+    """Time from t0 of the last exit of the row from |y - center| <= band (the last-exit rule).
+
+    With k the last sample where |y_k - center| > band: none gives 0, k the last sample gives
+    NaN (not settled within the record), otherwise the time where the piecewise linear signal
+    between samples k and k+1 meets the band's edge on the side of y_k,
+    center + sign(y_k - center) band.
+    """
+    n = y.shape[0]
+    k = n - 1
+    while k >= first and not abs(y[k] - center) > band:
+        k -= 1
+    if k < first:
+        return 0.0
+    if k == n - 1:
+        return math.nan
+    d_k, d_k1 = y[k] - center, y[k + 1] - center
+    edge = (1.0 if d_k > 0.0 else -1.0) * band
+    tau_k = t[k] - t0
+    return tau_k + clip01((d_k - edge) / (d_k - d_k1)) * ((t[k + 1] - t0) - tau_k)
 
 
 @njit(cache=True, error_model="numpy")
-def _max_abs(y, b):  # pragma: no cover - compiled
-    """max |y[b]|, NaN if the row holds a NaN (as np.max)."""
-    m = -np.inf
-    for i in range(y.shape[1]):
-        a = abs(y[b, i])
+def extremes(y, first, s, s_final, s_initial):  # pragma: no cover - compiled
+    """(max(s*y - s_final), max(s_initial - s*y), index of the first maximum of s*y) over the
+    row from ``first``: each maximum NaN if a term is NaN (np.max), the index that of the first
+    maximum or the first NaN (np.argmax)."""
+    hi, lo, hi_nan, lo_nan = -math.inf, -math.inf, False, False
+    best, at, found_nan = -math.inf, first, False
+    for i in range(first, y.shape[0]):
+        v = s * y[i]
+        a, c = v - s_final, s_initial - v
+        hi_nan = hi_nan or a != a
+        lo_nan = lo_nan or c != c
+        hi = a if a > hi else hi
+        lo = c if c > lo else lo
+        if not found_nan:
+            if v != v:
+                found_nan, at = True, i
+            elif i == first or v > best:
+                best, at = v, i
+    return (math.nan if hi_nan else hi), (math.nan if lo_nan else lo), at
+
+
+@njit(cache=True, error_model="numpy")
+def deviation_peak(y, first, center):  # pragma: no cover - compiled
+    """The index of the first largest |y - center| from ``first``, or of the first NaN (np.argmax)."""
+    best, at = abs(y[first] - center), first
+    if best != best:
+        return at
+    for i in range(first + 1, y.shape[0]):
+        d = abs(y[i] - center)
+        if d != d:
+            return i
+        if d > best:
+            best, at = d, i
+    return at
+
+
+@njit(cache=True, error_model="numpy")
+def max_abs(y, first):  # pragma: no cover - compiled
+    """max |y| over the row from ``first``, NaN if it holds a NaN (np.max)."""
+    m = -math.inf
+    for i in range(first, y.shape[0]):
+        a = abs(y[i])
         if a != a:
-            return np.nan
+            return math.nan
         m = a if a > m else m
     return m
-
-
-@njit(cache=True, error_model="numpy")
-def _steps(t):  # pragma: no cover - compiled
-    """t[k + 1] - t[k]: the grid's steps, formed once for every row of a scan."""
-    dt = np.empty(t.shape[0] - 1)
-    for k in range(t.shape[0] - 1):
-        dt[k] = t[k + 1] - t[k]
-    return dt
-
-
-@njit(cache=True, error_model="numpy")
-def error_terms(t, e, start):  # pragma: no cover - compiled
-    """The terms of the trapezoidal sums of e^2, |e| and (t - start) |e| over each row of e
-    (samples at t), as :func:`nlcx.metrics.rows.trapz` forms them, and max |e| per row. Summed by numpy
-    (pairwise), they are the integrals of :func:`nlcx.metrics.error_integrals` to the last bit."""
-    n_rows, n = e.shape
-    squared, absolute, weighted = np.empty((n_rows, n - 1)), np.empty((n_rows, n - 1)), np.empty((n_rows, n - 1))
-    max_abs = np.empty(n_rows)
-    dt, elapsed = _steps(t), t - start
-    for b in range(n_rows):
-        for k in range(n - 1):
-            e0, e1 = e[b, k], e[b, k + 1]
-            a0, a1 = abs(e0), abs(e1)
-            squared[b, k] = ((e1 * e1 + e0 * e0) * 0.5) * dt[k]
-            absolute[b, k] = ((a1 + a0) * 0.5) * dt[k]
-            weighted[b, k] = ((elapsed[k + 1] * a1 + elapsed[k] * a0) * 0.5) * dt[k]
-        max_abs[b] = _max_abs(e, b)
-    return squared, absolute, weighted, max_abs
-
-
-@njit(cache=True, error_model="numpy")
-def input_terms(t, u):  # pragma: no cover - compiled
-    """The terms of the trapezoidal sum of u^2 and of the total variation sum |u_k - u_{k-1}|
-    over each row of u, and max |u| per row (numpy sums them)."""
-    n_rows, n = u.shape
-    squared, steps = np.empty((n_rows, n - 1)), np.empty((n_rows, n - 1))
-    peak = np.empty(n_rows)
-    dt = _steps(t)
-    for b in range(n_rows):
-        for k in range(n - 1):
-            u0, u1 = u[b, k], u[b, k + 1]
-            squared[b, k] = ((u1 * u1 + u0 * u0) * 0.5) * dt[k]
-            steps[b, k] = abs(u1 - u0)
-        peak[b] = _max_abs(u, b)
-    return squared, steps, peak

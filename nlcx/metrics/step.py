@@ -9,25 +9,22 @@ between samples, peaks are sample values. See ``docs/metrics.md``.
 
 from __future__ import annotations
 
-import functools
-from typing import NamedTuple
-
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from nlcx.metrics.batch import step_info_rows, step_response_rows
+from nlcx.metrics.kernels import Timing, timing
 from nlcx.metrics.names import EVENT_TIMES, STEP_INFO_METRICS, STEP_METRICS
 from nlcx.metrics.rows import (
     FloatArray,
     MetricDict,
+    by_name,
     check_band,
     check_rise_limits,
     check_window,
     per_row,
     prepare,
-    run_batched,
-    window_mean,
 )
-from nlcx.metrics.scans import extremes, first_crossing, last_exit
 
 StepInfo = dict[str, float] | dict[str, FloatArray]
 """What :func:`step_info` returns: floats for a 1-D signal, ``(B,)`` arrays for a batch.
@@ -50,133 +47,26 @@ With D = y_final - y_init, s = sign(D), tau = t - t_step and ``(lo, hi) = rise_l
 All but ``peak``, ``peak_time`` and ``steady_state_value`` are NaN where D == 0."""
 
 
-class _StepGrid(NamedTuple):
-    """Where a step at ``t_step`` falls on the grid ``t``."""
-
-    i0: int  # first considered sample: t[i0] >= t_step
-    t_c: FloatArray  # t[i0:]
-    tau: FloatArray  # t[i0:] - t_step
-    j: int  # t[j] <= t_step < t[j+1]
-    on_grid: bool  # t_step == t[j] (or j < 0, when y(t_step) is not needed)
-    a: float  # weight of sample j+1 in y(t_step) when t_step is between samples
-
-
-def _step_grid(t: FloatArray, t_step: float, need_initial: bool, initial_name: str = "initial") -> _StepGrid:
-    """Locate ``t_step`` on ``t``; ``need_initial``: y(t_step) will be interpolated from ``y``."""
+def _checked_timing(
+    t: FloatArray, t_step: float, need_initial: bool, initial_name: str, band: float,
+    rise_limits: tuple[float, float], window: float = 1.0,
+) -> Timing:  # fmt: skip
+    """The :class:`~nlcx.metrics.kernels.Timing` of a step at ``t_step`` on ``t``; ValueError if
+    fewer than two samples are at or after it, or, when y(t_step) is needed, if it is before t[0]."""
     ts = float(t_step)
-    i0 = int(np.searchsorted(t, ts, side="left"))
-    if t.size - i0 < 2:
+    g = timing(t, ts, band=band, rise_limits=rise_limits, window=window)
+    if t.size - g.first < 2:
         raise ValueError(f"need at least two samples at or after t_step = {ts}")
     if need_initial and ts < t[0]:
         raise ValueError(f"t_step is before t[0]; pass {initial_name} explicitly")
-    t_c = t[i0:]
-    j = int(np.searchsorted(t, ts, side="right")) - 1
-    on_grid = j < 0 or t[j] == ts  # j < 0 only if the initial value was given (not used then)
-    a = 0.0 if on_grid else (ts - t[j]) / (t[j + 1] - t[j])
-    return _StepGrid(i0, t_c, t_c - ts, j, on_grid, a)
+    return g
 
 
-def _value_at_step(y: FloatArray, g: _StepGrid) -> FloatArray:
-    """y(t_step) of each row, linearly interpolated between the samples around it."""
-    j = g.j
-    return y[:, j] if g.on_grid else y[:, j] + g.a * (y[:, j + 1] - y[:, j])
-
-
-class _StepCore(NamedTuple):
-    """The metrics both step functions share, and what the rest of each is computed from."""
-
-    metrics: MetricDict  # rise_time, settling_time, overshoot, undershoot (NaN where delta == 0)
-    peak_index: NDArray[np.intp]  # first maximum of s * y, s = sign(final - initial)
-    valid: NDArray[np.bool_]  # delta != 0
-    risen: NDArray[np.bool_]  # the upper rise level is reached (and delta != 0)
-    hi_index: NDArray[np.intp]  # first sample at or past the upper rise level (where risen)
-
-
-def _step_core(
-    tau: FloatArray,
-    yc: FloatArray,
-    initial: FloatArray,
-    final: FloatArray,
-    limits: tuple[float, float],
-    band: float,
-) -> _StepCore:
-    """Rise time, settling time, overshoot and undershoot of rows ``yc`` stepping initial -> final."""
-    lo, hi = limits
-    delta = final - initial
-    s = np.sign(delta)
-    mag = np.abs(delta)
-    valid = delta != 0
-    t_lo, _ = first_crossing(tau, yc, s, s * (initial + lo * delta))
-    t_hi, hi_index = first_crossing(tau, yc, s, s * (initial + hi * delta))
-    settling = last_exit(tau, yc, final, band * mag)
-    over, under, peak_index = extremes(yc, s, s * final, s * initial)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        overshoot = 100.0 * np.maximum(over, 0.0) / mag
-        undershoot = 100.0 * np.maximum(under, 0.0) / mag
-    nan = np.nan
-    metrics = {
-        "rise_time": np.where(valid, t_hi - t_lo, nan),
-        "settling_time": np.where(valid, settling, nan),
-        "overshoot": np.where(valid, overshoot, nan),
-        "undershoot": np.where(valid, undershoot, nan),
-    }
-    return _StepCore(metrics, peak_index, valid, valid & ~np.isnan(t_hi), hi_index)
-
-
-def _abs_peak(tau: FloatArray, yc: FloatArray) -> MetricDict:
-    """python-control's ``Peak``: the largest ``|y|``, and the time of its first sample."""
-    absy = np.abs(yc)
-    ipk = np.argmax(absy, axis=1)
-    return {"peak": absy[np.arange(yc.shape[0]), ipk], "peak_time": tau[ipk]}
-
-
-def _settling_range(yc: FloatArray, final: FloatArray, core: _StepCore) -> MetricDict:
-    """python-control's ``SettlingMin``/``SettlingMax``: the extremes of ``y`` from the first
-    sample at or past the upper rise level on, and of the steady-state value."""
-    after = np.arange(yc.shape[1]) >= core.hi_index[:, np.newaxis]
-    y_min = np.minimum(np.min(np.where(after, yc, np.inf), axis=1), final)
-    y_max = np.maximum(np.max(np.where(after, yc, -np.inf), axis=1), final)
-    return {"settling_min": np.where(core.risen, y_min, np.nan), "settling_max": np.where(core.risen, y_max, np.nan)}
-
-
-def _step_response_rows(
-    g: _StepGrid,
-    limits: tuple[float, float],
-    band: float,
-    window: float,
-    yb: FloatArray,
-    final: FloatArray,
-    initial: FloatArray | None = None,
-) -> MetricDict:
-    """:func:`step_response_metrics` of the block of rows ``yb`` stepping from ``initial``
-    (default: y(t_step)) to ``final`` at the step ``g``."""
-    if initial is None:
-        initial = _value_at_step(yb, g)
-    yc = yb[:, g.i0 :]
-    core = _step_core(g.tau, yc, initial, final, limits, band)
-    ipk = core.peak_index
-    return {
-        **core.metrics,
-        "peak": np.where(core.valid, yc[np.arange(yc.shape[0]), ipk], np.nan),
-        "peak_time": np.where(core.valid, g.tau[ipk], np.nan),
-        "steady_state_error": final - window_mean(g.t_c, yc, window),
-    }
-
-
-def _step_info_rows(
-    g: _StepGrid,
-    limits: tuple[float, float],
-    band: float,
-    yb: FloatArray,
-    reference: FloatArray | None = None,
-    initial: FloatArray | None = None,
-) -> MetricDict:
-    """:func:`step_info` of the block of rows ``yb`` stepping from ``initial`` (default:
-    y(t_step)) at the step ``g``, against ``reference`` (default: each row's last sample)."""
-    final = yb[:, -1] if reference is None else reference
-    yc = yb[:, g.i0 :]
-    core = _step_core(g.tau, yc, _value_at_step(yb, g) if initial is None else initial, final, limits, band)
-    return {**core.metrics, **_abs_peak(g.tau, yc), "steady_state_value": final, **_settling_range(yc, final, core)}
+def _optional_rows(value: ArrayLike | None, n_rows: int, name: str) -> tuple[FloatArray, bool]:
+    """A per-row parameter that may be left out: ((B,) values or zeros, whether it was given)."""
+    if value is None:
+        return np.zeros(n_rows), False
+    return per_row(value, n_rows, name), True
 
 
 def step_response_metrics(
@@ -219,13 +109,11 @@ def step_response_metrics(
     t_arr, y2, squeeze = prepare(t, y, "y")
     n_rows = y2.shape[0]
     limits = check_rise_limits(rise_limits)
-    b = check_band(band)
-    w = check_window(ss_window)
-    g = _step_grid(t_arr, t_step, need_initial=initial is None)
-    params: dict[str, FloatArray] = {"final": per_row(final, n_rows, "final")}
-    if initial is not None:
-        params["initial"] = per_row(initial, n_rows, "initial")
-    return run_batched(functools.partial(_step_response_rows, g, limits, b, w), y2, STEP_METRICS, squeeze, params)
+    g = _checked_timing(t_arr, t_step, initial is None, "initial", check_band(band), limits, check_window(ss_window))
+    start, given = _optional_rows(initial, n_rows, "initial")
+    out = np.empty((n_rows, len(STEP_METRICS)))
+    step_response_rows(t_arr, y2, g, start, given, per_row(final, n_rows, "final"), out)
+    return by_name(out, STEP_METRICS, squeeze)
 
 
 def step_info(
@@ -297,14 +185,12 @@ def step_info(
     t_arr, y2, squeeze = prepare(t, y, "y")
     n_rows = y2.shape[0]
     limits = check_rise_limits(rise_limits)
-    b = check_band(settling_band)
-    g = _step_grid(t_arr, t_step, need_initial=y_initial is None, initial_name="y_initial")
-    params: dict[str, FloatArray] = {}
-    if reference is not None:
-        params["reference"] = per_row(reference, n_rows, "reference")
-    if y_initial is not None:
-        params["initial"] = per_row(y_initial, n_rows, "y_initial")
-    result = run_batched(functools.partial(_step_info_rows, g, limits, b), y2, STEP_INFO_METRICS, squeeze, params)
+    g = _checked_timing(t_arr, t_step, y_initial is None, "y_initial", check_band(settling_band), limits)
+    start, has_initial = _optional_rows(y_initial, n_rows, "y_initial")
+    final, has_final = _optional_rows(reference, n_rows, "reference")
+    out = np.empty((n_rows, len(STEP_INFO_METRICS)))
+    step_info_rows(t_arr, y2, g, start, has_initial, final, has_final, out)
+    result = by_name(out, STEP_INFO_METRICS, squeeze)
     return {k: float(v) for k, v in result.items()} if squeeze else result
 
 

@@ -15,7 +15,7 @@ class ReferenceConfig(BaseModel):
 
 
 @dataclass(frozen=True)
-class MetricPlan:
+class SignalPlan:
     """How a signal following this reference is measured (see docs/metrics.md).
 
     ``step``: step-response metrics from ``initial`` to ``final`` at ``t_step``;
@@ -37,5 +37,5 @@ class ReferenceModel:
         """r(t) at the times ``t``."""
         raise NotImplementedError
 
-    def metric_plan(self, cfg: Any) -> MetricPlan:
-        return MetricPlan("tracking")
+    def signal_plan(self, cfg: Any) -> SignalPlan:
+        return SignalPlan("tracking")

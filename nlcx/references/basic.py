@@ -7,7 +7,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from nlcx.references.base import MetricPlan, ReferenceConfig, ReferenceModel
+from nlcx.references.base import ReferenceConfig, ReferenceModel, SignalPlan
 
 
 class ConstantConfig(ReferenceConfig):
@@ -64,8 +64,8 @@ class Constant(ReferenceModel):
     def values(self, cfg: ConstantConfig, t: np.ndarray) -> np.ndarray:
         return np.full(t.shape, cfg.value)
 
-    def metric_plan(self, cfg: ConstantConfig) -> MetricPlan:
-        return MetricPlan("regulation", final=cfg.value)
+    def signal_plan(self, cfg: ConstantConfig) -> SignalPlan:
+        return SignalPlan("regulation", final=cfg.value)
 
 
 class Step(ReferenceModel):
@@ -76,10 +76,10 @@ class Step(ReferenceModel):
     def values(self, cfg: StepConfig, t: np.ndarray) -> np.ndarray:
         return np.where(t >= cfg.time, cfg.final, cfg.initial)
 
-    def metric_plan(self, cfg: StepConfig) -> MetricPlan:
+    def signal_plan(self, cfg: StepConfig) -> SignalPlan:
         if cfg.final == cfg.initial:
-            return MetricPlan("regulation", final=cfg.final)
-        return MetricPlan("step", final=cfg.final, t_step=cfg.time)
+            return SignalPlan("regulation", final=cfg.final)
+        return SignalPlan("step", final=cfg.final, t_step=cfg.time)
 
 
 class FilteredStep(ReferenceModel):
@@ -93,8 +93,8 @@ class FilteredStep(ReferenceModel):
         rise = -np.expm1(-np.maximum(t - cfg.time, 0.0) / cfg.time_constant)
         return cfg.initial + (cfg.final - cfg.initial) * rise
 
-    def metric_plan(self, cfg: FilteredStepConfig) -> MetricPlan:
-        return Step().metric_plan(cfg)
+    def signal_plan(self, cfg: FilteredStepConfig) -> SignalPlan:
+        return Step().signal_plan(cfg)
 
 
 class Sine(ReferenceModel):
