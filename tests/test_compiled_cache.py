@@ -212,7 +212,7 @@ def test_prewarm_compiles_what_a_run_needs_except_the_kernel(tmp_path: Path) -> 
     done = subprocess.run([*nlcx, "prewarm", str(CONFIG), *overrides], env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     index = _cache_index(tmp_path / "cache")
-    assert {"pid_step.pid_step", "pendulums.x_derived_rhs", "scans.error_terms", "scans.first_crossing"} <= index
+    assert {"pid_step.pid_step", "pendulums.x_derived_rhs", "batch.measure_rows", "kernels.measure"} <= index
     assert not any(name.startswith("integrator.") for name in index)
     for out, run_env in ((tmp_path / "cold", env), (tmp_path / "warm", None)):
         run = [*nlcx, "run", str(CONFIG), *overrides, "--out", str(out), "--no-report", "-q"]

@@ -251,7 +251,7 @@ def test_metrics_measured_in_blocks_of_runs_equal_one_block(x_error_raw: dict, m
     assert len({r.prepared.plant.p.tobytes() for r in results}) == 5 and len(whole) > 100
     runs = [run for r in results for run in r.runs]
     monkeypatch.setattr(measure, "ROWS_ELEMENTS", rows * runs[0].t.size)
-    assert len(measure._blocks(list(range(len(runs))), runs[0].t.size)[0]) == rows
+    assert len(measure._row_ranges(len(runs), runs[0].t.size)[0]) == rows
     blocks = engine.shared_metrics(engine.remeasure(results, {}))
     assert whole.equals(blocks)
     assert (whole.status == "ok").any() and not whole.value.isna().all()
@@ -343,7 +343,7 @@ def test_the_kernels_structures_are_typed_as_its_signature_declares(
     import numba
 
     from nlcx.kernel import structures
-    from nlcx.kernel.friction import FRICTIONAL, FRICTIONLESS
+    from nlcx.kernel.friction_path import FRICTIONAL, FRICTIONLESS
 
     unc = {"friction": {"kind": "friction", "model": "simple", "mu_s": 0.2, "mu_c": 0.15}} if friction else {}
     args, typed = _kernel_arguments(x_error_raw, monkeypatch, **unc)
@@ -401,7 +401,7 @@ def test_paddings_are_handed_over_by_address_called_anyway_run_and_pickle_by_ref
     from numba import njit, types
 
     from nlcx.kernel import abi
-    from nlcx.kernel.friction import FRICTIONLESS, no_frictional_sample, no_frictional_step
+    from nlcx.kernel.friction_path import FRICTIONLESS, no_frictional_sample, no_frictional_step
     from nlcx.kernel.structures import FrictionPath
 
     table = abi.callback_slots()

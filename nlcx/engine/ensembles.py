@@ -36,7 +36,8 @@ from nlcx.engine.simulate import (
     plant_call,
     plant_forces,
 )
-from nlcx.kernel.friction import FRICTIONAL, FRICTIONLESS, any_friction
+from nlcx.kernel.friction import any_friction
+from nlcx.kernel.friction_path import FRICTIONAL, FRICTIONLESS
 from nlcx.kernel.structures import Integration, Outcome, method_of
 
 #: The per-loop arrays of an item, by name, and the kernel argument (structure, field) each becomes.

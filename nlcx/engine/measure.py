@@ -61,10 +61,10 @@ def _reference_rows(columns: list[np.ndarray]) -> np.ndarray:
     return np.stack(columns)
 
 
-def _blocks(members: list[int], n_samples: int) -> list[list[int]]:
-    """``members`` in blocks of :data:`ROWS_ELEMENTS` samples' worth of runs."""
+def _row_ranges(n_runs: int, n_samples: int) -> list[range]:
+    """The runs 0 .. n_runs-1 in ranges of :data:`ROWS_ELEMENTS` samples' worth of runs."""
     size = max(1, ROWS_ELEMENTS // max(n_samples, 1))
-    return [members[k : k + size] for k in range(0, len(members), size)]
+    return [range(k, min(k + size, n_runs)) for k in range(0, n_runs, size)]
 
 
 def _loop_values(plant: Plant, plan: LoopPlan, runs: list[Run]) -> np.ndarray:
@@ -74,11 +74,11 @@ def _loop_values(plant: Plant, plan: LoopPlan, runs: list[Run]) -> np.ndarray:
     o = 0
     for signal in plan.signals:
         width = len(signal.metrics)
-        for block in _blocks(list(range(len(runs))), t.size):
-            chosen = [runs[i] for i in block]
+        for rows in _row_ranges(len(runs), t.size):
+            chosen = [runs[i] for i in rows]
             y = source_rows([r.x for r in chosen], [r.u for r in chosen], signal, plant)
             ref = y[:1] if signal.reference < 0 else _reference_rows([r.r[:, signal.reference] for r in chosen])
-            values[block[0] : block[-1] + 1, o : o + width] = signal_values(signal, t, y, ref)
+            values[rows.start : rows.stop, o : o + width] = signal_values(signal, t, y, ref)
         o += width
     return values
 

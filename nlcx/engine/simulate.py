@@ -19,7 +19,8 @@ from nlcx.engine.batching import group_key, groups_of, kernel_calls
 from nlcx.engine.prepared import TABLEAUS, Item, Prepared, TimeGrid, items_of
 from nlcx.engine.results import Run
 from nlcx.kernel.abi import ELEMENT_ENTRY, HOOKS, STATUS_BOUND, STATUS_NONFINITE, callback_slots, element_slots
-from nlcx.kernel.friction import FRICTION_AXIS, FRICTIONAL, FRICTIONLESS, any_friction
+from nlcx.kernel.friction import FRICTION_AXIS, any_friction
+from nlcx.kernel.friction_path import FRICTIONAL, FRICTIONLESS
 from nlcx.kernel.structures import (
     ControllerCall,
     FrictionPath,

@@ -1,6 +1,6 @@
 """Stick-slip friction (Appendix A) on the GPU: the CPU's friction path, for one thread's variant.
 
-A variant with friction is stepped on the CPU by :func:`nlcx.kernel.friction.step_with_friction`,
+A variant with friction is stepped on the CPU by :func:`nlcx.kernel.friction_path.step_with_friction`,
 its breakaway checked at each sample by :func:`nlcx.kernel.friction.update_friction_modes`. On
 the GPU the thread of such a variant calls the same functions, compiled from their source as
 device functions (:class:`nlcx.kernel.device.Retarget`) with the plant's right-hand side handed
@@ -19,14 +19,8 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 from nlcx.kernel.device import Retarget, cuda
-from nlcx.kernel.friction import (
-    friction_forces,
-    has_friction,
-    initial_modes,
-    sample_stage,
-    step_with_friction,
-    update_friction_modes,
-)
+from nlcx.kernel.friction import friction_forces, has_friction, initial_modes, update_friction_modes
+from nlcx.kernel.friction_path import sample_stage, step_with_friction
 from nlcx.kernel.structures import FrictionScratch, FrictionWork, OneColumn
 
 #: What :attr:`FrictionDevices.act` does: the breakaway at t_k (and the friction force there,
@@ -69,26 +63,28 @@ def friction_devices(retarget: Retarget, rhs: Any, n_x: int, n_u: int, n_stages:
         local = cuda_module.local.array
         one = OneColumn(local((N, 1), float64), local((NU, 1), float64), pc, local((N, 1), float64))
         scratch = FrictionScratch(
-            local((NST, N), float64), local(N, float64), local(NU, float64), local(NU, float64), local(NU, float64),
+            local((NST, N, 1), float64), local((N, 1), float64), local(NU, float64), local(NU, float64),
             local((NU, NU), float64), local(NU, float64), local(N, float64), local(ND, float64)[: dist.shape[3]], one,
         )  # fmt: skip
-        work = FrictionWork(local(N, float64), local(N, float64), local(N, float64), local(NU, float64), scratch)
+        column = (N, 1)
+        work = FrictionWork(local(column, float64), local(column, float64), local(column, float64),
+                            local((NU, 1), float64), scratch)  # fmt: skip
         for i in range(N):
-            work.x[i] = x[i, 0]
+            work.x[i, 0] = x[i, 0]
         for j in range(NU):
-            work.u[j] = u[0, j]
+            work.u[j, 0] = u[0, j]
         if phase == AT_SAMPLE:
             step, stage = at_sample(dist[bd], k)  # a device function returns no view: indices
             d_k = dist[bd, step, stage]
-            update(rhs, t, work.x, work.u, d_k, dist_map, axes, mode, direction, scratch)
+            update(rhs, t, work.x[:, 0], work.u[:, 0], d_k, dist_map, axes, mode, direction, scratch)
             if record:
-                forces_at(rhs, t, work.x, work.u, d_k, dist_map, axes, mode, direction, scratch)
+                forces_at(rhs, t, work.x[:, 0], work.u[:, 0], d_k, dist_map, axes, mode, direction, scratch)
                 for j in range(NU):
                     f_k[0, j] = scratch.f[j]
             return
-        step_one(rhs, t, work, dist[bd, kd], c, dist_map, axes, mode, direction, hold, integration)
+        step_one(rhs, t, work, dist, bd, kd, c, dist_map, axes, mode, direction, hold, integration)
         for i in range(N):
-            xn[i, 0] = work.x_new[i]
+            xn[i, 0] = work.x_new[i, 0]
 
     return FrictionDevices(retarget.device(has_friction), retarget.device(initial_modes), act)
 

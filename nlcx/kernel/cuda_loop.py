@@ -44,6 +44,16 @@ from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATU
 from nlcx.kernel.cuda_friction import AT_SAMPLE, OVER_STEP, FrictionDevices, friction_devices, frictionless
 from nlcx.kernel.device import Retarget, cuda, kept, refused
 from nlcx.kernel.friction import any_friction
+from nlcx.kernel.stepping import (
+    CLASSIC,
+    SEQUENTIAL,
+    first_failing_state,
+    hold_input,
+    output_picks,
+    rk_step,
+    sample_signals,
+    stage_nodes,
+)
 from nlcx.kernel.structures import CLASSIC_RK4, Integration
 
 EE = ELEMENT_ENTRY.at
@@ -192,109 +202,15 @@ def loop_kernel(shape: LoopShape) -> Any:
 cuda_module: Any = None
 
 
-def _stage_device(rhs: Any) -> Any:
-    """f(t, x, u) of one stage for the thread's column, plus the disturbance terms at the stage
-    time, dx += dist_map @ d (as :func:`nlcx.kernel.integrator._add_disturbances`)."""
-
-    @cuda().jit(device=True)
-    def stage(t, x, uc, pc, dx, dist, bd, kd, s, dist_map):  # pragma: no cover - device
-        rhs(t, x, uc, pc, dx, 1)
-        n_d = dist.shape[3]
-        if n_d == 0:
-            return
-        for i in range(dx.shape[0]):
-            acc = 0.0
-            for j in range(n_d):
-                acc += dist_map[i, j] * dist[bd, kd, s, j]
-            dx[i, 0] += acc
-
-    return stage
-
-
-def _advance_device(classic: bool, stage: Any) -> Any:
-    """One step of the thread's state x to xn: the classic RK4 written out as the CPU kernel
-    writes it, or any explicit tableau (rk_a, rk_b, nodes rk_c), the same operations in the
-    same order (:func:`nlcx.kernel.integrator._step_batch`)."""
-
-    @cuda().jit(device=True)
-    def advance(t, dt, x, xs, xn, ks, uc, pc, dist, bd, kd, dist_map, rk_a, rk_b, rk_c):  # pragma: no cover - device
-        n = x.shape[0]
-        if classic:
-            k1, k2, k3, k4 = ks[0], ks[1], ks[2], ks[3]
-            stage(t, x, uc, pc, k1, dist, bd, kd, 0, dist_map)
-            for i in range(n):
-                xs[i, 0] = x[i, 0] + 0.5 * dt * k1[i, 0]
-            stage(t + 0.5 * dt, xs, uc, pc, k2, dist, bd, kd, 1, dist_map)
-            for i in range(n):
-                xs[i, 0] = x[i, 0] + 0.5 * dt * k2[i, 0]
-            stage(t + 0.5 * dt, xs, uc, pc, k3, dist, bd, kd, 2, dist_map)
-            for i in range(n):
-                xs[i, 0] = x[i, 0] + dt * k3[i, 0]
-            stage(t + dt, xs, uc, pc, k4, dist, bd, kd, 3, dist_map)
-            for i in range(n):
-                xn[i, 0] = x[i, 0] + dt / 6.0 * (k1[i, 0] + 2.0 * (k2[i, 0] + k3[i, 0]) + k4[i, 0])
-            return
-        for s in range(rk_b.shape[0]):
-            for i in range(n):
-                acc = x[i, 0]
-                for j in range(s):
-                    if rk_a[s, j] != 0.0:
-                        acc += dt * rk_a[s, j] * ks[j, i, 0]
-                xs[i, 0] = acc
-            stage(t + rk_c[s] * dt, xs, uc, pc, ks[s], dist, bd, kd, s, dist_map)
-        for i in range(n):
-            acc = x[i, 0]
-            for s in range(rk_b.shape[0]):
-                acc += dt * rk_b[s] * ks[s, i, 0]
-            xn[i, 0] = acc
-
-    return advance
-
-
 @functools.cache
-def _loop_signals() -> tuple[Any, Any, Any]:
-    """(sample, hold, accept): the signal path's steps of one thread (see the module docstring)."""
-    jit = cuda().jit(device=True)
-
-    @jit
-    def sample(x, xrow, y, r, u, C, picked, ref, br, kr):  # pragma: no cover - device
-        """x_k into the controller's row, y_k = C x_k, r_k, u cleared (:func:`nlcx.kernel.integrator._sample`)."""
-        for i in range(x.shape[0]):
-            xrow[0, i] = x[i, 0]
-        for i in range(C.shape[0]):
-            if picked[i] >= 0:
-                y[0, i] = x[picked[i], 0]
-            else:
-                acc = 0.0
-                for j in range(x.shape[0]):
-                    acc += C[i, j] * x[j, 0]
-                y[0, i] = acc
-        for i in range(ref.shape[2]):
-            r[0, i] = ref[br, kr, i]
-        for j in range(u.shape[1]):
-            u[0, j] = 0.0
-
-    @jit
-    def hold(u, uc):  # pragma: no cover - device
-        """u_k held over the step (by column); the first input that is not finite, or -1."""
-        bad = -1
-        for j in range(u.shape[1]):
-            uc[j, 0] = u[0, j]
-            if bad < 0 and not math.isfinite(u[0, j]):
-                bad = j
-        return bad
-
-    @jit
-    def accept(x, xn, bounds, bb):  # pragma: no cover - device
-        """x_{k+1} taken; the first state not finite or past its bound, or -1."""
-        bad = -1
-        for i in range(x.shape[0]):
-            x[i, 0] = xn[i, 0]
-            if bad < 0 and not (math.isfinite(x[i, 0]) and abs(x[i, 0]) <= bounds[bb, i]):
-                bad = i
-        return bad
-
-    return sample, hold, accept
+def _steps() -> tuple[Any, Any, Any, Any]:
+    """(sample_signals, hold_input, rk_step, first_failing_state) of :mod:`nlcx.kernel.stepping`
+    compiled for the GPU, called by a thread with a batch of one."""
+    retarget = Retarget()
+    sample, hold, advance, failing = (
+        retarget.device(f) for f in (sample_signals, hold_input, rk_step, first_failing_state)
+    )
+    return sample, hold, advance, failing
 
 
 def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, friction: FrictionDevices) -> Any:
@@ -307,8 +223,8 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
 
     N, NU, NY, NR = shape.n_x, max(shape.n_u, 1), max(shape.n_y, 1), max(shape.n_r, 1)
     NLOG, NST, NCP, NCS = max(shape.n_log, 1), max(shape.n_stages, 1), max(shape.n_cp, 1), max(shape.n_cs, 1)
-    record, advance = _recorder(), _advance_device(shape.method == CLASSIC_RK4, _stage_device(rhs))
-    sample, hold, accept = _loop_signals()
+    record, combination = _recorder(), CLASSIC if shape.method == CLASSIC_RK4 else SEQUENTIAL
+    sample, hold, advance, failing = _steps()
     has_friction, start_friction, friction_at = friction
 
     @gpu.jit
@@ -323,7 +239,7 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
         ks, xrow, y = local((NST, N, 1), float64), local((1, N), float64), local((1, NY), float64)
         r, u = local((1, NR), float64), local((1, NU), float64)
         uc, logged, vid = local((NU, 1), float64), local((1, NLOG), float64), local(1, int64)
-        cp_row, cs_row = local((1, NCP), float64), local((1, NCS), float64)
+        cp_row, cs_row, bound = local((1, NCP), float64), local((1, NCS), float64), local((N, 1), float64)
         mode, direction, held, f_k = local(NU, int64), local(NU, float64), local(NU, float64), local((1, NU), float64)
         for i in range(cp.shape[1]):  # the thread's rows, in its own memory
             cp_row[0, i] = cp[v, i]
@@ -336,7 +252,9 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
         vid[0] = v
         pv = v if params.shape[1] > 1 else 0
         pc = params[:, pv : pv + 1]
-        bb, br, bd = (v if bounds.shape[0] > 1 else 0), (v if ref.shape[0] > 1 else 0), (v if dist.shape[0] > 1 else 0)
+        bb, bd = (v if bounds.shape[0] > 1 else 0), (v if dist.shape[0] > 1 else 0)
+        for i in range(N):
+            bound[i, 0] = bounds[bb, i]
         cpv, csv, logv = cp_row[:, : cp.shape[1]], cs_row[:, : cs.shape[1]], logged[:, : LOGS.shape[1]]
         yv, rv, uv, ucv = y[:, : C.shape[0]], r[:, : ref.shape[2]], u[:, :n_u], uc[:n_u, :]
         axes = friction[v if friction.shape[0] > 1 else 0]
@@ -346,11 +264,11 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
         status[v], fail_index[v], n_valid[v] = STATUS_OK, -1, n_steps + 1
         for k in range(n_steps + 1):
             t, kd = k * dt, (k if dist.shape[1] > 1 else 0)
-            sample(x, xrow, yv, rv, uv, C, picked, ref, br, k if ref.shape[1] > 1 else 0)
+            sample(1, vid, x, xrow, C, picked, yv, ref, k if ref.shape[1] > 1 else 0, rv, uv)
             sensor(t, dt, k, yv, vid, ep, es, data)
             step(t, dt, xrow, yv, rv, cpv, csv, uv, logv, 0)
             actuator(t, dt, k, uv, vid, ep, es, data)
-            bad_u = hold(uv, ucv)
+            bad_u = hold(0, uv, ucv)
             if frictional and bad_u < 0:  # the breakaway at t_k (Appendix A), and its forces when recorded
                 friction_at(AT_SAMPLE, t, k, kd, x, uv, pc, dist, bd, dist_map, integration, rk_c, axes, mode,
                             direction, held, xn, f_k, record_friction)  # fmt: skip
@@ -367,8 +285,11 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
                 friction_at(OVER_STEP, t, k, kd, x, uv, pc, dist, bd, dist_map, integration, rk_c, axes, mode,
                             direction, held, xn, f_k, False)  # fmt: skip
             else:
-                advance(t, dt, x, xs, xn, ks, ucv, pc, dist, bd, kd, dist_map, rk_a, rk_b, rk_c)
-            bad = accept(x, xn, bounds, bb)
+                advance(rhs, t, dt, 1, x, xn, ucv, pc, ks, xs, rk_a, rk_b, rk_c, combination, dist, vid, kd, dist_map,
+                        None)  # fmt: skip
+            for i in range(N):
+                x[i, 0] = xn[i, 0]
+            bad = failing(x, 0, bound)
             if bad >= 0:
                 status[v] = STATUS_NONFINITE if not math.isfinite(x[bad, 0]) else STATUS_BOUND
                 fail_index[v], n_valid[v] = bad, k + 1
@@ -421,8 +342,6 @@ def launch(
     """Run the kernel call's rows on the GPU, recording the signals ``recorded`` ((kind, index)
     rows: :data:`STATE`, :data:`OUTPUT`, :data:`INPUT`) at each of the ``n_samples`` samples; the
     results stay on the GPU."""
-    from nlcx.kernel.integrator import _output_picks, _stage_nodes
-
     gpu = cuda()
     shape = shape_of(plant, controller, elements, forces, n_u, n_log, integration)
     kernel = loop_kernel(shape)
@@ -433,11 +352,11 @@ def launch(
     out = Launch(REC, LOG, *(gpu.device_array(n_rows, dtype=np.int64) for _ in range(3)))
     rk_a = np.ascontiguousarray(integration.rk_a)
     args = (
-        dev(plant.x0), dev(np.ascontiguousarray(plant.p.T)), dev(plant.C), dev(_output_picks(plant.C)),
+        dev(plant.x0), dev(np.ascontiguousarray(plant.p.T)), dev(plant.C), dev(output_picks(plant.C)),
         dev(plant.bounds), dev(controller.cp), dev(np.array(controller.cs0, copy=True)), dev(controller.ref),
         dev(elements.ep), dev(np.array(elements.es0, copy=True)), dev(elements.data), dev(forces.dist),
         dev(forces.dist_map), dev(forces.friction), dev(rk_a), dev(np.ascontiguousarray(integration.rk_b)),
-        dev(_stage_nodes(rk_a)),
+        dev(stage_nodes(rk_a)),
         float(integration.dt), n_samples - 1, n_u, dev(recorded), bool((recorded[:, 0] == FRICTION).any()),
         REC, LOG, out.status, out.n_valid, out.fail_index,
     )  # fmt: skip

@@ -5,12 +5,13 @@ force mu_s F_N; sliding, the simple model gives Coulomb plus viscous friction,
 -mu_c F_N sgn(v) - eps v, and the exponential model
 -[mu_c + (mu_s - mu_c) exp(-(|v|/v_s)^gamma)] F_N sgn(v) - eps v.
 
-A variant with friction is stepped on its own (:func:`step_with_friction`): a sliding axis
-whose velocity reaches zero inside a step is stopped there (the step is split at that
-instant) and sticks; a stuck axis gets exactly the force that keeps its acceleration zero
-(no chattering from sgn(0)) while that force is at most mu_s F_N, and breaks away in the
-direction of the net force otherwise. The parameters of each axis are a
-:data:`FRICTION_AXIS` block; the configuration lives in :mod:`nlcx.uncertainty.friction`.
+A variant with friction is stepped on its own (:func:`nlcx.kernel.friction_path.step_with_friction`):
+a sliding axis whose velocity reaches zero inside a step is stopped there (the step is split at
+that instant) and sticks; a stuck axis gets exactly the force that keeps its acceleration zero
+(no chattering from sgn(0)) while that force is at most mu_s F_N (:func:`friction_forces`), and
+breaks away in the direction of the net force otherwise (:func:`update_friction_modes`). The
+parameters of each axis are a :data:`FRICTION_AXIS` block; the configuration lives in
+:mod:`nlcx.uncertainty.friction`.
 """
 
 from __future__ import annotations
@@ -21,8 +22,6 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from nlcx.kernel.abi import Padding, shared_row
-from nlcx.kernel.structures import FRICTION_SAMPLE_SIG, FRICTION_STEP_SIG, FrictionPath
 from nlcx.layout import Layout
 
 #: Friction parameters of one input's axis: model (FRICTION_NONE, _SIMPLE, _EXPONENTIAL),
@@ -175,7 +174,7 @@ def update_friction_modes(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direct
 
 
 @njit(cache=True, error_model="numpy")
-def _disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
+def disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
     """d at fraction ``position`` of the step, interpolated linearly between the stage nodes c."""
     n_stage = c.shape[0]
     lo, hi = 0, 0
@@ -189,88 +188,6 @@ def _disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
     w = 0.0 if c[hi] == c[lo] else (position - c[lo]) / (c[hi] - c[lo])
     for j in range(out.shape[0]):
         out[j] = (1.0 - w) * drow[lo, j] + w * drow[hi, j]
-
-
-@njit(cache=True, error_model="numpy")
-def _rk_step_one(
-    rhs, t, h, frac0, h_frac, x_in, x_out, u, drow, c, dist_map, fb, mode, direction, integration, scratch
-):  # pragma: no cover - compiled
-    """One explicit Runge-Kutta step of one variant with friction, size h from x_in at t
-    (u held) into x_out, with the tableau of ``integration``.
-
-    The step covers the fraction [frac0, frac0 + h_frac] of the sampling step; the
-    disturbance is exact at the stage nodes of a full step and interpolated between them
-    for a partial step (one that ends where a sliding axis stops). ``scratch`` is the
-    friction path's work space (:class:`~nlcx.kernel.structures.FrictionScratch`).
-    """
-    rk_a, rk_b = integration.rk_a, integration.rk_b
-    k_stage, xs, f, u_total, d_tmp = scratch.k_stage, scratch.xs, scratch.f, scratch.u_total, scratch.d_tmp
-    n = x_in.shape[0]
-    n_stage = rk_b.shape[0]
-    partial = frac0 != 0.0 or h_frac != 1.0
-    for s in range(n_stage):
-        for i in range(x_in.shape[0]):
-            xs[i] = x_in[i]
-        for j in range(s):
-            if rk_a[s, j] != 0.0:
-                for i in range(n):
-                    xs[i] += h * rk_a[s, j] * k_stage[j, i]
-        ts = t + c[s] * h
-        if partial:
-            _disturbance_at(drow, c, frac0 + c[s] * h_frac, d_tmp)
-            d_s = d_tmp
-        else:
-            d_s = drow[s]
-        friction_forces(rhs, ts, xs, u, d_s, dist_map, fb, mode, direction, scratch)
-        for j in range(u.shape[0]):
-            u_total[j] = u[j] + f[j]
-        _derivative(rhs, ts, xs, u_total, d_s, dist_map, k_stage[s], scratch.one)
-    for i in range(x_in.shape[0]):
-        x_out[i] = x_in[i]
-    for s in range(n_stage):
-        for i in range(n):
-            x_out[i] += h * rk_b[s] * k_stage[s, i]
-
-
-@njit(cache=True, error_model="numpy")
-def step_with_friction(rhs, t, work, drow, c, dist_map, fb, mode, direction, hold, integration):  # pragma: no cover
-    """One sampling step of one variant with friction (Appendix A), from ``work.x`` held
-    ``work.u`` into ``work.x_new`` (``work``: a :class:`~nlcx.kernel.structures.FrictionWork`,
-    allocated once per :func:`~nlcx.kernel.integrator.simulate` call): a sliding axis whose
-    velocity reaches zero inside the step is stopped there (the step is split at that instant,
-    ``work.x_mid``); a stuck axis is held at its position until it breaks away."""
-    x, x_new, x_mid, u, scratch = work.x, work.x_new, work.x_mid, work.u, work.scratch
-    dt = integration.dt
-    n_u = u.shape[0]
-    _rk_step_one(rhs, t, dt, 0.0, 1.0, x, x_new, u, drow, c, dist_map, fb, mode, direction, integration, scratch)
-    frac = 1.0
-    for j in range(n_u):
-        vi = int(fb[j, FA.velocity_index])
-        if mode[j] == SLIP and x_new[vi] * direction[j] <= 0.0 and x[vi] != x_new[vi]:
-            frac = min(frac, x[vi] / (x[vi] - x_new[vi]))
-    if frac < 1.0:
-        h1 = frac * dt
-        _rk_step_one(rhs, t, h1, 0.0, frac, x, x_mid, u, drow, c, dist_map, fb, mode, direction, integration, scratch)
-        for j in range(n_u):
-            vi = int(fb[j, FA.velocity_index])
-            if mode[j] == SLIP and x_new[vi] * direction[j] <= 0.0:
-                x_mid[vi] = 0.0
-                mode[j] = STUCK
-                hold[j] = x_mid[int(fb[j, FA.position_index])]
-        _disturbance_at(drow, c, frac, scratch.d_tmp)
-        update_friction_modes(rhs, t + h1, x_mid, u, scratch.d_tmp, dist_map, fb, mode, direction, scratch)
-        _rk_step_one(
-            rhs, t + h1, dt - h1, frac, 1.0 - frac, x_mid, x_new, u, drow, c, dist_map, fb, mode, direction,
-            integration, scratch,
-        )  # fmt: skip
-    for j in range(n_u):
-        vi = int(fb[j, FA.velocity_index])
-        if mode[j] == SLIP and x_new[vi] * direction[j] <= 0.0:  # a second stop: rare
-            mode[j] = STUCK
-            hold[j] = x_new[int(fb[j, FA.position_index])]
-        if mode[j] == STUCK:
-            x_new[vi] = 0.0
-            x_new[int(fb[j, FA.position_index])] = hold[j]
 
 
 def any_friction(axes: Any) -> bool:
@@ -298,100 +215,3 @@ def initial_modes(axes, x, mode, direction, hold):  # pragma: no cover - compile
             mode[j] = STUCK if v0 == 0.0 else SLIP
             direction[j] = 1.0 if v0 > 0.0 else -1.0
             hold[j] = x[int(axes[j, FA.position_index])]
-
-
-# ----------------------------------------------------------------------------- the kernel's friction path
-# (:class:`nlcx.kernel.structures.FrictionPath`: compiled when a batch with friction first reaches the kernel)
-
-
-@njit(cache=True, error_model="numpy")
-def frictional_sample(rhs, t, k, nb, n_free, slots, u, forces, work, records):  # pragma: no cover - compiled
-    """Breakaway at t_k for the frictional variants (Appendix A's static case), and the friction
-    force on each axis at t_k when it is recorded (the step evaluates its own). ``slots``: the
-    working slots (:class:`~nlcx.kernel.structures.Slots`), u by rows."""
-    dist, dist_map, FRICTION = forces.dist, forces.dist_map, records.FRICTION
-    record = FRICTION.shape[1] > 1
-    scratch = work.scratch
-    for b in range(nb):
-        if slots.stopped[b]:
-            continue
-        v = slots.vid[b]
-        if b < n_free:
-            if record:
-                for j in range(u.shape[1]):
-                    FRICTION[v, k, j] = 0.0
-            continue
-        _load_one(b, slots, u, work)
-        d_k = _disturbance_at_sample(dist[shared_row(dist.shape[0], v)], k)
-        axes, mode, direction = slots.axes[b], slots.mode[b], slots.direction[b]
-        update_friction_modes(rhs, t, work.x, work.u, d_k, dist_map, axes, mode, direction, scratch)
-        if record:
-            friction_forces(rhs, t, work.x, work.u, d_k, dist_map, axes, mode, direction, scratch)
-            for j in range(u.shape[1]):
-                FRICTION[v, k, j] = scratch.f[j]
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _disturbance_at_sample(drows, k):  # pragma: no cover - compiled
-    """d at the sample t_k from one variant's stage table ``drows`` (steps, stages, n_d; one
-    row when shared over time): the first stage of step k (c = 0, t_k), and at the final sample
-    t_K, which begins no step, the last stage of the last step (t_K itself for RK4 and Heun,
-    whose last node is c = 1; t_{K-1} for Euler, which has no later node)."""
-    step, stage = sample_stage(drows, k)
-    return drows[step, stage]
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def sample_stage(drows, k):  # pragma: no cover - compiled
-    """(step, stage) of the row of ``drows`` that holds d at the sample t_k
-    (:func:`_disturbance_at_sample`)."""
-    if drows.shape[0] == 1:
-        return 0, 0
-    if k < drows.shape[0]:
-        return k, 0
-    return drows.shape[0] - 1, drows.shape[1] - 1
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _load_one(b, slots, u, work):  # pragma: no cover - compiled
-    """Copy working slot b's state and plant parameters (columns b of ``slots.x`` and
-    ``slots.p``) and its input (row b of u) into the one-variant work space."""
-    for i in range(slots.x.shape[0]):
-        work.x[i] = slots.x[i, b]
-    for j in range(u.shape[1]):
-        work.u[j] = u[b, j]
-    for i in range(slots.p.shape[0]):
-        work.scratch.one.p[i, 0] = slots.p[i, b]
-
-
-@njit(cache=True, error_model="numpy")
-def frictional_step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c):  # pragma: no cover
-    """One sampling step of each frictional variant, one at a time, into x_new (by columns)."""
-    dist, dist_map = forces.dist, forces.dist_map
-    for b in range(n_free, nb):
-        if slots.stopped[b]:
-            continue
-        v = slots.vid[b]
-        _load_one(b, slots, u, work)
-        step_with_friction(
-            rhs, t, work, dist[shared_row(dist.shape[0], v), kd], c, dist_map,
-            slots.axes[b], slots.mode[b], slots.direction[b], slots.hold[b], integration,
-        )  # fmt: skip
-        for i in range(x_new.shape[0]):
-            x_new[i, b] = work.x_new[i]
-
-
-def _no_frictional_sample(rhs, t, k, nb, n_free, slots, u, forces, work, records):  # pragma: no cover - compiled
-    return
-
-
-def _no_frictional_step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c):  # pragma: no cover
-    return
-
-
-#: The friction path of a batch without friction: never called.
-no_frictional_sample = Padding(FRICTION_SAMPLE_SIG, _no_frictional_sample, __name__, "no_frictional_sample")
-no_frictional_step = Padding(FRICTION_STEP_SIG, _no_frictional_step, __name__, "no_frictional_step")
-#: The friction path handed to the kernel, with and without friction.
-FRICTIONAL = FrictionPath(sample=frictional_sample, step=frictional_step)
-FRICTIONLESS = FrictionPath(sample=no_frictional_sample, step=no_frictional_step)

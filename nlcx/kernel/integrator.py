@@ -27,8 +27,27 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, STATUS_OK, shared_row
+from nlcx.kernel.abi import (
+    ACTUATOR,
+    ELEMENT_ENTRY,
+    MAX_STAGES,
+    SENSOR,
+    STATUS_BOUND,
+    STATUS_NONFINITE,
+    STATUS_OK,
+    shared_row,
+)
 from nlcx.kernel.friction import FA, has_friction, initial_modes
+from nlcx.kernel.stepping import (
+    SEQUENTIAL,
+    add_disturbances,
+    first_failing_state,
+    hold_input,
+    output_picks,
+    rk_step,
+    sample_signals,
+    stage_nodes,
+)
 from nlcx.kernel.structures import (
     CLASSIC_RK4,
     SIMULATE_SIG,
@@ -81,13 +100,13 @@ class Signals(NamedTuple):
 
 
 class StageColumns(NamedTuple):
-    """Work arrays (n, B) of a Runge-Kutta step: x_{k+1}, a stage's state xs and the stage
-    derivatives k (up to four; zero where no right-hand side writes them: the columns of
+    """Work arrays of a Runge-Kutta step: x_{k+1} and a stage's state xs (n, B), and the stage
+    derivatives k (MAX_STAGES, n, B; zero where no right-hand side writes them: the columns of
     variants with friction)."""
 
     x_new: np.ndarray
     xs: np.ndarray
-    k: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    k: np.ndarray
 
 
 class FlatViews(NamedTuple):
@@ -101,47 +120,6 @@ class FlatViews(NamedTuple):
     k2: np.ndarray
     k3: np.ndarray
     k4: np.ndarray
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _add_disturbances(dx, nb, dist, vid, kd, stage, dist_map):  # pragma: no cover - compiled
-    """dx[:, b] += dist_map @ dist[variant of b, kd, stage] for the first nb columns."""
-    n_d = dist.shape[3]
-    if n_d == 0:
-        return
-    for b in range(nb):
-        bd = shared_row(dist.shape[0], vid[b])
-        for i in range(dx.shape[0]):
-            acc = 0.0
-            for j in range(n_d):
-                acc += dist_map[i, j] * dist[bd, kd, stage, j]
-            dx[i, b] += acc
-
-
-@njit(cache=True, error_model="numpy")
-def _rk_step_batch(
-    rhs, t, h, nb, x, x_out, u, p, dist, vid, kd, dist_map, rk_a, rk_b, c, stages, xs
-):  # pragma: no cover - compiled
-    """One explicit Runge-Kutta step of size h for the first nb columns, any tableau of at most
-    :data:`MAX_STAGES` stages (u held, no friction). ``stages`` holds one (n, B) array per stage."""
-    n = x.shape[0]
-    n_stage = rk_b.shape[0]
-    for s in range(n_stage):
-        for i in range(n):
-            for b in range(nb):
-                acc = x[i, b]
-                for j in range(s):
-                    if rk_a[s, j] != 0.0:
-                        acc += h * rk_a[s, j] * stages[j][i, b]
-                xs[i, b] = acc
-        rhs(t + c[s] * h, xs, u, p, stages[s], nb)
-        _add_disturbances(stages[s], nb, dist, vid, kd, s, dist_map)
-    for i in range(n):
-        for b in range(nb):
-            acc = x[i, b]
-            for s in range(n_stage):
-                acc += h * rk_b[s] * stages[s][i, b]
-            x_out[i, b] = acc
 
 
 @njit(cache=True, error_model="numpy")
@@ -182,34 +160,6 @@ def _swap_rows3(a, i, j):  # pragma: no cover - compiled
     for c in range(a.shape[1]):
         for d in range(a.shape[2]):
             a[i, c, d], a[j, c, d] = a[j, c, d], a[i, c, d]
-
-
-@njit(cache=True, error_model="numpy")
-def _stage_nodes(rk_a):  # pragma: no cover - compiled
-    """c_i = sum_j a_ij: the stage times t_k + c_i dt."""
-    n_stage = rk_a.shape[0]
-    c = np.zeros(n_stage)
-    for i in range(n_stage):
-        for j in range(n_stage):
-            c[i] += rk_a[i, j]
-    return c
-
-
-@njit(cache=True, error_model="numpy")
-def _output_picks(C):  # pragma: no cover - compiled
-    """picked[i] = j where row i of C is the unit vector e_j (y_i = x_j exactly), else -1."""
-    n_y, n = C.shape
-    picked = np.full(n_y, -1)
-    for i in range(n_y):
-        for j in range(n):
-            if C[i, j] == 1.0 and picked[i] == -1:
-                picked[i] = j
-            elif C[i, j] != 0.0:
-                picked[i] = -2
-    for i in range(n_y):
-        if picked[i] == -2:
-            picked[i] = -1
-    return picked
 
 
 @njit(cache=True, error_model="numpy")
@@ -301,10 +251,12 @@ def _friction_work(n, n_u, n_p, n_stage, n_d):  # pragma: no cover - compiled
     allocated once per :func:`simulate` call."""
     one = OneColumn(x=np.empty((n, 1)), u=np.empty((n_u, 1)), p=np.empty((n_p, 1)), dx=np.empty((n, 1)))
     scratch = FrictionScratch(
-        k_stage=np.empty((n_stage, n)), xs=np.empty(n), f=np.empty(n_u), u_total=np.empty(n_u), work=np.empty(n_u),
+        k_stage=np.empty((n_stage, n, 1)), xs=np.empty((n, 1)), f=np.empty(n_u), work=np.empty(n_u),
         A=np.empty((n_u, n_u)), rhs_s=np.empty(n_u), dx=np.empty(n), d_tmp=np.empty(n_d), one=one,
     )  # fmt: skip
-    return FrictionWork(x=np.empty(n), x_new=np.empty(n), x_mid=np.empty(n), u=np.empty(n_u), scratch=scratch)
+    column = (n, 1)
+    return FrictionWork(x=np.empty(column), x_new=np.empty(column), x_mid=np.empty(column), u=np.empty((n_u, 1)),
+                        scratch=scratch)  # fmt: skip
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -334,29 +286,12 @@ def _hook_counts(table):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _sample(k, nb, vid, x, xrow, C, picked, y, ref, r, u, X):  # pragma: no cover - compiled
-    """At t_k, for every active variant: record x_k, copy it into its row of xrow (the
-    controller's), measure y_k = C x_k, read r_k, clear u."""
-    n = x.shape[0]
-    kr = shared_row(ref.shape[1], k)
+def _record_states(k, nb, vid, x, X):  # pragma: no cover - compiled
+    """Record x_k of every active variant."""
     for b in range(nb):
         v = vid[b]
-        for i in range(n):
+        for i in range(x.shape[0]):
             X[v, k, i] = x[i, b]
-            xrow[b, i] = x[i, b]
-        for i in range(y.shape[1]):
-            if picked[i] >= 0:  # a row of C that selects one state
-                y[b, i] = x[picked[i], b]
-            else:
-                acc = 0.0
-                for j in range(n):
-                    acc += C[i, j] * x[j, b]
-                y[b, i] = acc
-        br = shared_row(ref.shape[0], vid[b])
-        for i in range(r.shape[1]):
-            r[b, i] = ref[br, kr, i]
-        for j in range(u.shape[1]):
-            u[b, j] = 0.0
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -371,12 +306,9 @@ def _record_inputs(k, nb, n, vid, u, uc, log, stopped, U, LOG, status, n_valid, 
         if record:
             for i in range(log.shape[1]):
                 LOG[v, k, i] = log[b, i]
-        bad_u = -1
         for j in range(u.shape[1]):
             U[v, k, j] = u[b, j]
-            uc[j, b] = u[b, j]
-            if bad_u < 0 and not np.isfinite(u[b, j]):
-                bad_u = j
+        bad_u = hold_input(b, u, uc)
         if bad_u >= 0:
             status[v] = STATUS_NONFINITE
             fail_index[v] = n + bad_u
@@ -419,10 +351,8 @@ def _accept_states(k, nb, vid, x, bw, xf, xnf, bwf, stopped, status, n_valid, fa
     for b in range(nb):
         if stopped[b]:
             continue
-        bad = 0
-        while bad < x.shape[0] and np.isfinite(x[bad, b]) and abs(x[bad, b]) <= bw[bad, b]:
-            bad += 1
-        if bad == x.shape[0]:
+        bad = first_failing_state(x, b, bw)
+        if bad < 0:
             continue
         v = vid[b]
         status[v] = STATUS_NONFINITE if not np.isfinite(x[bad, b]) else STATUS_BOUND
@@ -468,8 +398,7 @@ def _signal_rows(xrow, n_y, n_r, n_u, n_log):  # pragma: no cover - compiled
 @njit(cache=True, error_model="numpy")
 def _stage_columns(n_batch, n):  # pragma: no cover - compiled
     """The work arrays of a Runge-Kutta step (:class:`StageColumns`)."""
-    k = (np.zeros((n, n_batch)), np.zeros((n, n_batch)), np.zeros((n, n_batch)), np.zeros((n, n_batch)))
-    return StageColumns(x_new=np.empty((n, n_batch)), xs=np.empty((n, n_batch)), k=k)
+    return StageColumns(x_new=np.empty((n, n_batch)), xs=np.empty((n, n_batch)), k=np.zeros((MAX_STAGES, n, n_batch)))
 
 
 @njit(cache=True, error_model="numpy")
@@ -479,7 +408,7 @@ def _flat_views(slots, stages):  # pragma: no cover - compiled
     over every column, the inactive ones included (their values are never read again): a loop
     per state costs more than its work in a batch of a few variants."""
     size = slots.x.size
-    k1, k2, k3, k4 = stages.k
+    k1, k2, k3, k4 = stages.k[0], stages.k[1], stages.k[2], stages.k[3]
     return FlatViews(
         x=slots.x.reshape(size), xs=stages.xs.reshape(size), x_new=stages.x_new.reshape(size),
         bounds=slots.bounds.reshape(size), k1=k1.reshape(size), k2=k2.reshape(size), k3=k3.reshape(size),
@@ -520,18 +449,20 @@ def _step_batch(
     vid, stopped, x, pw, bw, cpw, cs = slots.vid, slots.stopped, slots.x, slots.p, slots.bounds, slots.cp, slots.cs
     log, status, n_valid, fail_index = slots.log, outcome.status, outcome.n_valid, outcome.fail_index
     xrow, y, r, u, uc = signals.xrow, signals.y, signals.r, signals.u, signals.uc
-    x_new, xs, (k1, k2, k3, k4) = stages.x_new, stages.xs, stages.k
+    x_new, xs, ks = stages.x_new, stages.xs, stages.k
+    k1, k2, k3, k4 = ks[0], ks[1], ks[2], ks[3]
     flat = _flat_views(slots, stages)
     xf, xsf, xnf, bwf, k1f, k2f, k3f, k4f = flat.x, flat.xs, flat.x_new, flat.bounds, flat.k1, flat.k2, flat.k3, flat.k4
     rk_a, rk_b, classic = integration.rk_a, integration.rk_b, integration.method == CLASSIC_RK4
-    c, picked, stage_k = _stage_nodes(rk_a), _output_picks(C), stages.k
+    c, picked = stage_nodes(rk_a), output_picks(C)
     fns, table, ep, es, data = elements.functions, elements.table, elements.ep, elements.es0.copy(), elements.data
     n_sensor, n_actuator = _hook_counts(table)
     n_steps, nb, m = X.shape[1] - 1, x.shape[1], x.size
     yv, rv, uv, xv, cpv, csv, logv = y, r, u, xrow, cpw, cs, log
     for k in range(n_steps + 1):
         t = k * dt
-        _sample(k, nb, vid, x, xrow, C, picked, y, ref, r, u, X)
+        _record_states(k, nb, vid, x, X)
+        sample_signals(nb, vid, x, xrow, C, picked, y, ref, shared_row(ref.shape[1], k), r, u)
         if n_sensor > 0:  # (a call handing over the function table costs even when it does nothing)
             _apply_elements(SENSOR, t, dt, k, yv, vid, fns, table, ep, es, data)
         step(t, dt, xv, yv, rv, cpv, csv, uv, logv, callbacks)
@@ -544,27 +475,28 @@ def _step_batch(
             _no_friction_recorded(k, nb, vid, stopped, FRICTION)
         if k < n_steps and nb > n_stop:
             kd = shared_row(dist.shape[1], k)
-            if n_free > 0 and classic:  # written out here: as a helper it cost a large share of a step
+            if n_free > 0 and classic:  # rk_step's CLASSIC written out in flat loops (the module docstring)
                 rhs(t, x, uc, pw, k1, n_free)
-                _add_disturbances(k1, n_free, dist, vid, kd, 0, dist_map)
+                add_disturbances(k1, n_free, dist, vid, kd, 0, dist_map)
                 for q in range(m):
                     xsf[q] = xf[q] + 0.5 * dt * k1f[q]
                 rhs(t + 0.5 * dt, xs, uc, pw, k2, n_free)
-                _add_disturbances(k2, n_free, dist, vid, kd, 1, dist_map)
+                add_disturbances(k2, n_free, dist, vid, kd, 1, dist_map)
                 for q in range(m):
                     xsf[q] = xf[q] + 0.5 * dt * k2f[q]
                 rhs(t + 0.5 * dt, xs, uc, pw, k3, n_free)
-                _add_disturbances(k3, n_free, dist, vid, kd, 2, dist_map)
+                add_disturbances(k3, n_free, dist, vid, kd, 2, dist_map)
                 for q in range(m):
                     xsf[q] = xf[q] + dt * k3f[q]
                 rhs(t + dt, xs, uc, pw, k4, n_free)
-                _add_disturbances(k4, n_free, dist, vid, kd, 3, dist_map)
+                add_disturbances(k4, n_free, dist, vid, kd, 3, dist_map)
                 for q in range(m):
                     xnf[q] = xf[q] + dt / 6.0 * (k1f[q] + 2.0 * (k2f[q] + k3f[q]) + k4f[q])
             elif n_free > 0:
-                _rk_step_batch(
-                    rhs, t, dt, n_free, x, x_new, uc, pw, dist, vid, kd, dist_map, rk_a, rk_b, c, stage_k, xs
-                )
+                rk_step(
+                    rhs, t, dt, n_free, x, x_new, uc, pw, ks, xs, rk_a, rk_b, c, SEQUENTIAL, dist, vid, kd, dist_map,
+                    None,
+                )  # fmt: skip
             if nb > n_free:
                 friction_path.step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c)
             n_stop += _accept_states(k, nb, vid, x, bw, xf, xnf, bwf, stopped, status, n_valid, fail_index)

@@ -1,7 +1,7 @@
 """The kernel's arguments and work spaces, one named structure per concept.
 
 The engine hands :func:`nlcx.kernel.integrator.simulate` a batch of closed loops as eight
-structures, and the kernel hands its friction path (:mod:`nlcx.kernel.friction`) its working
+structures, and the kernel hands its friction path (:mod:`nlcx.kernel.friction_path`) its working
 slots and scratch the same way. Each is a :class:`typing.NamedTuple`, which numba compiles as a
 named tuple: a field is read by its name (``plant.x0``, ``records.U``, ``scratch.rhs_s``) in
 the compiled code as in Python.
@@ -248,15 +248,15 @@ class OneColumn(NamedTuple):
 
 class FrictionScratch(NamedTuple):
     """Work space of a step of one variant with friction
-    (:func:`nlcx.kernel.friction.step_with_friction`): the stage derivatives k_stage (s, n),
-    a stage's state xs (n,), the friction forces f, the input with them u_total, a work input
-    (n_u,), the stuck axes' system A (n_u, n_u) and right-hand side rhs_s (n_u,), a derivative
-    dx (n,), a disturbance d_tmp (n_d,) and the variant as one column."""
+    (:func:`nlcx.kernel.friction_path.step_with_friction`), the variant as one column: the stage
+    derivatives k_stage (s, n, 1) and a stage's state xs (n, 1) of its Runge-Kutta step, the
+    friction forces f, a work input (n_u,), the stuck axes' system A (n_u, n_u) and right-hand
+    side rhs_s (n_u,), a derivative dx (n,), a disturbance d_tmp (n_d,) and the variant as a
+    batch of one column for its right-hand side."""
 
     k_stage: np.ndarray
     xs: np.ndarray
     f: np.ndarray
-    u_total: np.ndarray
     work: np.ndarray
     A: np.ndarray
     rhs_s: np.ndarray
@@ -267,8 +267,8 @@ class FrictionScratch(NamedTuple):
 
 class FrictionWork(NamedTuple):
     """Work space of the friction path, allocated once per kernel call: the variant's state
-    x, the end of its step x_new, the state where an axis stops x_mid (n,), its input u (n_u,)
-    and the scratch of its step."""
+    x, the end of its step x_new, the state where an axis stops x_mid (n, 1), its input u
+    (n_u, 1) and the scratch of its step."""
 
     x: np.ndarray
     x_new: np.ndarray
@@ -301,10 +301,9 @@ SlotsType = declare(
 )  # fmt: skip
 OneColumnType = declare(OneColumn, x=MAT, u=MAT, p=MAT, dx=MAT)
 FrictionScratchType = declare(
-    FrictionScratch, k_stage=MAT, xs=VEC, f=VEC, u_total=VEC, work=VEC, A=MAT, rhs_s=VEC, dx=VEC, d_tmp=VEC,
-    one=OneColumnType,
+    FrictionScratch, k_stage=ARR3, xs=MAT, f=VEC, work=VEC, A=MAT, rhs_s=VEC, dx=VEC, d_tmp=VEC, one=OneColumnType,
 )  # fmt: skip
-FrictionWorkType = declare(FrictionWork, x=VEC, x_new=VEC, x_mid=VEC, u=VEC, scratch=FrictionScratchType)
+FrictionWorkType = declare(FrictionWork, x=MAT, x_new=MAT, x_mid=MAT, u=MAT, scratch=FrictionScratchType)
 
 #: The friction path's two signatures (:class:`FrictionPath`).
 FRICTION_SAMPLE_SIG = types.void(
