@@ -188,12 +188,12 @@ class _Feedback(LawController):
             log_names=tuple(f"{cfg.kind}.z_{o}" for o in cfg.integral),
             log_units=tuple("" for _ in cfg.integral),
             config=cfg.model_dump(),
-            records=self.records(K, states, inputs, cfg.integral, poles, model),
+            records=self.design_records(K, states, inputs, cfg.integral, poles, model),
             law=law,
         )
 
     @staticmethod
-    def records(
+    def design_records(
         K: np.ndarray, states: list[str], inputs: list[str], integral: list[str], poles: np.ndarray, model: Plant
     ) -> dict[str, Any]:
         """tuning.csv's rows: every entry of K by input and state (or integrator), the poles of
