@@ -10,7 +10,6 @@ the same metrics, column for column.
 
 from __future__ import annotations
 
-import copy
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -21,6 +20,17 @@ import numpy as np
 from nlcx import compiled_cache, manifest, safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.pages.output_tables import read_output_table
+from nlcx.run_files import (
+    METRIC_COLUMNS,
+    RECORDED_SIGNALS,
+    copy_run,
+    metrics_frame,
+    outputs_of,
+    read_metrics,
+    read_timeseries,
+    recorded_outputs,
+    timeseries_file,
+)
 
 if TYPE_CHECKING:
     import control as ct
@@ -30,30 +40,6 @@ if TYPE_CHECKING:
     from nlcx import engine
 
 __all__ = ["METRIC_COLUMNS", "Result", "SweepResult", "load_run", "read_output_table"]
-
-#: The columns of metrics.csv, in order.
-METRIC_COLUMNS = ("controller", "signal", "metric", "value", "unit", "status", "note")
-
-
-def _metrics_frame(frame: pd.DataFrame) -> pd.DataFrame:
-    """A metrics table with metrics.csv's columns and types: text columns as str (a missing
-    note is ""), ``value`` as float64 (undefined is NaN)."""
-    out = frame.loc[:, list(METRIC_COLUMNS)].copy()
-    for column in METRIC_COLUMNS:
-        if column == "value":
-            out[column] = out[column].astype(np.float64)
-        else:
-            out[column] = out[column].fillna("").astype(str)
-    return out.reset_index(drop=True)
-
-
-def _read_metrics(path: Path) -> pd.DataFrame:
-    """metrics.csv as :func:`_metrics_frame` gives it."""
-    import pandas as pd
-
-    text = {c: str for c in METRIC_COLUMNS if c != "value"}
-    frame = pd.read_csv(path, dtype=text, keep_default_na=False, na_values={"value": [""]})
-    return _metrics_frame(frame)
 
 
 class Result:
@@ -111,7 +97,7 @@ class Result:
         return cls(
             name=result.prepared.experiment.name,
             config=result.prepared.experiment.resolved(),
-            metrics=_metrics_frame(result.metrics),
+            metrics=metrics_frame(result.metrics),
             statuses={run.label: run.status for run in result.runs},
             trajectories=trajectories,
             outputs=[(s.name, s.unit, s.label) for s in plant.outputs],
@@ -328,7 +314,7 @@ class Result:
 
             save_run(self._source, target, with_report=report)
         elif self.directory is not None:
-            _copy_run(self.directory, target)
+            copy_run(self.directory, target)
         else:  # pragma: no cover - a Result is built from a run or a directory
             raise ConfigError("directory", str(target), "a result of nlcx.run or nlcx.load_run")
         self.directory = target
@@ -349,53 +335,6 @@ def _frame(columns: Mapping[str, np.ndarray]) -> pd.DataFrame:
     import pandas as pd
 
     return pd.DataFrame({name: np.asarray(values) for name, values in columns.items()})
-
-
-def _timeseries_file(directory: Path, listed: Mapping[str, Any]) -> Path | None:
-    """The time series file the manifest lists (timeseries.csv or .parquet), or None."""
-    for name in ("timeseries.parquet", "timeseries.csv"):
-        if name in listed:
-            return directory / name
-    return None
-
-
-def _read_timeseries(path: Path | None) -> dict[str, pd.DataFrame] | None:
-    """A time series file (CSV or Parquet) split by controller, each without the columns its
-    run does not have (another controller's logs: empty in its rows); None without one."""
-    import pandas as pd
-
-    if path is None:
-        return None
-    if path.suffix == ".parquet":
-        frame = pd.read_parquet(path)
-    else:
-        frame = pd.read_csv(path, dtype={"controller": str}, keep_default_na=False, na_values=[""])
-    out = {}
-    for controller, rows in frame.groupby("controller", sort=False):
-        rows = rows.drop(columns="controller").reset_index(drop=True).astype(np.float64)  # "1" in a CSV is 1.0
-        out[str(controller)] = rows.loc[:, rows.notna().any(axis=0)]
-    return out
-
-
-def _recorded_outputs(record: Mapping[str, Any]) -> list[tuple[str, str, str]] | None:
-    """(name, unit, label) of the plant's outputs as the manifest records them; None when it
-    records none (nothing is then imported to find them: the plant is built, if it is known)."""
-    outputs = record.get("outputs")
-    if not isinstance(outputs, list) or not all(
-        isinstance(o, list) and len(o) == 3 and all(isinstance(v, str) for v in o) for o in outputs
-    ):
-        return None
-    return [(str(n), str(u), str(label)) for n, u, label in outputs]
-
-
-def _outputs_of(config: Mapping[str, Any]) -> list[tuple[str, str, str]]:
-    """(name, unit, label) of the plant's outputs, from the registered plant of ``config``."""
-    from nlcx import config as cfg
-
-    exp = cfg.build(copy.deepcopy(dict(config)))
-    model = exp.plant_model
-    plant = model.build(exp.section.plant.name, exp.plant_params, exp.section.plant.x0, {})
-    return [(s.name, s.unit, s.label) for s in plant.outputs]
 
 
 def load_run(directory: str | os.PathLike[str]) -> Result:
@@ -442,12 +381,12 @@ def load_run(directory: str | os.PathLike[str]) -> Result:
             path / manifest.MANIFEST, "not the manifest of a run with checksums of its files (an output of "
             "another kind, or of an nlcx that recorded none)", "a run directory: write it again with nlcx run",
         )  # fmt: skip
-    series = _timeseries_file(path, listed)
+    series = timeseries_file(path, listed)
     manifest.verify(path, ["config.yaml", "metrics.csv", *([series.name] if series is not None else [])])
     config = safe_yaml.load_file(path / "config.yaml")
     if not isinstance(config, dict):
         raise manifest.IntegrityError(path / "config.yaml", "not a mapping of sections", "the config nlcx wrote")
-    metrics = _read_metrics(path / "metrics.csv")
+    metrics = read_metrics(path / "metrics.csv")
     statuses = {r["controller"]: r["status"] for r in record.get("runs", [])}
     if not statuses:
         statuses = dict(metrics.groupby("controller", sort=False).status.first())
@@ -456,27 +395,11 @@ def load_run(directory: str | os.PathLike[str]) -> Result:
         config=config,
         metrics=metrics,
         statuses=statuses,
-        trajectories=_read_timeseries(series),
-        outputs=_recorded_outputs(record) or _outputs_of(config),
+        trajectories=read_timeseries(series),
+        outputs=recorded_outputs(record) or outputs_of(config),
         directory=path,
-        signals={kind: record[kind] for kind in _SIGNALS if isinstance(record.get(kind), list)},
+        signals={kind: record[kind] for kind in RECORDED_SIGNALS if isinstance(record.get(kind), list)},
     )
-
-
-#: What the manifest records of the plant besides its outputs: its states and inputs by name, C.
-_SIGNALS = ("states", "inputs", "output_matrix")
-
-
-def _copy_run(source: Path, target: Path) -> None:
-    """Copy a run directory whole (a loaded result saved elsewhere), staged as a run is."""
-    import shutil
-
-    from nlcx.rundir import staged
-
-    with staged(target) as tmp:
-        for item in source.iterdir():
-            if item.is_file():
-                shutil.copy2(item, tmp / item.name)
 
 
 class SweepResult:

@@ -205,7 +205,7 @@ def frozen_rows(results: Path) -> list[dict[str, Any]]:
 
 
 def consistency(study: Path) -> dict[str, Any]:
-    """What the page shows of the consistency study (nlcx/thesis/consistency.py): one row per
+    """What the page shows of the consistency study (nlcx/thesis/consistency/): one row per
     printed column (table, controller), the families each was examined under (summary.json)."""
     spec = yaml.safe_load(CONSISTENCY_SPEC.read_text())
     definitions = spec.get("definitions") or list(DEFINITIONS)

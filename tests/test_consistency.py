@@ -14,18 +14,14 @@ from typer.testing import CliRunner
 from nlcx.cli import app
 from nlcx.pages.tolerances import Tolerances
 from nlcx.thesis import hypotheses
-from nlcx.thesis.consistency import (
+from nlcx.thesis.consistency.analysis import group_hits, hits, twins, unreachable_sets
+from nlcx.thesis.consistency.loops import ColumnRuns, used_box
+from nlcx.thesis.consistency.spec import (
     STUDY_FAMILIES,
-    ColumnRuns,
     also_printed,
     column_cells,
-    group_hits,
-    hits,
     load_spec,
     printed_interval,
-    twins,
-    unreachable_sets,
-    used_box,
     with_intervals,
 )
 from nlcx.thesis.fitting import DEFINITIONS, FLOORS, measure_cells

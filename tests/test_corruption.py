@@ -46,6 +46,7 @@ import nlcx
 from nlcx import manifest, rundir, sweeps
 from nlcx.cli import app
 from nlcx.manifest import IntegrityError
+from nlcx.pages.writing import is_page
 from nlcx.sweeps import seals
 
 runner = CliRunner()
@@ -319,7 +320,7 @@ def _report_cases() -> list[Any]:
     return [
         pytest.param(kind, slot, how, id=f"{kind}-{slot}-{how}")
         for kind, layout in LAYOUTS.items()
-        for slot in slots(layout, lambda pattern: not rundir.is_page(pattern))
+        for slot in slots(layout, lambda pattern: not is_page(pattern))
         for how in DAMAGES
     ]
 

@@ -11,7 +11,8 @@ import pytest
 import skfuzzy as fuzz
 
 from nlcx import config, engine
-from nlcx.controllers.fuzzy import (
+from nlcx.controllers.fuzzy import Fuzzy, FuzzyConfig, fuzzy_gains, fuzzy_surface, membership
+from nlcx.controllers.fuzzy_config import (
     DE_DT_UNIVERSE,
     E_UNIVERSE,
     OUTPUT_UNIVERSE,
@@ -20,14 +21,9 @@ from nlcx.controllers.fuzzy import (
     SET_NAMES,
     TABLE_SETS,
     VARIABLES,
-    Fuzzy,
-    FuzzyConfig,
-    fuzzy_gains,
-    fuzzy_surface,
-    membership,
-    membership_figure,
 )
 from nlcx.errors import ConfigError
+from nlcx.thesis.membership import membership_figure
 from nlcx.validation import validate_model
 
 GAINS = {"kp": {"min": 1.0, "max": 2.0}, "ki": {"min": 1.0, "max": 2.5}, "kd": {"min": 0.05, "max": 0.2}}

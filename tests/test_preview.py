@@ -11,11 +11,10 @@ import numpy as np
 import pytest
 
 from nlcx import config, engine, registry
-from nlcx.controllers.preview import (
-    Preview,
-    PreviewConfig,
+from nlcx.controllers.base import check_sample_time
+from nlcx.controllers.preview import Preview, PreviewConfig
+from nlcx.controllers.preview_design import (
     augment,
-    check_sample_time,
     companion_matrices,
     design_preview,
     gamma_min,

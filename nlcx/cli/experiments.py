@@ -31,6 +31,7 @@ from nlcx.terminal import echo
 
 if TYPE_CHECKING:
     from nlcx.drawing import Painter
+    from nlcx.sweeps.cluster import ClusterSpec
 
 
 def _painter(raw: dict[str, Any]) -> Painter | None:
@@ -198,7 +199,6 @@ def _sweep(
 
     from nlcx import sweeps as sweep
     from nlcx.sweeps import cluster as clusters
-    from nlcx.sweeps import sizing
 
     _imported()
     cluster = clusters.load(cluster_file) if cluster_file is not None else None
@@ -206,18 +206,7 @@ def _sweep(
         executor, jobs = "dask", cluster.workers if cluster.kind == "local" else cluster.cores
 
     if dry_run:
-        base_raw, spec, base = sweep.load(config, overrides, allow_env=allow_env)
-        sizing.check(spec, base, None)  # the plan's memory, before it is expanded
-        variants, hashes = sweep.plan(base_raw, spec)
-        echo(f"{base.name}: {len(variants)} variant(s) x {len(base.controllers)} controller(s)")
-        for v, h in list(zip(variants, hashes, strict=True))[:20]:
-            values = ", ".join(f"{k}={val!r}" for k, val in v.values.items())
-            echo(f"  {v.index:>6}  seed {v.seed:>10}  {h}  {values}")
-        if len(variants) > 20:
-            echo(f"  ... {len(variants) - 20} more")
-        if cluster is not None:
-            echo(f"{cluster.kind} cluster: {cluster.jobs} job(s) of {cluster.cores} worker(s); each job's script:")
-            echo(clusters.job_script(cluster).rstrip())
+        _print_plan(config, overrides, cluster, allow_env)
         return
     columns = (
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -252,6 +241,27 @@ def _sweep(
         for row in failed.itertuples():
             echo(f"  variant {row.variant} failed: {row.message}", err=True)
         raise typer.Exit(1)
+
+
+def _print_plan(config: Path, overrides: list[str], cluster: ClusterSpec | None, allow_env: bool) -> None:
+    """``nlcx sweep --dry-run``: the sweep's plan checked (its memory before it is expanded) and
+    its first variants printed, and the job script of ``cluster`` when there is one."""
+    from nlcx import sweeps as sweep
+    from nlcx.sweeps import cluster as clusters
+    from nlcx.sweeps import sizing
+
+    base_raw, spec, base = sweep.load(config, overrides, allow_env=allow_env)
+    sizing.check(spec, base, None)  # the plan's memory, before it is expanded
+    variants, hashes = sweep.plan(base_raw, spec)
+    echo(f"{base.name}: {len(variants)} variant(s) x {len(base.controllers)} controller(s)")
+    for v, h in list(zip(variants, hashes, strict=True))[:20]:
+        values = ", ".join(f"{k}={val!r}" for k, val in v.values.items())
+        echo(f"  {v.index:>6}  seed {v.seed:>10}  {h}  {values}")
+    if len(variants) > 20:
+        echo(f"  ... {len(variants) - 20} more")
+    if cluster is not None:
+        echo(f"{cluster.kind} cluster: {cluster.jobs} job(s) of {cluster.cores} worker(s); each job's script:")
+        echo(clusters.job_script(cluster).rstrip())
 
 
 @app.command("sweep")

@@ -162,54 +162,68 @@ def _write_metrics(out: Path, rows: list[tuple[str, str, str, float, str, str]],
     write_csv(out, table if own else table[["signal", "metric", "value", "unit"]])
 
 
+#: The options of ``nlcx metrics``.
+MetricsFileArg = Annotated[
+    Path, typer.Argument(help="CSV file with a header row, or a Parquet file.", show_default=False)
+]
+TimeColumnOpt = Annotated[str, typer.Option("--time", help="Time column, in seconds.")]
+SignalsOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--signal",
+        help="Column to measure; repeat for several (default: every column s with a reference column s_ref, "
+        "else every column of numbers).",
+        show_default=False,
+    ),
+]
+ReferenceOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--reference",
+        help="Target: a number, or a column (default: the signal's column s_ref if there is one, else its "
+        "last sample).",
+        show_default=False,
+    ),
+]
+StepTimeOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--t-step",
+        help="Step time in s; earlier samples are ignored (default: the change of a reference column that "
+        "steps once, else 0).",
+        show_default=False,
+    ),
+]
+SettlingBandOpt = Annotated[
+    float,
+    typer.Option(
+        "--settling-band", help="Settling band: a fraction of the step, or of a regulated signal's peak deviation."
+    ),
+]
+RiseLimitsOpt = Annotated[
+    tuple[float, float], typer.Option("--rise-limits", help="Rise time between these fractions of the step.")
+]
+SteadyWindowOpt = Annotated[
+    float, typer.Option("--ss-window", help="Window of a regulated signal's steady-state error, s.")
+]
+MetricsOutOpt = Annotated[
+    Path | None,
+    typer.Option("--out", help="Write the metrics in long form to this CSV.", show_default=False),
+]
+
+
 @app.command("metrics")
 @one_line_errors
 def metrics_command(
-    file: Annotated[Path, typer.Argument(help="CSV file with a header row, or a Parquet file.", show_default=False)],
-    time_column: Annotated[str, typer.Option("--time", help="Time column, in seconds.")] = "t",
-    signals: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--signal",
-            help="Column to measure; repeat for several (default: every column s with a reference column s_ref, "
-            "else every column of numbers).",
-            show_default=False,
-        ),
-    ] = None,
-    reference: Annotated[
-        str | None,
-        typer.Option(
-            "--reference",
-            help="Target: a number, or a column (default: the signal's column s_ref if there is one, else its "
-            "last sample).",
-            show_default=False,
-        ),
-    ] = None,
-    t_step: Annotated[
-        float | None,
-        typer.Option(
-            "--t-step",
-            help="Step time in s; earlier samples are ignored (default: the change of a reference column that "
-            "steps once, else 0).",
-            show_default=False,
-        ),
-    ] = None,
-    settling_band: Annotated[
-        float,
-        typer.Option(
-            "--settling-band", help="Settling band: a fraction of the step, or of a regulated signal's peak deviation."
-        ),
-    ] = 0.02,
-    rise_limits: Annotated[
-        tuple[float, float], typer.Option("--rise-limits", help="Rise time between these fractions of the step.")
-    ] = (0.1, 0.9),
-    ss_window: Annotated[
-        float, typer.Option("--ss-window", help="Window of a regulated signal's steady-state error, s.")
-    ] = 1.0,
-    out: Annotated[
-        Path | None,
-        typer.Option("--out", help="Write the metrics in long form to this CSV.", show_default=False),
-    ] = None,
+    file: MetricsFileArg,
+    time_column: TimeColumnOpt = "t",
+    signals: SignalsOpt = None,
+    reference: ReferenceOpt = None,
+    t_step: StepTimeOpt = None,
+    settling_band: SettlingBandOpt = 0.02,
+    rise_limits: RiseLimitsOpt = (0.1, 0.9),
+    ss_window: SteadyWindowOpt = 1.0,
+    out: MetricsOutOpt = None,
 ) -> None:
     """Step-response metrics of the columns of a CSV or Parquet file: logged on a rig, or nlcx's own time series.
 

@@ -28,18 +28,9 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from nlcx.diff.cells import NUMBER, Kind, as_numbers, as_texts, hash_rows, kind_holds, mix
 from nlcx.diff.records import DESCRIPTIVE, ROW_KEYS, Drift, Tolerances, is_status_column
-from nlcx.diff.tables import (
-    NUMBER,
-    Kind,
-    KindChangedError,
-    TableSource,
-    as_numbers,
-    as_texts,
-    hash_rows,
-    kind_holds,
-    mix,
-)
+from nlcx.diff.tables import KindChangedError, TableSource
 
 #: The two tables, as indices of pairs.
 BASE, NEW = 0, 1

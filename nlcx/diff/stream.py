@@ -27,6 +27,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from nlcx.diff.cells import as_texts, hash_rows, mix
 from nlcx.diff.records import KEEP_STATUS, PENDING_BYTES, PENDING_ROWS, STATUS_RUNS, Drift, FileDrift, Tolerances
 from nlcx.diff.rows import (
     BASE,
@@ -41,7 +42,7 @@ from nlcx.diff.rows import (
     rows_of,
     status_changes,
 )
-from nlcx.diff.tables import KindChangedError, TableSource, as_texts, hash_rows, mix
+from nlcx.diff.tables import KindChangedError, TableSource
 
 
 @dataclass(order=True)

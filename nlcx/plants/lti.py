@@ -98,6 +98,22 @@ def _signals(key: str, given: Sequence[str] | Mapping[str, str] | None, labels: 
     return tuple(Signal(name, unit) for name, unit in pairs)
 
 
+def _state_space(system: Any, name: str) -> Any:
+    """``system`` as a python-control state space, refused in one line unless it is a
+    continuous-time, strictly proper (D = 0) StateSpace or TransferFunction."""
+    import control as ct
+
+    if not isinstance(system, ct.StateSpace | ct.TransferFunction):
+        raise ConfigError("system", type(system).__name__, "a control.StateSpace or control.TransferFunction")
+    ss = ct.ss(system)
+    if not ss.isctime():
+        raise ConfigError("system", name, "a continuous-time system (dt = 0 or None); discretisation is nlcx's")
+    if np.any(ss.D != 0):
+        raise ConfigError("system", name, "strictly proper (D = 0): a direct feedthrough and the controller's "
+                          "zero-order hold would form an algebraic loop")  # fmt: skip
+    return ss
+
+
 def from_control(
     system: Any,
     name: str,
@@ -141,16 +157,7 @@ def from_control(
     >>> round(float(result.response("pi").y[0, -1]), 3)
     1.0
     """
-    import control as ct
-
-    if not isinstance(system, ct.StateSpace | ct.TransferFunction):
-        raise ConfigError("system", type(system).__name__, "a control.StateSpace or control.TransferFunction")
-    ss = ct.ss(system)
-    if not ss.isctime():
-        raise ConfigError("system", name, "a continuous-time system (dt = 0 or None); discretisation is nlcx's")
-    if np.any(ss.D != 0):
-        raise ConfigError("system", name, "strictly proper (D = 0): a direct feedthrough and the controller's "
-                          "zero-order hold would form an algebraic loop")  # fmt: skip
+    ss = _state_space(system, name)
     existing = registry.plants.get(name) if name in registry.plants else None
     if existing is not None and not (replace and isinstance(existing, LTIPlant)):
         raise ConfigError("plant", name, f"already registered ({type(existing).__name__}); allowed: a new name")

@@ -182,7 +182,7 @@ def _write_figure(spec: FigureSpec, records: dict[Path, Record], out_dir: Path) 
     if spec.kind == "lyapunov":
         fig = claims.lyapunov_figure(spec, [records[c] for c in spec.configs])
     else:
-        from nlcx.controllers.fuzzy import membership_figure
+        from nlcx.thesis.membership import membership_figure
 
         fig = membership_figure(cstr.fuzzy_schedule(records[spec.configs[0]]), spec.variable)
         fig.axes[0].set_title(spec.title, fontsize=10)

@@ -1,0 +1,391 @@
+"""The loop options of the pendulums (chapters 2-4) a hypothesis about the loop the thesis
+simulated may pick (:mod:`nlcx.thesis.hypotheses`), by family.
+
+Every option is a setting a user can put in any config (nothing here is a special case of
+the kernel): the PID's derivative, integral form, PID form, sampling and actuator saturation with
+anti-windup, the units its loops see, the error-AGS argument, the reading of the printed gain
+ranges, an actuator lag, a reference prefilter and the integrators' limits; and the experiment
+as Simulink may have run it: the steps' amplitude and time and the origin of the measured
+times, the settling band of a regulated angle, the initial angle, the z loop of the x-z and
+x-y-z pendulums, the disturbance's phase, start and entry. A value changes only what the
+experiment has: a disturbance option leaves an experiment without a disturbance as it is.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from nlcx import registry
+
+Raw = dict[str, Any]
+
+
+@dataclass(frozen=True)
+class OptionValue:
+    """One value of an option family: how it changes a PID controller's config (given the
+    free parameters' values and the plant's inputs), and the continuous parameters
+    (name -> (lower, upper)) it frees."""
+
+    doc: str
+    change: Callable[[Raw, Mapping[str, float], list[str]], None]
+    free: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    #: "controller": ``change`` edits each PID controller's section; "experiment": the
+    #: whole experiment (a loop element or a reference).
+    scope: str = "controller"
+
+
+def _by_magnitude(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """Gain ranges of the negative-gain loops read as min/max of |k|, not of k: where both
+    printed bounds are negative, the "min" value is the one of smaller magnitude."""
+    for loop in pid["loops"].values():
+        schedule = loop["schedule"]
+        for gain in ("kp", "ki", "kd"):
+            bounds = schedule.get(gain)
+            if isinstance(bounds, dict) and bounds["min"] < 0 and bounds["max"] < 0:
+                lo, hi = sorted((bounds["min"], bounds["max"]), key=abs)
+                schedule[gain] = {"min": lo, "max": hi}
+
+
+def _derivative(method: str, on: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    def change(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        pid["derivative"] = {"method": method, "N": 100.0, "on": on}
+
+    return change
+
+
+def _integral_inside(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    pid["integral"] = "inside"
+
+
+def _signed_error(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    for loop in pid["loops"].values():
+        if loop["schedule"].get("kind") == "error_ags":
+            loop["schedule"]["error"] = "signed"
+
+
+def _saturation(anti_windup: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    def change(pid: Raw, params: Mapping[str, float], inputs: list[str]) -> None:
+        pid["saturation"] = {"limits": {name: params["F_max"] for name in inputs}, "anti_windup": anti_windup}
+
+    return change
+
+
+def unchanged(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """The default setting: the config as it is."""
+
+
+def _form(form: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    def change(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        pid["form"] = form
+
+    return change
+
+
+def _angles_in_degrees(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """The angle loops (theta, phi) see their output and reference in degrees."""
+    for key, loop in pid["loops"].items():
+        if (loop.get("signal") or key) in ANGLES:
+            loop["scale"] = 180.0 / math.pi
+
+
+def _ags_angle_degrees(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """The error schedules of the angle loops take e in degrees (the loop itself stays in radians)."""
+    for key, loop in pid["loops"].items():
+        if (loop.get("signal") or key) in ANGLES and loop["schedule"].get("kind") == "error_ags":
+            loop["schedule"]["error_scale"] = 180.0 / math.pi
+
+
+def _forces_before_input_disturbances(raw: Raw) -> None:
+    """Loop elements act in config order: an actuator lag filters the controller's forces
+    only, so it goes before any disturbance that enters at the inputs."""
+    elements = raw.get("uncertainty") or {}
+    lag = elements.get("actuator_lag")
+    names = list(elements)
+    at_input = [k for k, e in elements.items() if isinstance(e, dict) and e.get("kind") == "disturbance"
+                and e.get("entry") == "input"]  # fmt: skip
+    if lag is None or not at_input or names.index("actuator_lag") < names.index(at_input[0]):
+        return
+    rest = [(k, e) for k, e in elements.items() if k != "actuator_lag"]
+    first = [k for k, _ in rest].index(at_input[0])
+    raw["uncertainty"] = dict([*rest[:first], ("actuator_lag", lag), *rest[first:]])
+
+
+def _actuator_lag(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """A first-order lag tau on every force (the actuator_lag loop element), after every other
+    element except a disturbance entering at the inputs (:func:`_forces_before_input_disturbances`)."""
+    raw.setdefault("uncertainty", {})["actuator_lag"] = {"kind": "actuator_lag", "tau": params["tau"]}
+    _forces_before_input_disturbances(raw)
+
+
+def _prefilter(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """Every step reference through a first-order prefilter of time constant T_f."""
+    for reference in raw.get("reference", {}).values():
+        if reference.get("kind") == "step":
+            reference.update(kind="filtered_step", time_constant=params["T_f"])
+
+
+def _sampled(pid: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """A discrete PID sampled every T_s (the free parameter)."""
+    pid["sample_time"] = params["T_s"]
+
+
+def _step_references(raw: Raw) -> list[Raw]:
+    """The experiment's step references (a prefiltered step is one)."""
+    return [r for r in (raw.get("reference") or {}).values() if r.get("kind") in STEPS]
+
+
+def _set_metrics(raw: Raw, **settings: Any) -> None:
+    raw["metrics"] = {**(raw.get("metrics") or {}), **settings}
+
+
+def _plant_states(raw: Raw) -> list[str]:
+    """The state names of the experiment's plant (from the plant registry)."""
+    plant = registry.plants.get(raw["plant"]["name"], path="plant.name")
+    return [s.name for s in plant.states]
+
+
+def _absolute_settling(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """A regulated signal (theta, phi) settles inside a band of at least tol (the free
+    parameter): the larger of tol and the settling band's fraction of its peak deviation."""
+    _set_metrics(raw, regulation_abs_tol=params["tol"])
+
+
+def _step_amplitude(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """Every step reference ends at A (the free parameter) instead of its configured final value."""
+    for reference in _step_references(raw):
+        reference["final"] = params["A"]
+
+
+def _step_at_one_second(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
+    """The reference steps at t = 1 s (Simulink's Step block default), not at t = 0."""
+    for reference in _step_references(raw):
+        reference["time"] = 1.0
+
+
+def _step_at_one_second_timed_from(origin: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """The reference steps at t = 1 s; a step response's times are measured from ``origin``
+    (``metrics.time_origin``: ``start``, t = 0, or ``step``, its step)."""
+
+    def change(raw: Raw, params: Mapping[str, float], inputs: list[str]) -> None:
+        _step_at_one_second(raw, params, inputs)
+        _set_metrics(raw, time_origin=origin)
+
+    return change
+
+
+def _initial_angle(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """The pendulum starts tilted: theta(0) = theta0 (the free parameter), and phi(0) alike
+    on the pendulums that have it."""
+    angles = [state for state in _plant_states(raw) if state in ANGLES]
+    plant = raw["plant"]
+    plant["x0"] = {**(plant.get("x0") or {}), **dict.fromkeys(angles, params["theta0"])}
+
+
+def _z_loop(feedforward: bool, printed: bool) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """On a plant with a z axis only: without the equilibrium feed-forward on every PID (the z
+    loop holds the weight by its integrator) and/or with the printed state equations."""
+
+    def change(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        if "z" not in _plant_states(raw):
+            return
+        if not feedforward:
+            for controller in (raw.get("controllers") or {}).values():
+                if controller.get("kind") == "pid":
+                    controller["feedforward"] = "none"
+        if printed:
+            raw["plant"]["params"] = {**(raw["plant"].get("params") or {}), "equations": "printed"}
+
+    return change
+
+
+def _disturbance(**settings: Any) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """``settings`` on every ``kind: disturbance`` element of the experiment (none: no change)."""
+
+    def change(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        for element in (raw.get("uncertainty") or {}).values():
+            if isinstance(element, dict) and element.get("kind") == "disturbance":
+                element.update(settings)
+        _forces_before_input_disturbances(raw)
+
+    return change
+
+
+def _integral_limit(signals: tuple[str, ...] | None) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """The integrator of each loop on ``signals`` (None: every loop) held inside [-L, L] (the
+    free parameter), as the output limits of Simulink's Integrator block hold it."""
+
+    def change(pid: Raw, params: Mapping[str, float], _: list[str]) -> None:
+        for key, loop in pid["loops"].items():
+            if signals is None or (loop.get("signal") or key) in signals:
+                loop["integral_limit"] = params["L"]
+
+    return change
+
+
+ANGLES = ("theta", "phi")
+#: The position loops (an integrator limit on them leaves the angle and z loops unlimited).
+POSITIONS = ("x", "y")
+#: Reference kinds that step (a step, and a step through a prefilter).
+STEPS = ("step", "filtered_step")
+F_MAX = {"F_max": (2.0, 100.0)}
+#: The free parameters' values nearest the default loop: the widest limit, the shortest lag,
+#: prefilter and sampling period, the narrowest absolute band, the unit step, the upright
+#: start, the widest integrator limit.
+NEUTRAL = {
+    "F_max": 100.0, "tau": 0.001, "T_f": 0.01, "T_s": 0.001, "u_max": 20.0,
+    "tol": 0.002, "A": 1.0, "theta0": 0.0, "L": 2.0,
+}  # fmt: skip
+#: The integrators' limit L.
+L_MAX = {"L": (0.01, 2.0)}
+
+#: family -> value -> option; the first value of each family is the default.
+FAMILIES: dict[str, dict[str, OptionValue]] = {
+    "ordering": {
+        "value": OptionValue("AGS ranges min/max by value, as printed (default)", unchanged),
+        "magnitude": OptionValue("negative-gain AGS ranges min/max by magnitude", _by_magnitude),
+    },
+    "derivative": {
+        "backward": OptionValue("backward difference of e (default)", unchanged),
+        "filtered": OptionValue("filtered N s/(s + N), N = 100 (Simulink's default)", _derivative("filtered", "error")),
+        "measurement": OptionValue("filtered, N = 100, on the measurement", _derivative("filtered", "measurement")),
+    },
+    "integral": {
+        "outside": OptionValue("u = k_i(t) integral(e), eqs. 2.17-2.22 as printed (default)", unchanged),
+        "inside": OptionValue("u = integral(k_i(t) e) (Simulink's AGS by a gain block)", _integral_inside),
+    },
+    "ags_error": {
+        "abs": OptionValue("error AGS on |e| (default)", unchanged),
+        "signed": OptionValue("error AGS on e as eqs. 2.20-2.22 print it", _signed_error),
+    },
+    "ags_argument": {
+        "as_seen": OptionValue("the error schedule's argument is e as the loop sees it (default)", unchanged),
+        "angle_degrees": OptionValue("the angle loops' error schedules take e in degrees", _ags_angle_degrees),
+    },
+    "form": {
+        "parallel": OptionValue("k_p + k_i/s + k_d s (default)", unchanged),
+        "ideal": OptionValue("k_p (1 + k_i/s + k_d s), Simulink's ideal form", _form("ideal")),
+        "series": OptionValue("k_p (1 + k_i/s)(1 + k_d s)", _form("series")),
+    },
+    "units": {
+        "radians": OptionValue("angle loops see radians (default)", unchanged),
+        "degrees": OptionValue("angle loops see degrees (y, r, e and the schedule's argument)", _angles_in_degrees),
+    },
+    "lag": {
+        "none": OptionValue("forces applied as commanded (default)", unchanged),
+        "first_order": OptionValue(
+            "first-order actuator lag tau on every force", _actuator_lag, {"tau": (0.001, 0.3)}, "experiment"
+        ),
+    },
+    "prefilter": {
+        "none": OptionValue("raw step references (default)", unchanged),
+        "first_order": OptionValue(
+            "first-order prefiltered steps, time constant T_f", _prefilter, {"T_f": (0.01, 3.0)}, "experiment"
+        ),
+    },
+    "sampling": {
+        "continuous": OptionValue("PID updated at every integration step, dt = 1 ms (default)", unchanged),
+        "discrete": OptionValue(
+            "discrete PID at T_s (free in [1, 50] ms; 10 and 20 ms inside), output held between samples",
+            _sampled,
+            {"T_s": (0.001, 0.05)},
+        ),
+    },
+    "saturation": {
+        "none": OptionValue("unlimited forces (default)", unchanged),
+        "plain": OptionValue("|F| <= F_max, no anti-windup", _saturation("none"), F_MAX),
+        "clamping": OptionValue("|F| <= F_max, clamping anti-windup", _saturation("clamping"), F_MAX),
+        "back_calculation": OptionValue(
+            "|F| <= F_max, back-calculation anti-windup", _saturation("back_calculation"), F_MAX
+        ),
+    },
+    "theta_settling": {
+        "relative": OptionValue("a regulated angle settles inside 2 % of its peak deviation (default)", unchanged),
+        "absolute": OptionValue(
+            "a regulated angle settles inside max(2 % of its peak deviation, tol) (metrics.regulation_abs_tol)",
+            _absolute_settling,
+            {"tol": (0.002, 0.05)},
+            "experiment",
+        ),
+    },
+    "reference_amplitude": {
+        "unit": OptionValue("unit steps, as printed (default)", unchanged),
+        "free": OptionValue(
+            "every step reference ends at A (the AGS error normalisation untouched)",
+            _step_amplitude,
+            {"A": (0.2, 2.0)},
+            "experiment",
+        ),
+    },
+    "step_time": {
+        "zero": OptionValue("reference step at t = 0 (default)", unchanged),
+        "one_second": OptionValue(
+            "reference step at t = 1 s (Simulink's default), times measured from t = 0 (metrics.time_origin: start)",
+            _step_at_one_second_timed_from("start"),
+            scope="experiment",
+        ),
+        "one_second_from_step": OptionValue(
+            "reference step at t = 1 s (Simulink's default), times measured from the step (metrics.time_origin: step)",
+            _step_at_one_second_timed_from("step"),
+            scope="experiment",
+        ),
+    },
+    "initial_angle": {
+        "zero": OptionValue("the pendulum starts upright (default)", unchanged),
+        "free": OptionValue(
+            "theta(0) = theta0, and phi(0) alike where the pendulum has phi",
+            _initial_angle,
+            {"theta0": (0.0, 0.2)},
+            "experiment",
+        ),
+    },
+    "z_loop": {
+        "as_configured": OptionValue(
+            "x-z, x-y-z: equilibrium feed-forward F_z = (M + m) g, derived equations (default)", unchanged
+        ),
+        "no_feedforward": OptionValue(
+            "x-z, x-y-z: no feed-forward (the z loop's integrator holds the weight)",
+            _z_loop(feedforward=False, printed=False),
+            scope="experiment",
+        ),
+        "no_feedforward_printed": OptionValue(
+            "x-z, x-y-z: no feed-forward, the printed state equations",
+            _z_loop(feedforward=False, printed=True),
+            scope="experiment",
+        ),
+        "printed": OptionValue(
+            "x-z, x-y-z: the printed state equations (plant.params.equations)",
+            _z_loop(feedforward=True, printed=True),
+            scope="experiment",
+        ),
+    },
+    "disturbance_phase": {
+        "zero": OptionValue("d = A sin(2 pi f t), as printed (default)", unchanged),
+        "quarter": OptionValue("the disturbance's phase pi/2", _disturbance(phase=math.pi / 2), scope="experiment"),
+        "half": OptionValue("the disturbance's phase pi", _disturbance(phase=math.pi), scope="experiment"),
+        "three_quarter": OptionValue(
+            "the disturbance's phase 3 pi/2", _disturbance(phase=3 * math.pi / 2), scope="experiment"
+        ),
+    },
+    "disturbance_start": {
+        "zero": OptionValue("the disturbance acts from t = 0 (default)", unchanged),
+        "one_second": OptionValue(
+            "the disturbance starts at t = 1 s (d = 0 before)", _disturbance(start=1.0), scope="experiment"
+        ),
+    },
+    "disturbance_entry": {
+        "accelerations": OptionValue("d added to every acceleration, as eqs. 2.13-2.16 print it (default)", unchanged),
+        "input": OptionValue(
+            "d added as a force to every plant input", _disturbance(entry="input"), scope="experiment"
+        ),
+    },
+    "integrator_limit": {
+        "none": OptionValue("unlimited integrators (default)", unchanged),
+        "position": OptionValue(
+            "the position loops' (x, y) integrators held inside [-L, L]", _integral_limit(POSITIONS), L_MAX
+        ),
+        "all": OptionValue("every loop's integrator held inside [-L, L]", _integral_limit(None), L_MAX),
+    },
+}
