@@ -12,7 +12,6 @@ import yaml
 from typer.testing import CliRunner
 
 from nlcx.cli import app
-from nlcx.pages.tolerances import Tolerances
 from nlcx.thesis import hypotheses
 from nlcx.thesis.consistency.analysis import group_hits, hits, twins, unreachable_sets
 from nlcx.thesis.consistency.loops import ColumnRuns, used_box
@@ -25,6 +24,7 @@ from nlcx.thesis.consistency.spec import (
     with_intervals,
 )
 from nlcx.thesis.fitting import DEFINITIONS, FLOORS, measure_cells
+from nlcx.thesis.pages.tolerances import Tolerances
 
 ROOT = Path(__file__).resolve().parents[1]
 THESIS = ROOT / "configs" / "thesis"

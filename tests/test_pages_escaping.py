@@ -32,7 +32,7 @@ from typer.testing import CliRunner
 
 from nlcx import manifest
 from nlcx.cli import app
-from nlcx.pages import markup, render
+from nlcx.pages import kinds, markup, render
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
@@ -153,7 +153,8 @@ def reproduction_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     ]
     write_csv(out / "tables" / "table_9_1.csv", table)
     write_csv(out / "tables" / file_name(HOSTILE[1], ".csv"), table)
-    manifest = {"command": f"nlcx reproduce {HOSTILE[4]}", "profile": HOSTILE[1], "versions": {"nlcx": HOSTILE[0]}}
+    manifest = {"nlcx_output": "reproduction", "command": f"nlcx reproduce {HOSTILE[4]}", "profile": HOSTILE[1],
+                "versions": {"nlcx": HOSTILE[0]}}  # fmt: skip
     (out / "manifest.json").write_text(json.dumps(manifest))
     report(out)
     return out
@@ -190,8 +191,10 @@ def browser() -> Iterator[Browser]:
 
 
 def shipped_scripts(template: str) -> list[str]:
-    """The scripts a template itself holds (its <script> elements' text)."""
-    return re.findall(r"<script>(.*?)</script>", (render.TEMPLATES / template).read_text(), flags=re.S)
+    """The scripts a template itself holds (its <script> elements' text), read from the folder of
+    its kind's page (``reproduction.html.j2``: the reproduction page's)."""
+    folder = kinds.page(template.split(".")[0]).templates
+    return re.findall(r"<script>(.*?)</script>", (folder / template).read_text(), flags=re.S)
 
 
 def open_and_provoke(browser: Browser, page_file: Path) -> tuple[Page, dict[str, Any], list[str]]:

@@ -16,9 +16,9 @@ from typer.testing import CliRunner
 from nlcx import manifest
 from nlcx.cli import app
 from nlcx.comparison import THESIS_METRICS
-from nlcx.pages.tables import cells_of
-from nlcx.pages.tolerances import load as load_tolerances
 from nlcx.results import read_output_table
+from nlcx.thesis.pages.tables import cells_of
+from nlcx.thesis.pages.tolerances import load as load_tolerances
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"

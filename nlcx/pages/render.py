@@ -17,29 +17,38 @@ from typing import Any
 
 import jinja2
 
-from nlcx import report
+from nlcx import manifest, report
 from nlcx.errors import ConfigError
-from nlcx.pages import markup
+from nlcx.pages import kinds, markup
 from nlcx.pages.output_tables import has_table
 
 TEMPLATES = Path(__file__).parent / "templates"
 
 
 def kind_of(directory: Path) -> str:
-    """baselines, reproduction, sweep or run: baselines by the kind its manifest names, the
-    others by the files the directory holds: a sweep's tables ``sweep`` and ``metrics`` in either
-    form (:func:`~nlcx.pages.output_tables.has_table`)."""
-    if (directory / "tables" / "robustness.csv").is_file() and (directory / "tables" / "comparison.csv").is_file():
-        return "baselines"
-    if (directory / "claims.csv").is_file() or (directory / "tables").is_dir():
-        return "reproduction"
+    """The kind of output ``directory`` holds: the one its manifest names (``nlcx_output``) when
+    that kind has a report page (:mod:`nlcx.pages.kinds`); else a sweep by its tables ``sweep``
+    and ``metrics`` in either form (:func:`~nlcx.pages.output_tables.has_table`), a run by its
+    metrics.csv."""
+    named = _named_kind(directory)
+    if named is not None and kinds.has_page(named):
+        return named
     if has_table(directory, "sweep") and has_table(directory, "metrics"):
         return "sweep"
     if (directory / "metrics.csv").is_file():
         return "run"
     raise ConfigError(
-        "DIR", str(directory), "an nlcx output directory: a reproduction, a sweep or a run (none of their files found)"
-    )
+        "DIR", str(directory), f"an nlcx output directory of a kind with a report page: {', '.join(kinds.kinds())} "
+        "(its manifest names none of them and it holds no sweep's or run's tables)",
+    )  # fmt: skip
+
+
+def _named_kind(directory: Path) -> str | None:
+    """The kind of output ``directory``'s manifest names; None without a manifest."""
+    if not (directory / manifest.MANIFEST).is_file():
+        return None
+    kind = manifest.load(directory).get(manifest.MARKER)
+    return kind if isinstance(kind, str) else None
 
 
 def number(value: Any, digits: int = 4) -> str:
@@ -79,11 +88,13 @@ def _markdown_only(build: Callable[..., Any]) -> Callable[..., Any]:
     return apply
 
 
-def environment() -> jinja2.Environment:
-    """The templates' environment: every printed value escaped (HTML or Markdown, by the
+def environment(templates: Path | None = None) -> jinja2.Environment:
+    """The templates' environment: the templates of :data:`TEMPLATES`, then those of
+    ``templates`` (a page's own folder); every printed value escaped (HTML or Markdown, by the
     template's name), the filters ``num``, ``href``, ``fenced`` and ``code``."""
+    folders = [TEMPLATES, *([templates] if templates is not None and templates != TEMPLATES else [])]
     env = jinja2.Environment(
-        loader=jinja2.FileSystemLoader(TEMPLATES),
+        loader=jinja2.FileSystemLoader(folders),
         autoescape=is_html,
         finalize=_finalize,
         undefined=jinja2.StrictUndefined,
@@ -104,28 +115,14 @@ def repository() -> Path | None:
 
 
 def write_report(directory: Path, configs: Path | None = None) -> tuple[Path, Path]:
-    """Write DIR/report.html and DIR/report.md (atomically) for whatever DIR holds."""
+    """Write DIR/report.html and DIR/report.md (atomically): the page of the kind of output DIR
+    holds (:func:`kind_of`, :func:`nlcx.pages.kinds.page`), from its files; ``configs`` is handed
+    to the page (``nlcx report --configs``)."""
     directory = directory.resolve()
     kind = kind_of(directory)
-    configs = configs or (repository() or Path.cwd()) / "configs" / "thesis"
-    if kind == "reproduction":
-        from nlcx.pages import reproduction
-
-        ctx = reproduction.context(directory, configs, repository())
-        report.write_csv(directory / "report_summary.csv", reproduction.summary_frame(ctx))
-    elif kind == "sweep":
-        from nlcx.pages import sweep
-
-        ctx = sweep.context(directory)
-    elif kind == "baselines":
-        from nlcx.pages import baselines
-
-        ctx = baselines.context(directory)
-    else:
-        from nlcx.pages import run  # a run's page needs neither pandas nor the thesis pages
-
-        ctx = run.context(directory)
-    env = environment()
+    page = kinds.page(kind)
+    ctx = page.context(directory, configs, repository())
+    env = environment(page.templates)
     html, md = directory / "report.html", directory / "report.md"
     report.write_text(html, env.get_template(f"{kind}.html.j2").render(**ctx))
     report.write_text(md, env.get_template(f"{kind}.md.j2").render(**ctx))

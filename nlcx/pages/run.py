@@ -14,6 +14,8 @@ from typing import Any
 
 from nlcx import safe_yaml
 from nlcx.comparison import Comparison, Row, comparison
+from nlcx.pages.kinds import ReportPage
+from nlcx.pages.render import TEMPLATES
 
 
 def metric_records(path: Path) -> list[dict[str, Any]]:
@@ -55,3 +57,12 @@ def context(directory: Path) -> dict[str, Any]:
         "config": config,
         "manifest": manifest,
     }
+
+
+def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, Any]:
+    """The page's :func:`context` (it reads only the directory's own files)."""
+    return context(directory)
+
+
+#: The report page of a run directory (built in: :data:`nlcx.pages.kinds.BUILT_IN`).
+PAGE = ReportPage(TEMPLATES, page_context)

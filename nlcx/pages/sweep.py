@@ -18,7 +18,9 @@ import pandas as pd
 
 from nlcx import report, safe_yaml
 from nlcx.pages import charts, sweep_charts
+from nlcx.pages.kinds import ReportPage
 from nlcx.pages.output_tables import STEMS, part_files, read_output_table, table_path
+from nlcx.pages.render import TEMPLATES
 
 FILES = "report_files"
 
@@ -193,3 +195,12 @@ def table_files(directory: Path) -> dict[str, str]:
     (e.g. ``{"metrics": "metrics.parquet", "sweep": "sweep.parquet"}``), for the page's links."""
     names = {stem: table_path(directory, stem) for stem in STEMS}
     return {stem: path.name for stem, path in names.items() if path is not None}
+
+
+def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, Any]:
+    """The page's :func:`context` (it reads only the directory's own files)."""
+    return context(directory)
+
+
+#: The report page of a sweep directory (built in: :data:`nlcx.pages.kinds.BUILT_IN`).
+PAGE = ReportPage(TEMPLATES, page_context)

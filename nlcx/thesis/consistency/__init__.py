@@ -37,12 +37,12 @@ from typing import Any
 
 import pandas as pd
 
-from nlcx.pages import tolerances
 from nlcx.thesis import hypotheses
 from nlcx.thesis.consistency.analysis import analyse
 from nlcx.thesis.consistency.loops import ColumnRuns, Store, fit_column, random_loops
 from nlcx.thesis.consistency.spec import Column, ConsistencySpec, Family, digest, load_spec
 from nlcx.thesis.fitting import write_study
+from nlcx.thesis.pages import tolerances
 
 Task = tuple[str, str, str, str]  # (fit or cloud, table, controller, hypothesis; "" for a cloud)
 

@@ -13,7 +13,6 @@ import numpy as np
 import pandas as pd
 
 from nlcx import report
-from nlcx.pages import tolerances
 from nlcx.thesis import catalog
 from nlcx.thesis.consistency.figure import figure
 from nlcx.thesis.consistency.loops import Store, families_of
@@ -27,6 +26,7 @@ from nlcx.thesis.consistency.spec import (
     with_intervals,
 )
 from nlcx.thesis.fitting import FLOORS
+from nlcx.thesis.pages import tolerances
 
 
 def hits(loops: pd.DataFrame, cells: pd.DataFrame) -> np.ndarray:

@@ -13,9 +13,9 @@ import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nlcx import safe_yaml
-from nlcx.pages import tolerances
 from nlcx.thesis import catalog, hypotheses
 from nlcx.thesis.fitting import DEFINITIONS, FLOORS
+from nlcx.thesis.pages import tolerances
 from nlcx.tuning.optimise import GASettings, check_search_box
 from nlcx.validation import validate_model
 

@@ -18,11 +18,14 @@ import pandas as pd
 from markdown_it import MarkdownIt
 from markupsafe import Markup
 
+from nlcx import report
 from nlcx.pages import charts
-from nlcx.pages.tables import TableComparison, compare
-from nlcx.pages.tolerances import Tolerances
-from nlcx.pages.tolerances import load as load_tolerances
+from nlcx.pages.kinds import ReportPage
 from nlcx.thesis import catalog
+from nlcx.thesis.pages import bars
+from nlcx.thesis.pages.tables import TableComparison, compare
+from nlcx.thesis.pages.tolerances import Tolerances
+from nlcx.thesis.pages.tolerances import load as load_tolerances
 
 CITATION = (
     '"Conventional and Intelligent Control of Nonlinear Systems", PhD thesis, Thapar University '
@@ -143,8 +146,8 @@ def context(directory: Path, configs: Path, repo: Path | None) -> dict[str, Any]
         "manifest": manifest,
         "tolerances": tolerances,
         "tables": tables,
-        "bars": {t.name: charts.grouped_bars(t.cells) for t in tables},
-        "legend": charts.legend(),
+        "bars": {t.name: bars.grouped_bars(t.cells) for t in tables},
+        "legend": charts.legend(bars.legend_keys()),
         "table_verdicts": {v: sum(t.verdict == v for t in tables) for v in ("reproduced", "partly", "not", "n/a")},
         "claims": claim_rows,
         "claim_counts": {v: sum(c["reproduced"] == v for c in claim_rows) for v in VERDICTS},
@@ -167,3 +170,16 @@ def summary_frame(ctx: dict[str, Any]) -> pd.DataFrame:
             for t in ctx["tables"]
         ]
     )
+
+
+def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, Any]:
+    """The page's :func:`context`, the thesis's configs (tolerances.yaml, the figures' catalogue)
+    read from ``configs`` (default: configs/thesis of the checkout, else of the working
+    directory); report_summary.csv written beside it (:func:`summary_frame`)."""
+    ctx = context(directory, configs or (repo or Path.cwd()) / "configs" / "thesis", repo)
+    report.write_csv(directory / "report_summary.csv", summary_frame(ctx))
+    return ctx
+
+
+#: The report page of a reproduction directory (the entry point ``reproduction`` of nlcx.pages).
+PAGE = ReportPage(Path(__file__).parent / "templates", page_context)

@@ -12,6 +12,8 @@ from typing import Any
 
 import pandas as pd
 
+from nlcx.pages.kinds import ReportPage
+
 #: The metrics the side-by-side tables show, in this order (step-referenced and regulated signals).
 SHOWN = ("overshoot", "rise_time", "settling_time", "peak_deviation", "ise", "control_effort")
 #: The metrics the robustness tables show.
@@ -78,3 +80,12 @@ def context(directory: Path) -> dict[str, Any]:
         "shown": SHOWN,
         "spread": SPREAD,
     }
+
+
+def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, Any]:
+    """The page's :func:`context` (it reads only the directory's tables)."""
+    return context(directory)
+
+
+#: The report page of a baselines directory (the entry point ``baselines`` of nlcx.pages).
+PAGE = ReportPage(Path(__file__).parent / "templates", page_context)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from nlcx.pages.tolerances import Tolerances
+from nlcx.thesis.pages.tolerances import Tolerances
 
 #: Columns that name a cell (the first present is its metric for the tolerance).
 METRIC_COLUMNS = ("metric", "parameter")
