@@ -251,6 +251,7 @@ def cli_page() -> str:
     import typer
 
     from nlcx.cli import app
+    from nlcx.cli.lazy import LazyCommand
 
     group = typer.main.get_command(app)
     parts = [
@@ -265,6 +266,8 @@ def cli_page() -> str:
         parts += [f"| {', '.join(f'`{o}`' for o in p.opts)} | {cell(p.help or '')} |" for p in top]
         parts.append("")
     for name, command in group.commands.items():  # type: ignore[attr-defined]
+        if isinstance(command, LazyCommand):  # a thesis command: its options are its function's
+            command = command.loaded
         if not command.hidden:
             parts.append(_command_section(name, command))
     return "\n".join(parts)

@@ -1,12 +1,16 @@
 """The package's structure rules: no import cycles, small functions and modules, named offsets
-and named fields.
+and named fields, and the thesis a study on top of the library.
 
-These read the source with :mod:`ast`; they do not import the package.
+These read the source with :mod:`ast`; they do not import the package (but for one check of
+what importing the command line imports, made in another process).
 """
 
 from __future__ import annotations
 
 import ast
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "nlcx"
@@ -25,6 +29,11 @@ STRUCTURES = {
 }  # fmt: skip
 #: Where values are structures read by name: the kernel, the engine and the plugins.
 NAMED_FIELD_PACKAGES = ("kernel", "engine", "plants", "controllers", "uncertainty", "references")
+#: The thesis: a study built on the library, which nothing outside it imports.
+THESIS = "nlcx.thesis"
+#: The one module outside the thesis that names its modules: the command line's table of the
+#: thesis's commands, each imported when it is used.
+THESIS_COMMAND_TABLE = "nlcx.cli.lazy"
 
 
 def _modules() -> dict[str, Path]:
@@ -41,11 +50,12 @@ def _generated(path: Path) -> bool:
     return "generated" in path.relative_to(PACKAGE).parts
 
 
-def _imports(name: str, path: Path, known: set[str]) -> set[str]:
-    """Every nlcx module ``name`` imports, at module level or inside a function."""
+def _imports(name: str, path: Path, known: set[str], source: str | None = None) -> set[str]:
+    """Every nlcx module ``name`` imports, at module level or inside a function (``source``:
+    its text, default read from ``path``)."""
     package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
     found: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(ast.parse(path.read_text() if source is None else source)):
         if isinstance(node, ast.Import):
             found.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -222,3 +232,108 @@ def test_no_module_longer_than_600_lines() -> None:
         if not _generated(path) and (lines := _too_long(path.read_text())):
             long[str(path.relative_to(PACKAGE.parent))] = lines
     assert long == {}
+
+
+def _in_thesis(module: str) -> bool:
+    return module == THESIS or module.startswith(THESIS + ".")
+
+
+#: A module of the thesis named in a string: ``nlcx.thesis``, ``nlcx.thesis.cli:reproduce``.
+_THESIS_NAME = re.compile(r"\bnlcx\.thesis(?![\w])")
+#: Calls that import the module their first argument names.
+_IMPORTING_CALLS = {"import_module", "__import__"}
+
+
+def _documentation(tree: ast.Module) -> set[int]:
+    """The ids of the string constants that only document (a docstring, a bare string statement)."""
+    return {
+        id(node.value)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)
+    }
+
+
+def _thesis_references(name: str, path: Path, source: str, known: set[str]) -> list[str]:
+    """Where module ``name`` reaches for the thesis: an import of ``nlcx.thesis`` or a module under
+    it (absolute or relative, at module level or in a function), a call of
+    ``importlib.import_module`` or ``__import__`` with a literal name under it, and any other
+    string that names one (``"nlcx.thesis.cli:reproduce"``, as an entry point does); docstrings
+    aside."""
+    tree = ast.parse(source)
+    found = [f"imports {m}" for m in sorted(_imports(name, path, known | {THESIS}, source)) if _in_thesis(m)]
+    documentation = _documentation(tree)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and node.args:
+            func = node.func
+            called = func.attr if isinstance(func, ast.Attribute) else func.id if isinstance(func, ast.Name) else ""
+            first = node.args[0]
+            literal = isinstance(first, ast.Constant) and isinstance(first.value, str)
+            if called in _IMPORTING_CALLS and literal and _in_thesis(first.value):
+                found.append(f"{node.lineno}: {called}({first.value!r})")
+                documentation.add(id(first))
+        if (
+            isinstance(node, ast.Constant)
+            and isinstance(node.value, str)
+            and id(node) not in documentation
+            and _THESIS_NAME.search(node.value)
+        ):
+            found.append(f"{node.lineno}: names {node.value!r}")
+    return found
+
+
+def test_thesis_reference_finder_finds_every_form() -> None:
+    source = (
+        '"""The docstring may name nlcx.thesis.cli."""\n'
+        "import importlib\n"
+        "import nlcx.thesis.catalog\n"
+        "from nlcx import thesis, pages\n"
+        "from ..thesis import profiles\n"
+        "from nlcx.pages import render\n"
+        "def f():\n"
+        '    """Nor is nlcx.thesis here."""\n'
+        "    from nlcx.thesis.reproduce import reproduce\n"
+        '    importlib.import_module("nlcx.thesis.cli")\n'
+        '    load("nlcx.thesis.cli:reproduce")\n'
+        '    return "nlcx.thesisless", "nlcx.pages.run:PAGE"\n'
+    )
+    known = {"nlcx.cli.x", "nlcx.thesis.catalog", "nlcx.thesis.profiles", "nlcx.thesis.reproduce", "nlcx.pages",
+             "nlcx.pages.render", "nlcx.thesis.cli"}  # fmt: skip
+    found = _thesis_references("nlcx.cli.x", PACKAGE / "cli" / "x.py", source, known)
+    assert found == [
+        "imports nlcx.thesis", "imports nlcx.thesis.catalog", "imports nlcx.thesis.profiles",
+        "imports nlcx.thesis.reproduce", "10: import_module('nlcx.thesis.cli')",
+        "11: names 'nlcx.thesis.cli:reproduce'",
+    ]  # fmt: skip
+
+
+def test_nothing_outside_the_thesis_imports_it_but_the_command_table() -> None:
+    """The thesis is a study on top of the library: no module outside nlcx/thesis imports it or
+    names one of its modules, except the table of the thesis's commands, which names them."""
+    mods = _modules()
+    known = set(mods)
+    found = {
+        name: refs
+        for name, path in mods.items()
+        if not _in_thesis(name) and (refs := _thesis_references(name, path, path.read_text(), known))
+    }
+    table = found.pop(THESIS_COMMAND_TABLE, [])
+    assert found == {}
+    assert table and all("names 'nlcx.thesis.cli:" in ref for ref in table), table
+
+
+def test_importing_the_command_line_or_listing_its_commands_leaves_the_thesis_unimported() -> None:
+    code = (
+        "import sys\n"
+        "import nlcx.cli\n"
+        "after_import = sorted(m for m in sys.modules if m == 'nlcx.thesis' or m.startswith('nlcx.thesis.'))\n"
+        "sys.argv = ['nlcx', '--help']\n"
+        "try:\n"
+        "    nlcx.cli.main()\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "after_help = sorted(m for m in sys.modules if m == 'nlcx.thesis' or m.startswith('nlcx.thesis.'))\n"
+        "print('THESIS', after_import, after_help)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert "reproduce" in proc.stdout and "identify" in proc.stdout, "nlcx --help lists the thesis's commands"
+    assert proc.stdout.splitlines()[-1] == "THESIS [] []"

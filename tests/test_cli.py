@@ -233,6 +233,45 @@ def test_console_script_one_line_error() -> None:
     assert proc.stderr.strip().splitlines() == ["config error: simulation.dt = -1: must be greater than 0"]
 
 
+def test_the_thesis_commands_are_listed_by_their_own_help_and_parse_their_own_options() -> None:
+    """Each thesis command is listed by the first line of its own help, and its command line is
+    parsed by the command built from its function: its options, its one-line refusals."""
+    import inspect
+
+    import typer
+
+    from nlcx.cli.lazy import THESIS_COMMANDS, LazyCommand
+
+    group = typer.main.get_command(app)
+    for name, (_, listed) in THESIS_COMMANDS.items():
+        command = group.commands[name]  # type: ignore[attr-defined]
+        assert isinstance(command, LazyCommand) and command.help == listed
+        own = " ".join(inspect.cleandoc(command.loaded.help or "").split("\n\n")[0].split())
+        assert own.startswith(listed), (name, own)
+        assert command.loaded.params and not command.params, "the options are the loaded command's"
+    result = runner.invoke(app, ["calibrate", "spec.yaml", "--jobs", "0"])
+    assert result.exit_code == 2 and "--jobs" in result.output.splitlines()[0]
+    result = runner.invoke(app, ["baselines", "--no-such-option"])
+    assert result.exit_code == 2 and "No such option: --no-such-option" in result.output
+
+
+def test_a_run_and_its_report_leave_the_thesis_unimported(tmp_path: Path) -> None:
+    """``nlcx run`` (its report page included) imports nothing of the thesis, a study on top of
+    the library."""
+    code = (
+        "import atexit, sys\n"
+        "atexit.register(lambda: print('THESIS', sorted(m for m in sys.modules if m.startswith('nlcx.thesis'))))\n"
+        "from nlcx.cli import main\n"
+        f"sys.argv = ['nlcx', 'run', {str(ROOT / 'configs' / 'x_error_ags.yaml')!r}, 'simulation.t_end=1', "
+        f"'--out', {str(tmp_path / 'run')!r}, '--quiet']\n"
+        "main()\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "run" / "report.html").is_file()
+    assert proc.stdout.splitlines()[-1] == "THESIS []"
+
+
 def test_reproduce_only_some_figures_and_tables(tmp_path: Path) -> None:
     out = tmp_path / "thesis"
     result = reproduce_only("fig-2.4,fig-2.3,table-2.3,table-2.1,table-2.2", out)

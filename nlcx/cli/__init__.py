@@ -1,8 +1,9 @@
 """The ``nlcx`` command line: the Typer application (:data:`app`) and its entry point (:func:`main`).
 
-The commands live in :mod:`nlcx.cli.experiments` (run, sweep, validate, reproduce, report,
-calibrate, identify), :mod:`nlcx.cli.inspecting` (diff, metrics, list) and
-:mod:`nlcx.cli.analysis` (linearize); importing this package registers them on :data:`app`.
+The commands live in :mod:`nlcx.cli.experiments` (run, sweep, validate, report),
+:mod:`nlcx.cli.inspecting` (diff, metrics, list, schema) and :mod:`nlcx.cli.analysis`
+(linearize); importing this package registers them on :data:`app`, and the thesis's commands
+(reproduce, baselines, calibrate, identify) by name, imported when used (:mod:`nlcx.cli.lazy`).
 What a command sets for its process (the garbage collector, warnings, matplotlib's backend)
 is set and restored by :func:`command_settings`.
 """
@@ -13,13 +14,13 @@ import atexit
 import functools
 import gc
 
-from nlcx.cli import analysis, experiments, inspecting
+from nlcx.cli import analysis, experiments, inspecting, lazy
 from nlcx.cli._app import app, command_settings, one_line_errors
 from nlcx.terminal import echo
 
 __all__ = ["app", "command_settings", "main", "one_line_errors"]
 
-_COMMANDS = (experiments, inspecting, analysis)  # imported for the commands they register
+_COMMANDS = (experiments, inspecting, analysis, lazy)  # imported for the commands they register
 
 
 def main() -> None:  # pragma: no cover - console entry point
