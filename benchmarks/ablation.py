@@ -76,7 +76,7 @@ def _no_freezing(module: ModuleType) -> None:
 #: mechanism -> (what it is, the module holding it, how it is switched off)
 WITHOUT: dict[str, tuple[str, str, Callable[[ModuleType], None]]] = {
     "painter": ("painter process (nlcx run's figure drawn in a second process)", "nlcx.cli.experiments", _no_painter),
-    "mallopt": ("mallopt (glibc keeps freed blocks up to 32 MB)", "nlcx.engine.pipeline", _no_mallopt),
+    "mallopt": ("mallopt (glibc keeps freed blocks up to 32 MB)", "nlcx.runtime", _no_mallopt),
     "collector_freezing": ("collector freezing (gc.freeze after imports, in workers, at exit)", "nlcx", _no_freezing),
     "pandas_free_csv": ("pandas-free CSV path (metrics and time series to Arrow)", "nlcx.report", _no_pandas_free_csv),
     "build_cache_pid": ("build cache: PIDs shared by variants", "nlcx.controllers.pid", _no_built_controllers),

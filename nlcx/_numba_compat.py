@@ -9,7 +9,9 @@ nlcx relies on things numba does not document as public:
 - ``numba.core.caching.IndexDataCacheFile`` and its ``_index_path``: the disk cache's index
   file, whose reads and writes nlcx serialises between processes (:func:`serialize_cache_access`);
 - the text of the warning numba gives for first-class function types
-  (:data:`FIRST_CLASS_FUNCTION_WARNING`).
+  (:data:`FIRST_CLASS_FUNCTION_WARNING`);
+- numba-cuda's ``cudadrv.nvvm`` (:func:`load_nvvm`, :func:`cuda_without_fma`) and a kernel
+  dispatcher's ``_cache`` (:func:`keep_compiled_kernels`).
 
 A numba version outside :data:`TESTED` may have changed any of them: :func:`check_version`
 says so in one line (:class:`UntestedNumbaWarning`). Nothing here changes numba or the
@@ -104,7 +106,7 @@ def check_version(version: str | None = None) -> bool:
     return False
 
 
-def serialize_cache_access() -> None:
+def serialize_cache_access() -> tuple[str, ...]:
     """Make each read or write of a compiled function's files in numba's disk cache one step
     for every process that shares the cache (idempotent; every numba cache of the process).
 
@@ -117,13 +119,28 @@ def serialize_cache_access() -> None:
     result). Here a save, a load and a flush each hold an exclusive lock (:mod:`filelock`) on
     ``<index>.lock`` beside the index, so the second save reads the first's entry and a load
     never reads an index entry whose data file is still being written. Where the lock file
-    cannot be made (a read-only cache), the operation runs unlocked, as numba's own."""
+    cannot be made (a read-only cache), the operation runs unlocked, as numba's own.
+
+    Returns the names of the operations this call wrapped (none if they already were), for
+    :func:`restore_cache_access`."""
     from numba.core.caching import IndexDataCacheFile
 
+    wrapped = []
     for name in _CACHE_FILE_OPERATIONS:
         operation = getattr(IndexDataCacheFile, name)
         if not getattr(operation, "serialized", False):
             setattr(IndexDataCacheFile, name, _locked(operation))
+            wrapped.append(name)
+    return tuple(wrapped)
+
+
+def restore_cache_access(wrapped: tuple[str, ...]) -> None:
+    """Give numba's cache-file operations ``wrapped`` (what :func:`serialize_cache_access`
+    returned) back their own, unlocked methods."""
+    from numba.core.caching import IndexDataCacheFile
+
+    for name in wrapped:
+        setattr(IndexDataCacheFile, name, getattr(IndexDataCacheFile, name).__wrapped__)
 
 
 def _locked(operation: Callable[..., Any]) -> Callable[..., Any]:
@@ -165,6 +182,14 @@ def cuda_without_fma() -> None:
 
     strict.without_fma = True  # type: ignore[attr-defined]  # a mark on the function: wrapped once
     nvvm.compile_ir = strict
+
+
+def load_nvvm() -> None:
+    """Load NVVM, CUDA's compiler of the kernels (numba-cuda's ``cudadrv.nvvm.NVVM``): raises
+    what numba-cuda raises when it cannot be found."""
+    from numba.cuda.cudadrv.nvvm import NVVM
+
+    NVVM()
 
 
 def keep_compiled_kernels(dispatcher: Any, directory: Any, key: str) -> None:

@@ -16,7 +16,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Union
 
-from nlcx import compiled_cache
+from nlcx import compiled_cache, runtime
 from nlcx._numba_compat import quiet_first_class_functions
 from nlcx.errors import ConfigError
 from nlcx.limits import MAX_JOBS, check_count
@@ -97,10 +97,11 @@ def experiment(config: ConfigLike, overrides: OverridesLike = None, *, allow_env
     compiled_cache.ready()  # before a plugin's compiled functions are loaded
     from nlcx import config as cfg
 
-    raw = load_config_imports(_with_overrides(_raw(config), overrides))
-    if "sweep" in raw:
-        raise ConfigError("sweep", "...", "a config with a sweep section runs with nlcx.sweep, not nlcx.run")
-    return cfg.build(cfg.interpolate(raw, allow_env=allow_env), allow_env=allow_env)
+    with runtime.cache_access():  # a plugin's compiled functions may load from numba's cache
+        raw = load_config_imports(_with_overrides(_raw(config), overrides))
+        if "sweep" in raw:
+            raise ConfigError("sweep", "...", "a config with a sweep section runs with nlcx.sweep, not nlcx.run")
+        return cfg.build(cfg.interpolate(raw, allow_env=allow_env), allow_env=allow_env)
 
 
 def run(
@@ -145,7 +146,9 @@ def run(
     exp = experiment(config, overrides, allow_env=allow_env)  # checks numba's cache before anything compiled is loaded
     from nlcx import engine
 
-    with quiet_first_class_functions():  # numba's note on compiling the kernel's function values
+    # numba's note on compiling the kernel's function values not shown; its cache read and
+    # written one function at a time with every other process (nlcx.runtime.cache_access)
+    with quiet_first_class_functions(), runtime.cache_access():
         result = Result.from_engine(engine.run_experiment(exp))
     if out is not None:
         result.save(out)
@@ -203,7 +206,7 @@ def sweep(
     raw = _with_overrides(_raw(config), overrides)
     with tempfile.TemporaryDirectory(prefix="nlcx-sweep-") as scratch:
         target = Path(out) if out is not None else Path(scratch) / "sweep"
-        with quiet_first_class_functions():
+        with quiet_first_class_functions(), runtime.cache_access():
             sweeps.run(raw, [], target, executor, jobs or 2, with_report=out is not None, allow_env=allow_env)
         variants, metrics = read_output_table(target, "sweep"), read_output_table(target, "metrics")
         return SweepResult(variants, metrics, target if out is not None else None)

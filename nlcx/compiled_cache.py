@@ -29,7 +29,7 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
-from nlcx._numba_compat import check_version, serialize_cache_access
+from nlcx._numba_compat import check_version
 
 PACKAGE = Path(__file__).resolve().parent
 STAMP = PACKAGE / "__pycache__" / "numba-source.sha256"
@@ -76,15 +76,14 @@ def ensure_consistent(root: Path = PACKAGE, stamp: Path | None = None, depends: 
 def ready() -> None:
     """Prepare this process to load the package's compiled functions (once; the processes it
     forks inherit it): say in one line if numba's version is untested
-    (:func:`nlcx._numba_compat.check_version`), drop the package's numba cache if the source
-    changed since it was stamped (:func:`ensure_consistent`), and serialise every process's
-    reads and writes of the cache files (:func:`nlcx._numba_compat.serialize_cache_access`).
+    (:func:`nlcx._numba_compat.check_version`) and drop the package's numba cache if the source
+    changed since it was stamped (:func:`ensure_consistent`). The reads and writes of the cache
+    files are serialised between processes by whoever runs nlcx (:mod:`nlcx.runtime`).
 
     Call it before importing a module that declares compiled functions: a function compiled
     for an explicit signature is loaded from the cache when its module is imported."""
     check_version()
     ensure_consistent()
-    serialize_cache_access()
 
 
 class CompileHelper:

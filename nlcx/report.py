@@ -70,10 +70,10 @@ def write_csv(path: Path, frame: pd.DataFrame, empty_as_missing: bool = False) -
         if frame[col].dtype == object and len({type(v) for v in frame[col] if v is not None}) > 1:
             frame[col] = [v if isinstance(v, str) else repr(v) for v in frame[col]]
     table = pa.Table.from_pandas(frame, preserve_index=False)
-    _write_table(path, _empty_text_as_null(table) if empty_as_missing else table)
+    _write_table(path, empty_text_as_null(table) if empty_as_missing else table)
 
 
-def _empty_text_as_null(table: pa.Table) -> pa.Table:
+def empty_text_as_null(table: pa.Table) -> pa.Table:
     """``table`` with every empty string of its text columns a null."""
     import pyarrow as pa
     import pyarrow.compute as pc
@@ -177,7 +177,7 @@ def timeseries_columns(result: Result) -> dict[str, np.ndarray]:
     return out
 
 
-def _thin(t: np.ndarray, y: np.ndarray, points: int = 3000) -> tuple[np.ndarray, np.ndarray]:
+def thinned(t: np.ndarray, y: np.ndarray, points: int = 3000) -> tuple[np.ndarray, np.ndarray]:
     """At most ~2 ``points`` samples for drawing: the min and max of each bucket, in time order,
     so chattering and spikes keep their envelope (a figure is a few hundred pixels wide)."""
     n = t.size
@@ -196,7 +196,7 @@ def _thin(t: np.ndarray, y: np.ndarray, points: int = 3000) -> tuple[np.ndarray,
     return np.concatenate([tt, t[m:]]), np.concatenate([yy, y[m:]])
 
 
-def _finite(values: np.ndarray, limit: float = 1e9) -> np.ndarray:
+def finite_for_plot(values: np.ndarray, limit: float = 1e9) -> np.ndarray:
     """Values beyond ``limit`` (a diverging run) as NaN, so an axis can still be drawn."""
     return np.where(np.abs(values) < limit, values, np.nan)
 
@@ -228,7 +228,7 @@ def _lines(run_values: list[tuple[Run, np.ndarray | None, str]], lw: float) -> t
     for i, (run, values, label) in enumerate(run_values):
         if values is not None:
             color, ls = _style(i)
-            out.append(Line(*_thin(run.t, _finite(values)), color=color, ls=ls, lw=lw, label=label))
+            out.append(Line(*thinned(run.t, finite_for_plot(values)), color=color, ls=ls, lw=lw, label=label))
     return tuple(out)
 
 
@@ -247,7 +247,7 @@ def output_plan(result: Result, title: str | None = None) -> FigurePlan:
         first = result.runs[0]
         if sig.name in first.controller.reference_signals:
             col = first.controller.reference_signals.index(sig.name)
-            lines += (Line(*_thin(first.t, first.r[:, col]), color="k", ls=":", lw=1.0, label="reference"),)
+            lines += (Line(*thinned(first.t, first.r[:, col]), color="k", ls=":", lw=1.0, label="reference"),)
         panels.append(_time_panel(lines, k, sig))
     for j, sig in enumerate(inputs):
         lines = _lines([(run, run.u[:, j], _run_label(run)) for run in result.runs], lw=1.3)

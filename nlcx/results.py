@@ -262,7 +262,7 @@ class Result:
     def _plan(self, signals: Sequence[str] | None, title: str | None) -> Any:
         """The figure's plan (:class:`nlcx.drawing.FigurePlan`) from the trajectories."""
         from nlcx.drawing import FigurePlan, Line, Panel
-        from nlcx.report import LINE_STYLES, _finite, _thin
+        from nlcx.report import LINE_STYLES, finite_for_plot, thinned
 
         names = [o[0] for o in self._outputs]
         chosen = list(signals) if signals is not None else names
@@ -277,11 +277,11 @@ class Result:
                 frame = self.trajectory(controller)
                 color, ls = LINE_STYLES[i % len(LINE_STYLES)]
                 legend = controller if self.status(controller) == "ok" else f"{controller} ({self.status(controller)})"
-                t, y = _thin(frame.t.to_numpy(), _finite(frame[name].to_numpy()))
+                t, y = thinned(frame.t.to_numpy(), finite_for_plot(frame[name].to_numpy()))
                 lines.append(Line(t, y, color=color, ls=ls, lw=1.3, label=legend))
             first = self.trajectory(self.controllers[0])
             if f"{name}_ref" in first:
-                t, r = _thin(first.t.to_numpy(), first[f"{name}_ref"].to_numpy())
+                t, r = thinned(first.t.to_numpy(), first[f"{name}_ref"].to_numpy())
                 lines.append(Line(t, r, color="k", ls=":", lw=1.0, label="reference"))
             ylabel = f"{label or name} ({unit})" if unit else (label or name)
             panels.append(Panel(tuple(lines), f"({chr(ord('a') + k)}) {label or name} vs time",

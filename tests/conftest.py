@@ -10,9 +10,12 @@ import numpy as np
 import pytest
 import yaml
 
-from nlcx import compiled_cache
+from nlcx import _numba_compat, compiled_cache
 
 compiled_cache.ready()  # before any module with compiled functions loads them from numba's cache
+# the test process compiles and loads the package's functions as a command would: their cache
+# files read and written one function at a time with every other process sharing the cache
+_numba_compat.serialize_cache_access()
 
 from nlcx import config, engine  # noqa: E402
 

@@ -257,18 +257,6 @@ def test_metrics_measured_in_blocks_of_runs_equal_one_block(x_error_raw: dict, m
     assert (whole.status == "ok").any() and not whole.value.isna().all()
 
 
-def test_freed_memory_is_kept_for_reuse_on_glibc() -> None:
-    """A sweep worker asks glibc to keep freed blocks of up to 32 MB in its heap (the rows a
-    batch measures); elsewhere nothing is changed and it says so."""
-    import os
-
-    try:
-        glibc = bool(os.confstr("CS_GNU_LIBC_VERSION"))
-    except (ValueError, OSError):
-        glibc = False
-    assert engine.reuse_freed_memory() is glibc
-
-
 def test_controllers_of_several_structures_share_a_call_of_few_rows_and_split_when_many(
     x_error_raw: dict, monkeypatch
 ) -> None:

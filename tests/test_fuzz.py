@@ -346,11 +346,11 @@ def test_numbas_experimental_feature_warning_is_not_shown_by_a_command() -> None
 
     from numba.core.errors import NumbaExperimentalFeatureWarning
 
-    from nlcx.cli._app import command_settings
+    from nlcx import runtime
 
     given_by_numba = NumbaExperimentalFeatureWarning("First-class function type feature is experimental")
     with warnings.catch_warnings(record=True) as shown:
         warnings.simplefilter("always")
-        with command_settings():
+        with runtime.command():
             warnings.warn(given_by_numba, stacklevel=1)
     assert [str(w.message) for w in shown] == []

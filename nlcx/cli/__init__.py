@@ -4,21 +4,18 @@ The commands live in :mod:`nlcx.cli.experiments` (run, sweep, validate, report),
 :mod:`nlcx.cli.inspecting` (diff, metrics, list, schema) and :mod:`nlcx.cli.analysis`
 (linearize); importing this package registers them on :data:`app`, and the thesis's commands
 (reproduce, baselines, calibrate, identify) by name, imported when used (:mod:`nlcx.cli.lazy`).
-What a command sets for its process (the garbage collector, warnings, matplotlib's backend)
-is set and restored by :func:`command_settings`.
+What a command sets for its process (numba's cache access, the garbage collector, warnings,
+matplotlib's backend) is set and restored by :func:`nlcx.runtime.command`.
 """
 
 from __future__ import annotations
 
-import atexit
-import functools
-import gc
-
+from nlcx import runtime
 from nlcx.cli import analysis, experiments, inspecting, lazy
-from nlcx.cli._app import app, command_settings, one_line_errors
+from nlcx.cli._app import app, one_line_errors
 from nlcx.terminal import echo
 
-__all__ = ["app", "command_settings", "main", "one_line_errors"]
+__all__ = ["app", "main", "one_line_errors"]
 
 _COMMANDS = (experiments, inspecting, analysis, lazy)  # imported for the commands they register
 
@@ -28,14 +25,14 @@ def main() -> None:  # pragma: no cover - console entry point
 
     A misused command line (an unknown option or command, a missing argument) is one line on
     stderr, ``usage error: ...; see nlcx COMMAND --help`` (exit 2), like every other refusal.
-    When the interpreter exits, everything still alive is frozen first (:func:`_freeze_at_exit`),
+    When the interpreter exits, everything still alive is frozen first (:func:`nlcx.runtime.freeze_at_exit`),
     so its final collections do not walk the import graph of numba, pandas and matplotlib, a
     noticeable part of a short run."""
     import sys
 
     import typer
 
-    _freeze_at_exit()
+    runtime.freeze_at_exit()
     command = typer.main.get_command(app)
     try:
         status = command.main(prog_name="nlcx", standalone_mode=False)
@@ -50,10 +47,3 @@ def main() -> None:  # pragma: no cover - console entry point
         echo(f"usage error: {line}{where}", err=True)
         sys.exit(getattr(exc, "exit_code", 2))
     sys.exit(status if isinstance(status, int) else 0)
-
-
-@functools.cache
-def _freeze_at_exit() -> None:
-    """Freeze the heap when the interpreter exits: exit handlers run before its final garbage
-    collections. Until then nothing is frozen on the command's behalf."""
-    atexit.register(gc.freeze)

@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
-import contextlib
 import functools
-import gc
 import math
 import os
 import sys
-import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TextIO, TypeVar
+from typing import Annotated, Any, TypeVar
 
 import typer
 
-from nlcx import _numba_compat, compiled_cache
+from nlcx import compiled_cache, runtime
 from nlcx.errors import NlcxError
 from nlcx.limits import MAX_JOBS, check_count
 from nlcx.terminal import echo
@@ -53,61 +50,9 @@ def _options(
     ] = False,
 ) -> None:
     """Reproducible experiments on the control of nonlinear systems."""
-    ctx.with_resource(command_settings())  # left when the command ends
+    ctx.with_resource(runtime.command())  # left when the command ends
     if ctx.invoked_subcommand not in FILE_COMMANDS:
         compiled_cache.ready()  # before the command imports any compiled function
-
-
-@contextlib.contextmanager
-def command_settings() -> Iterator[None]:
-    """What a command sets for its whole process, each restored when it ends.
-
-    - What the command freezes for the collector (:func:`_imported`) is unfrozen when it ends
-      (unless something was frozen before).
-    - Warnings: numba's note that first-class function types are experimental (the kernel's
-      function tables) is not shown; nlcx's own warnings (an untested numba) print as one line.
-    - matplotlib's backend is Agg (``MPLBACKEND``, inherited by the processes the command
-      starts): every figure is written to a file."""
-    frozen = gc.get_freeze_count()
-    backend = os.environ.get("MPLBACKEND")
-    try:
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", _numba_compat.FIRST_CLASS_FUNCTION_WARNING)
-            warnings.showwarning = _one_line_warnings(warnings.showwarning)
-            os.environ["MPLBACKEND"] = "Agg"
-            yield
-    finally:
-        _restore_variable("MPLBACKEND", backend)
-        if not frozen:
-            gc.unfreeze()
-
-
-def _restore_variable(name: str, value: str | None) -> None:
-    """Set environment variable ``name`` back to ``value`` (``None``: it was not set)."""
-    if value is None:
-        os.environ.pop(name, None)
-    else:
-        os.environ[name] = value
-
-
-def _one_line_warnings(show: Callable[..., None]) -> Callable[..., None]:
-    """``warnings.showwarning`` that prints a warning of nlcx's own as ``warning: <message>`` on
-    stderr, and hands every other to ``show``."""
-
-    def show_warning(
-        message: Warning | str,
-        category: type[Warning],
-        filename: str,
-        lineno: int,
-        file: TextIO | None = None,
-        line: str | None = None,
-    ) -> None:
-        if category.__module__.split(".")[0] == "nlcx":
-            echo(f"warning: {message}", err=True)
-        else:
-            show(message, category, filename, lineno, file, line)
-
-    return show_warning
 
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -204,11 +149,6 @@ def checked_jobs(jobs: int | None) -> int | None:
     return jobs
 
 
-def _imported() -> None:
-    """Leave what the imports built (numba, pandas, matplotlib) out of later collections: a long
-    command calls this once they are imported (:func:`command_settings` unfreezes at its end)."""
-    gc.freeze()
-
-
-def _fmt(value: float) -> str:
+def fmt(value: float) -> str:
+    """A metric's value in a table of the terminal: four significant digits, NaN as a dash."""
     return "—" if value is None or math.isnan(value) else f"{value:.4g}"

@@ -10,8 +10,8 @@ from typing import Annotated
 
 import typer
 
-from nlcx import rundir
-from nlcx.cli._app import ConfigArg, OverridesArg, PluginsOpt, _imported, app, load_plugins, one_line_errors
+from nlcx import rundir, runtime
+from nlcx.cli._app import ConfigArg, OverridesArg, PluginsOpt, app, load_plugins, one_line_errors
 from nlcx.errors import ConfigError
 from nlcx.terminal import echo
 
@@ -60,7 +60,7 @@ def linearize(
     from nlcx.analysis.linearization import analyse
     from nlcx.analysis.output import save_analysis, summary
 
-    _imported()
+    runtime.imports_done()
     load_plugins(plugins)
     start = time.perf_counter()
     if out is not None:

@@ -9,16 +9,16 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from nlcx import runtime
 from nlcx.cli._app import (
     AllowEnv,
     ConfigArg,
     NoReport,
     OverridesArg,
     PluginsOpt,
-    _fmt,
-    _imported,
     app,
     checked_jobs,
+    fmt,
     load_plugins,
     one_line_errors,
 )
@@ -61,11 +61,10 @@ def _summary(result: Any) -> str:
         for signal, sub in by_signal.items():
             if "overshoot" in sub:
                 parts.append(
-                    f"{signal}: Mp {_fmt(sub['overshoot'])}% tr {_fmt(sub['rise_time'])}s "
-                    f"ts {_fmt(sub['settling_time'])}s"
+                    f"{signal}: Mp {fmt(sub['overshoot'])}% tr {fmt(sub['rise_time'])}s ts {fmt(sub['settling_time'])}s"
                 )
             elif "peak_deviation" in sub:
-                parts.append(f"{signal}: peak {_fmt(sub['peak_deviation'])} ts {_fmt(sub['settling_time'])}s")
+                parts.append(f"{signal}: peak {fmt(sub['peak_deviation'])} ts {fmt(sub['settling_time'])}s")
         lines.append(f"  {run.label:<14} ok    " + " | ".join(parts))
     return "\n".join(lines)
 
@@ -78,7 +77,7 @@ DeviceOpt = Annotated[
 ]
 
 
-def _checked_device(device: str | None) -> str | None:
+def checked_device(device: str | None) -> str | None:
     """``--device`` checked (for cuda: a GPU found) before any work; None without it."""
     from nlcx.kernel.device import DEVICES, cuda
 
@@ -91,7 +90,7 @@ def _checked_device(device: str | None) -> str | None:
 
 def _on_device(device: str | None, overrides: list[str] | None) -> list[str]:
     """The overrides with ``simulation.device`` set to ``--device`` (checked), or unchanged without it."""
-    if _checked_device(device) is None:
+    if checked_device(device) is None:
         return list(overrides or [])
     return [*(overrides or []), f"++simulation.device={device}"]
 
@@ -125,7 +124,7 @@ def run(
     try:
         from nlcx import engine, rundir
 
-        _imported()
+        runtime.imports_done()
         with helper.watching():  # a slow load means an empty numba cache: `nlcx prewarm` compiles alongside
             engine.load_kernel()
         start = time.perf_counter()
@@ -198,7 +197,7 @@ def _sweep(
     from nlcx import sweeps as sweep
     from nlcx.sweeps import cluster as clusters
 
-    _imported()
+    runtime.imports_done()
     cluster = clusters.load(cluster_file) if cluster_file is not None else None
     if cluster is not None:  # the cluster's workers; the memory check counts one node's
         executor, jobs = "dask", cluster.workers if cluster.kind == "local" else cluster.cores

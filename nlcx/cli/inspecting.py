@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from nlcx import registry
-from nlcx.cli._app import PluginsOpt, _fmt, app, load_plugins, one_line_errors
+from nlcx.cli._app import PluginsOpt, app, fmt, load_plugins, one_line_errors
 from nlcx.cli.metric_files import (
     CONTROLLER,
     Measured,
@@ -106,7 +106,7 @@ def _table_lines(measured: Measured) -> list[str]:
     for key in _metric_order():
         if not any(key in values for values in measured.values.values()):
             continue
-        cells = "".join(f"{_fmt(measured.values[n].get(key, math.nan)):>{width + 2}}" for n in names)
+        cells = "".join(f"{fmt(measured.values[n].get(key, math.nan)):>{width + 2}}" for n in names)
         lines.append(f"  {key:<20}{_unit(key):<8}{cells}")
     return lines
 

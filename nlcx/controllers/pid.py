@@ -164,10 +164,8 @@ class MultiLoopPID(ControllerModel):
         limits = sat.limits if sat else {}
         for name, value in limits.items():
             where = join(path, "saturation", "limits", name)
-            if name not in inputs:
+            if name not in inputs:  # the limit itself is > 0 by its model (pid_config.SaturationConfig)
                 raise ConfigError(where, value, f"unknown input; allowed: {', '.join(inputs)}")
-            if not value > 0:
-                raise ConfigError(where, value, "must be a limit > 0")
         return np.concatenate([
             HEAD.pack(
                 n_loops=len(cfg.loops), n_inputs=len(inputs),

@@ -8,7 +8,7 @@ model and packs the validated section into the parameter row its compiled step r
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, SerializeAsAny
 
@@ -90,7 +90,7 @@ class SaturationConfig(BaseModel):
     every loop on that input (Astrom & Hagglund's tracking anti-windup, K_b = 1 / T_t)."""
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-    limits: dict[str, float] = Field(
+    limits: dict[str, Annotated[float, Field(gt=0)]] = Field(
         min_length=1,
         description=(
             "limit of each saturated input, |u| <= limit, by input name (> 0; inputs not named are unlimited), in the "

@@ -16,7 +16,6 @@ The package by job; this module names what the rest of nlcx uses:
 - :mod:`nlcx.engine.batching`: which loops share a kernel call;
 - :mod:`nlcx.engine.simulate`: the kernel's arguments, its calls, their runs;
 - :mod:`nlcx.engine.measure`: the metric rows of the runs;
-- :mod:`nlcx.engine.memory`: freed blocks kept by the C allocator for reuse;
 - :mod:`nlcx.engine.prewarm`: the kernel loaded on demand, the rest compiled ahead;
 - :mod:`nlcx.engine.results`: :class:`Run`, :class:`Result` and the metric tables.
 """
@@ -24,7 +23,6 @@ The package by job; this module names what the rest of nlcx uses:
 from __future__ import annotations
 
 from nlcx.engine.measure import measure_runs
-from nlcx.engine.memory import reuse_freed_memory
 from nlcx.engine.pipeline import LoopSimulator, evaluate, prepare, remeasure, run_experiment
 from nlcx.engine.prepared import (
     TABLEAUS,
@@ -66,7 +64,6 @@ __all__ = [
     "prewarm",
     "reference_array",
     "remeasure",
-    "reuse_freed_memory",
     "run_experiment",
     "shared_metrics",
     "simulate_items",

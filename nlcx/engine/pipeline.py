@@ -20,7 +20,6 @@ import numpy as np
 from nlcx import preflight
 from nlcx.config import Experiment, MetricsSection, build, controller_section
 from nlcx.engine.measure import controller_records, measure_experiments
-from nlcx.engine.memory import reuse_freed_memory
 from nlcx.engine.prepared import Prepared, check_memory, perturbations, reference_models, time_grid
 from nlcx.engine.results import MetricBlock, Result, Run
 from nlcx.engine.simulate import simulate_experiments
@@ -44,7 +43,6 @@ def evaluate(
     Timings are per experiment; a shared kernel call, and the measuring, are split evenly
     between their experiments.
     """
-    reuse_freed_memory()
     prepared, timings = [], []
     for exp in experiments:
         start = time.perf_counter()

@@ -54,12 +54,7 @@ from typing import Any
 from numba import cfunc, njit, types
 
 from nlcx._numba_compat import register_typeof
-from nlcx.compiled_cache import serialize_cache_access
 from nlcx.layout import Layout
-
-# every compiled function of nlcx and its plugins is declared against this module, so its
-# processes read and write numba's cache one function's files at a time from here on
-serialize_cache_access()
 
 F64 = types.float64
 VEC = types.float64[::1]

@@ -32,7 +32,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from nlcx._numba_compat import is_numba_function
+from nlcx._numba_compat import is_numba_function, load_nvvm
 from nlcx.errors import ConfigError
 
 #: The devices a closed loop runs on (``simulation.device``, ``--device``).
@@ -56,10 +56,9 @@ def simulator_enabled() -> bool:
 @functools.cache
 def cuda() -> Any:
     """numba's CUDA module, once a GPU (or the simulator) is there; a one-line ConfigError otherwise."""
-    import numpy as np
+    from nlcx import runtime
 
-    if not hasattr(np, "row_stack"):  # numba-cuda before 0.31 calls what numpy 2.5 removed
-        np.row_stack = np.vstack
+    runtime.gpu_shims()
     try:
         from numba import cuda as numba_cuda
     except ImportError as exc:  # pragma: no cover - numba without its CUDA module
@@ -76,18 +75,14 @@ def cuda() -> Any:
         if not available:
             raise refused("no CUDA GPU is available here; allowed here: cpu")
         _check_nvvm()
-        from nlcx._numba_compat import cuda_without_fma
-
-        cuda_without_fma()
+        runtime.gpu_compiler()
     return numba_cuda
 
 
 def _check_nvvm() -> None:
     """NVVM, CUDA's compiler of the kernels, loads; a one-line ConfigError otherwise."""
     try:
-        from numba.cuda.cudadrv.nvvm import NVVM
-
-        NVVM()
+        load_nvvm()
     except Exception as exc:  # numba-cuda's own words make the line
         why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise refused(

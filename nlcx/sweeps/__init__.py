@@ -37,7 +37,7 @@ variants and their hashes), the batches a worker runs (:mod:`nlcx.sweeps.batches
 from __future__ import annotations
 
 from nlcx.sweeps.assembly import assemble
-from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, run_batch
+from nlcx.sweeps.batches import Batch, BatchResult, run_batch
 from nlcx.sweeps.planning import (
     Distribution,
     RandomSpec,
@@ -53,7 +53,6 @@ from nlcx.sweeps.resuming import completed
 from nlcx.sweeps.runner import SweepOutcome, make_executor, run
 
 __all__ = [
-    "THREAD_VARIABLES",
     "Batch",
     "BatchResult",
     "Distribution",

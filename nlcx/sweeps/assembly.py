@@ -200,12 +200,12 @@ def arrow_table(frame: pd.DataFrame) -> Any:
     missing or empty text null), numbers as they are (a NaN null), as the CSV form reads back."""
     import pyarrow as pa
 
-    from nlcx.report import _empty_text_as_null
+    from nlcx.report import empty_text_as_null
 
     table = pa.Table.from_pandas(_missing_as_null(frame), preserve_index=False)
     columns = [c.cast(pa.string()) if pa.types.is_null(c.type) or pa.types.is_large_string(c.type) else c
                for c in table.columns]  # fmt: skip
-    return _empty_text_as_null(pa.table(columns, names=table.column_names))
+    return empty_text_as_null(pa.table(columns, names=table.column_names))
 
 
 def write_dataset(directory: Path, tables: Sequence[tuple[int, Any]]) -> None:

@@ -8,10 +8,8 @@ batch complete.
 
 from __future__ import annotations
 
-import gc
 import hashlib
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -20,15 +18,12 @@ import numpy as np
 import pandas as pd
 
 from nlcx import config as cfg
-from nlcx import plugins
+from nlcx import plugins, runtime
 from nlcx.sweeps import seals
 from nlcx.sweeps.planning import Variant
 
 if TYPE_CHECKING:
     pass
-
-#: The thread-count variables of BLAS, OpenMP and numba: one thread per worker.
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 
 
 @dataclass
@@ -56,21 +51,6 @@ class BatchResult:
     statuses: dict[str, int] = field(default_factory=dict)
 
 
-def set_threads() -> None:
-    """One BLAS, OpenMP and numba thread in this process (a worker's, one of many)."""
-    for name in THREAD_VARIABLES:
-        os.environ[name] = "1"
-
-
-def settle_heap() -> None:
-    """Collect, then freeze what survives (imported modules, loaded kernels, caches).
-
-    A worker's later collections then scan only the objects of the batch in hand instead of
-    numba's and pandas' object graphs again and again (about 15 % of a batch's time)."""
-    gc.collect()
-    gc.freeze()
-
-
 def _cell(value: Any) -> Any:
     """A varied value as a sweep.csv cell: a mapping or list (e.g. a whole section) as JSON."""
     return json.dumps(value, sort_keys=True) if isinstance(value, dict | list) else value
@@ -81,12 +61,11 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
 
     ``return_metrics=False`` leaves the metrics out of the result (a pool worker's result
     travels back pickled; the sweep reads the metrics from the part files). After the batch
-    the heap is settled (:func:`settle_heap`)."""
-    set_threads()
+    a command's or a worker's heap is settled (:func:`nlcx.runtime.settle_heap`)."""
     try:
         return _run_batch(batch, return_metrics)
     finally:
-        settle_heap()
+        runtime.settle_heap()
 
 
 def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:

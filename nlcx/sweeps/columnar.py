@@ -298,10 +298,10 @@ def run_column_batch(batch: ColumnBatch) -> Any:
     """Simulate and measure a columnar batch; write its part files (the metrics, the index, then
     their seal, which marks the batch complete). Returns the batch's
     :class:`~nlcx.sweeps.batches.BatchResult`."""
+    from nlcx import runtime
     from nlcx.engine.gpu import ensemble_metrics
-    from nlcx.sweeps.batches import BatchResult, set_threads, settle_heap
+    from nlcx.sweeps.batches import BatchResult
 
-    set_threads()
     try:
         template = _template(batch)
         rows, measured = ensemble_metrics(template, batch.packing.slots, batch.columns, batch.n)
@@ -315,4 +315,4 @@ def run_column_batch(batch: ColumnBatch) -> Any:
         counts = dict(zip(*np.unique(status, return_counts=True), strict=True))
         return BatchResult(part=batch.part, variants=batch.n, statuses={str(k): int(v) for k, v in counts.items()})
     finally:
-        settle_heap()
+        runtime.settle_heap()

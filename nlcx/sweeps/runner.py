@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import functools
-import gc
-import os
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
@@ -15,10 +13,11 @@ from typing import Any
 import pandas as pd
 
 import nlcx.sweeps.columnar as columnar
+from nlcx import runtime
 from nlcx.errors import NlcxError
 from nlcx.sweeps import seals
 from nlcx.sweeps.assembly import assemble, assemble_columns, write_manifest
-from nlcx.sweeps.batches import THREAD_VARIABLES, Batch, BatchResult, run_batch, set_threads
+from nlcx.sweeps.batches import Batch, BatchResult, run_batch
 from nlcx.sweeps.cluster import ClusterSpec
 from nlcx.sweeps.cluster import make as make_cluster
 from nlcx.sweeps.planning import (
@@ -41,16 +40,17 @@ def make_executor(
     """(executor, close) for "serial", "process" or "dask" (on ``scheduler``'s cluster, on
     the cluster a cluster file describes (:mod:`nlcx.sweeps.cluster`), or on a local one); and
     for "gpu", two threads of this process: one batch runs on the GPU while the one before it is
-    laid out and written (:func:`nlcx.engine.gpu.simulate_measure` lets one call at a time on the GPU)."""
-    for name in THREAD_VARIABLES:  # one BLAS/OpenMP thread per worker
-        os.environ.setdefault(name, "1")
+    laid out and written (:func:`nlcx.engine.gpu.simulate_measure` lets one call at a time on the GPU).
+
+    Every worker process enters :func:`nlcx.runtime.worker` (one BLAS, OpenMP and numba thread,
+    among others); this process's environment is left as it is."""
     if kind == "serial":
         return None, lambda: None
     if kind == "gpu":
         threads = ThreadPoolExecutor(max_workers=2)
         return threads, lambda: threads.shutdown(wait=True, cancel_futures=True)
     if kind == "process":
-        pool = ProcessPoolExecutor(max_workers=jobs, initializer=set_threads)
+        pool = ProcessPoolExecutor(max_workers=jobs, initializer=runtime.worker)
         return pool, lambda: pool.shutdown(wait=True, cancel_futures=True)
     try:
         from distributed import Client, LocalCluster
@@ -58,20 +58,41 @@ def make_executor(
         raise NlcxError("--executor dask needs the optional extra: pip install 'nlcx[dask]'") from None
     if scheduler:
         client = Client(scheduler)
+        _enter_workers(client)
         return client.get_executor(), client.close
     if cluster is not None:
         workers = make_cluster(cluster)
     else:
         workers = LocalCluster(
-            n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+            n_workers=jobs,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            host="127.0.0.1",
+            env=runtime.thread_variables(),
         )
     client = Client(workers)
+    _enter_workers(client)
 
     def close() -> None:
         client.close()
         workers.close()
 
     return client.get_executor(), close
+
+
+def _enter_workers(client: Any) -> None:
+    """Have every worker of ``client``'s cluster, present and to come, enter
+    :func:`nlcx.runtime.worker` (a Dask worker plugin)."""
+    from distributed import WorkerPlugin
+
+    class EnterRuntime(WorkerPlugin):
+        name = "nlcx-runtime"
+
+        def setup(self, worker: Any) -> None:
+            runtime.worker()
+
+    client.register_plugin(EnterRuntime())
 
 
 @dataclass
@@ -116,29 +137,21 @@ def _run_batches(
     result to ``on_batch`` as it completes (``task``: :func:`~nlcx.sweeps.batches.run_batch`,
     or :func:`~nlcx.sweeps.columnar.run_column_batch`). The kernel must be loaded already
     (:func:`nlcx.engine.load_kernel`): the process pool's workers fork from this process and
-    inherit it."""
-    # nothing of the caller's is frozen: whatever this sweep freezes is thawed at its end, so the
-    # caller's collector is as it was (serial batches settle their heap here, too)
-    thawed = gc.get_freeze_count() == 0
-    if thawed and batches and executor == "process":
-        # the workers fork with this heap frozen: their first collection (_settle_heap) then
-        # skips what they inherit (imports, the kernel) in each worker's first batch;
-        # a list splice, nothing collected, free here (docs/performance.md)
-        gc.freeze()
-    pool, close = make_executor(executor, jobs, scheduler, cluster) if batches else (None, lambda: None)
-    try:
-        results: Iterable[BatchResult]
-        if pool is None:
-            results = (task(b) for b in batches)
-        else:
-            futures: list[Future[BatchResult]] = [pool.submit(task, b) for b in batches]
-            results = (f.result() for f in as_completed(futures))
-        for result in results:
-            on_batch(result)
-    finally:
-        close()
-        if thawed:
-            gc.unfreeze()
+    inherit it. A command's workers fork with its heap frozen (:func:`nlcx.runtime.frozen_for_fork`):
+    their first collection then skips what they inherit (imports, the kernel)."""
+    with runtime.frozen_for_fork(bool(batches) and executor == "process"):
+        pool, close = make_executor(executor, jobs, scheduler, cluster) if batches else (None, lambda: None)
+        try:
+            results: Iterable[BatchResult]
+            if pool is None:
+                results = (task(b) for b in batches)
+            else:
+                futures: list[Future[BatchResult]] = [pool.submit(task, b) for b in batches]
+                results = (f.result() for f in as_completed(futures))
+            for result in results:
+                on_batch(result)
+        finally:
+            close()
 
 
 def _batches(

@@ -32,7 +32,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nlcx import config as cfg
-from nlcx import engine, manifest, safe_yaml
+from nlcx import engine, manifest, runtime, safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.thesis import catalog
 from nlcx.thesis.tables import lookup_value, metric_lookup
@@ -151,7 +151,7 @@ def calibrate(
     lower = np.array([b[0] for b in spec.parameters.values()])
     upper = np.array([b[1] for b in spec.parameters.values()])
     if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
+        with ProcessPoolExecutor(max_workers=jobs, initializer=runtime.worker) as pool:
             result = evolve(objective, lower, upper, spec.optimiser, pool, jobs, progress)
     else:
         result = evolve(objective, lower, upper, spec.optimiser, callback=progress)

@@ -15,9 +15,9 @@ from typing import Annotated, Any
 
 import typer
 
-from nlcx import safe_yaml
-from nlcx.cli._app import NoReport, OverridesArg, _imported, checked_jobs, one_line_errors
-from nlcx.cli.experiments import DeviceOpt, _checked_device
+from nlcx import runtime, safe_yaml
+from nlcx.cli._app import NoReport, OverridesArg, checked_jobs, one_line_errors
+from nlcx.cli.experiments import DeviceOpt, checked_device
 from nlcx.errors import ConfigError, NlcxError
 from nlcx.terminal import echo
 
@@ -51,7 +51,7 @@ def reproduce(
     from nlcx.thesis.reproduce import reproduce as run_reproduce
 
     checked_jobs(jobs)
-    _imported()
+    runtime.imports_done()
     chosen = profiles.load(profile or profiles.default_name(configs), configs)
 
     start = time.perf_counter()
@@ -110,7 +110,7 @@ def baselines(
     pendulums = [p.strip() for p in (only or ",".join(study.PENDULUMS)).split(",") if p.strip()]
     study.check_pendulums(pendulums)
     study.configs_of(configs, pendulums)  # every config there, before any work
-    _imported()
+    runtime.imports_done()
     start = time.perf_counter()
 
     def progress(what: str, seconds: float) -> None:
@@ -179,7 +179,7 @@ def calibrate(
     from nlcx.thesis.calibrate import load_spec, write_back
 
     checked_jobs(jobs)
-    _imported()
+    runtime.imports_done()
 
     name = load_spec(spec, overrides or []).name
     out_dir = out or Path("results/calibration") / name
@@ -215,7 +215,7 @@ def identify(
     from nlcx.thesis.identify_cstr import identify_cstr
 
     checked_jobs(jobs)
-    _imported()
+    runtime.imports_done()
     raw = safe_yaml.load_file(spec)
     if not isinstance(raw, dict) or not isinstance(raw.get("name"), str):
         raise ConfigError("spec", str(spec), "an identification spec: a YAML mapping with a name")
@@ -233,7 +233,7 @@ def identify(
         elif raw.get("chapter") == 5:
             table = identify_cstr(spec, out_dir, jobs=jobs, progress=progress)
         else:
-            table = run_identify(spec, out_dir, jobs=jobs, progress=progress, device=_checked_device(device))
+            table = run_identify(spec, out_dir, jobs=jobs, progress=progress, device=checked_device(device))
         manifest.update(out_dir, manifest.load(out_dir).get("checksums", {}))  # every file's checksum, anew
     if raw.get("kind") == "consistency":
         shown = table[["table", "definition", "loops", "most_cells_hit", "cells", "reproduced"]]

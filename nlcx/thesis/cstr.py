@@ -32,7 +32,7 @@ CSTR_METRICS = {
 MethodValues = dict[str, dict[str, float]]
 
 
-def _value(metrics: pd.DataFrame, controller: str, metric: str, signal: str = "C_B") -> float:
+def cstr_value(metrics: pd.DataFrame, controller: str, metric: str, signal: str = "C_B") -> float:
     """One metric of one controller's run on one signal (default the output C_B); NaN if absent."""
     rows = metrics[(metrics.controller == controller) & (metrics.metric == metric) & (metrics.signal == signal)]
     return float(rows.value.iloc[0]) if not rows.empty else math.nan
@@ -43,7 +43,7 @@ def method_values(records: Mapping[Path, Any], root: Path) -> MethodValues:
     out = {}
     for method, (file, label) in catalog.CSTR_METHODS.items():
         record = records[root / "ch5" / file]
-        out[method] = {col: _value(record.metrics, label, metric) for col, (metric, _) in CSTR_METRICS.items()}
+        out[method] = {col: cstr_value(record.metrics, label, metric) for col, (metric, _) in CSTR_METRICS.items()}
     return out
 
 
@@ -161,7 +161,7 @@ def zn_variants(root: Path, out_dir: Path) -> pd.DataFrame:
         )
         result = engine.run_experiment(exp)
         label = exp.controllers[0].label
-        values = {col: _value(result.metrics, label, metric) for col, (metric, _) in CSTR_METRICS.items()}
+        values = {col: cstr_value(result.metrics, label, metric) for col, (metric, _) in CSTR_METRICS.items()}
         distance = math.sqrt(sum(
             ((values[c] - float(printed[c])) / max(abs(float(printed[c])), 1.0)) ** 2
             for c in ("tr_s", "ts_s", "Mp_percent", "inverse_response_percent")

@@ -53,7 +53,7 @@ import pandas as pd
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from nlcx import report, safe_yaml
+from nlcx import report, runtime, safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.thesis import hypotheses, lockstep, profiles, split
 from nlcx.thesis.fitting import (
@@ -150,7 +150,9 @@ def fit_hypothesis(
     objective, lower, upper, seed = search(root, hyp, spec.free, cells, spec.device, start)
     t0 = time.perf_counter()
     if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=_context(spec.device)) as pool:
+        with ProcessPoolExecutor(
+            max_workers=jobs, mp_context=_context(spec.device), initializer=runtime.worker
+        ) as pool:
             result = evolve(objective, lower, upper, spec.optimiser, pool, jobs, start=seed)
     else:
         result = evolve(objective, lower, upper, spec.optimiser, start=seed)
@@ -340,7 +342,7 @@ def _fits(
         for hyp in todo:
             yield fit_hypothesis(spec, root, hyp, cells, jobs, start)
         return
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=_context(spec.device)) as pool:
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=_context(spec.device), initializer=runtime.worker) as pool:
         futures = [pool.submit(fit_hypothesis, spec, root, hyp, cells, 1, start) for hyp in todo]
         for future in as_completed(futures):
             yield future.result()

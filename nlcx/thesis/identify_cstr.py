@@ -25,10 +25,10 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nlcx import config as cfg
-from nlcx import engine, report, safe_yaml
+from nlcx import engine, report, runtime, safe_yaml
 from nlcx.errors import NlcxError
 from nlcx.thesis import catalog, hypotheses, profiles, split
-from nlcx.thesis.cstr import CSTR_METRICS, _value
+from nlcx.thesis.cstr import CSTR_METRICS, cstr_value
 from nlcx.thesis.fitting import fit_table, relative_errors, train_loss, write_study
 from nlcx.thesis.identify import finished, save_fit, spec_digest
 from nlcx.tuning.optimise import GASettings, evolve
@@ -92,7 +92,7 @@ def measure(runs: MethodRuns, hyp: hypotheses.Hypothesis, candidates: list[dict[
             cell: Any  # a row of ``cells``: its method, metric and printed value
             for i, cell in enumerate(cells.itertuples(index=False)):
                 if cell.method == method:
-                    out[i, k] = _value(result.metrics, label, METRIC[cell.metric])
+                    out[i, k] = cstr_value(result.metrics, label, METRIC[cell.metric])
     return out
 
 
@@ -159,7 +159,7 @@ def identify_cstr(
     fits = out_dir / "fits"
     todo = [h for h in family if not finished(fits / f"{h.name}.json", digest)]
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=max(jobs, 1)) as pool:
+    with ProcessPoolExecutor(max_workers=max(jobs, 1), initializer=runtime.worker) as pool:
         futures = [pool.submit(fit_hypothesis, spec, root, hyp, cells) for hyp in todo]
         for k, future in enumerate(as_completed(futures)):
             summary, fit = future.result()

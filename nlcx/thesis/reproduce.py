@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from nlcx import runtime
 from nlcx.errors import ConfigError, NlcxError
 from nlcx.thesis import catalog, cstr, profiles, tables
 from nlcx.thesis.catalog import FigureSpec, TableSpec
@@ -165,7 +166,7 @@ def _run_all(
 ) -> dict[Path, Record]:
     """Run every config in a process pool, in order, drawing the response figures named in ``titles``."""
     records: dict[Path, Record] = {}
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    with ProcessPoolExecutor(max_workers=jobs, initializer=runtime.worker) as pool:
         futures = {c: pool.submit(run_config, c, out_dir, titles.get(c), overrides, profile) for c in configs}
         for config, future in futures.items():
             records[config] = future.result()

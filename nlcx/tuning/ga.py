@@ -14,6 +14,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, field_validator
 
+from nlcx import runtime
 from nlcx.tuning.base import Simulate, TuneContext, TunerConfig, TunerModel, single_loop
 from nlcx.tuning.optimise import GASettings, evolve
 
@@ -94,7 +95,7 @@ class GATuner(TunerModel):
         lower = np.array([cfg.bounds[g][0] for g in ("kp", "ki", "kd")])
         upper = np.array([cfg.bounds[g][1] for g in ("kp", "ki", "kd")])
         if cfg.jobs > 1:
-            with ProcessPoolExecutor(max_workers=cfg.jobs) as pool:
+            with ProcessPoolExecutor(max_workers=cfg.jobs, initializer=runtime.worker) as pool:
                 result = evolve(objective, lower, upper, cfg.optimiser, pool, cfg.jobs)
         else:
             result = evolve(objective, lower, upper, cfg.optimiser)

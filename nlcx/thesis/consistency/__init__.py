@@ -37,6 +37,7 @@ from typing import Any
 
 import pandas as pd
 
+from nlcx import runtime
 from nlcx.thesis import hypotheses
 from nlcx.thesis.consistency.analysis import analyse
 from nlcx.thesis.consistency.loops import ColumnRuns, Store, fit_column, random_loops
@@ -101,7 +102,7 @@ def _run(
         for task in tasks:
             yield task, _task(spec, root, task, start(task), families[task[1:3]])
         return
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    with ProcessPoolExecutor(max_workers=jobs, initializer=runtime.worker) as pool:
         futures = {pool.submit(_task, spec, root, t, start(t), families[t[1:3]]): t for t in tasks}
         for future in as_completed(futures):
             yield futures[future], future.result()
