@@ -15,9 +15,10 @@ What each sets, and why (docs/performance.md measures each mechanism that is the
 ========================= ============================ ==========================================
 effect                    who                          what for
 ========================= ============================ ==========================================
-numba's cache access      command, worker; a library   a function's cache files read and written
-serialised                call for its own duration    one process at a time (correctness:
-                          (:func:`cache_access`)       :func:`nlcx._numba_compat.serialize_cache_access`)
+numba's cache access      a command that loads         a function's cache files read and written
+serialised                compiled code, a worker, a   one process at a time (correctness:
+(:func:`cache_access`)    library call: each for its   :func:`nlcx._numba_compat.serialize_cache_access`)
+                          own duration
 one BLAS/OpenMP/numba     worker                       the workers share the cores, not each
 thread                                                 worker a pool of threads
 freed blocks kept         command, worker              glibc keeps blocks up to 32 MB for reuse
@@ -91,22 +92,23 @@ def reuse_freed_memory() -> bool:
 def cache_access() -> Iterator[None]:
     """Within the block, this process reads and writes numba's cache files one function at a
     time with every other nlcx process (:func:`nlcx._numba_compat.serialize_cache_access`);
-    afterwards numba's cache classes are as they were (a command's or a worker's stay serialised)."""
+    afterwards numba's cache classes are as they were. A command enters it before it loads
+    compiled code (a command that loads none, such as ``nlcx diff``, never imports numba); a
+    library call for its own duration."""
     from nlcx import _numba_compat
 
     done = _numba_compat.serialize_cache_access()
     try:
         yield
     finally:
-        if _role == "library":
-            _numba_compat.restore_cache_access(done)
+        _numba_compat.restore_cache_access(done)
 
 
 @contextlib.contextmanager
 def command() -> Iterator[None]:
     """What a command sets for its process, each restored (where it can be) when it ends: numba's
-    cache access serialised; numba's note that first-class function types are experimental (the
-    kernel's function tables) not shown, nlcx's own warnings (an untested numba) as one line;
+    note that first-class function types are experimental (the kernel's function tables) not
+    shown, nlcx's own warnings (an untested numba) as one line;
     matplotlib's backend Agg (``MPLBACKEND``, inherited by the processes the command starts);
     freed memory kept (:func:`reuse_freed_memory`, for the process's lifetime); and whatever the
     command froze for the collector (:func:`imports_done`) unfrozen at its end (unless something
@@ -115,7 +117,6 @@ def command() -> Iterator[None]:
     from nlcx import _numba_compat
 
     before, frozen, backend = _role, gc.get_freeze_count(), os.environ.get("MPLBACKEND")
-    done = _numba_compat.serialize_cache_access()
     _role = "command"
     try:
         with warnings.catch_warnings():
@@ -127,8 +128,6 @@ def command() -> Iterator[None]:
     finally:
         _role = before
         _restore_variable("MPLBACKEND", backend)
-        if before == "library":
-            _numba_compat.restore_cache_access(done)
         if not frozen:
             gc.unfreeze()
 

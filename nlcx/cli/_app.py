@@ -52,7 +52,8 @@ def _options(
     """Reproducible experiments on the control of nonlinear systems."""
     ctx.with_resource(runtime.command())  # left when the command ends
     if ctx.invoked_subcommand not in FILE_COMMANDS:
-        compiled_cache.ready()  # before the command imports any compiled function
+        ctx.with_resource(runtime.cache_access())  # before the command loads any compiled function
+        compiled_cache.ready()
 
 
 F = TypeVar("F", bound=Callable[..., Any])
