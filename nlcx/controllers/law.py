@@ -47,6 +47,7 @@ from nlcx import registry
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.controllers.law_shape import LawShape, ParamSpec, shape_of
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import FloatArray
 from nlcx.plants.base import Plant
 
 __all__ = ["LawController", "LawShape", "controller", "law_model", "step_source"]
@@ -94,7 +95,7 @@ def _measure_function() -> Any:
     ``-code - 1`` of y."""
     from numba import njit
 
-    def measure(x, y, b, code):  # pragma: no cover - compiled
+    def measure(x: FloatArray, y: FloatArray, b: int, code: int) -> float:  # pragma: no cover - compiled
         c = int(code)
         return x[b, c] if c >= 0 else y[b, -c - 1]
 

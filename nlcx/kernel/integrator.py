@@ -23,10 +23,13 @@ working slots, signals and stage columns of a call are :mod:`nlcx.kernel.working
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
 from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, shared_row
+from nlcx.kernel.signatures import BoolArray, ElementFunctions, FloatArray, IntArray
 from nlcx.kernel.stepping import (
     SEQUENTIAL,
     add_disturbances,
@@ -51,11 +54,38 @@ from nlcx.kernel.working_storage import (
     working_slots,
 )
 
+if TYPE_CHECKING:
+    from nlcx.kernel.structures import (
+        ControllerCall,
+        FrictionPath,
+        FrictionWork,
+        Integration,
+        LoopElements,
+        Outcome,
+        PlantCall,
+        PlantForces,
+        Records,
+        Slots,
+    )
+    from nlcx.kernel.working_storage import Signals, StageColumns
+
 EE = ELEMENT_ENTRY.at
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _apply_elements(hook, t, dt, k, signal, vid, fns, table, ep, es, data):  # pragma: no cover - compiled
+def _apply_elements(
+    hook: int,
+    t: float,
+    dt: float,
+    k: int,
+    signal: FloatArray,
+    vid: IntArray,
+    fns: ElementFunctions,
+    table: FloatArray,
+    ep: FloatArray,
+    es: FloatArray,
+    data: FloatArray,
+) -> None:  # pragma: no cover - compiled
     """Every loop element at ``hook`` acts on ``signal`` (the active rows), in table order
     (:class:`~nlcx.kernel.structures.LoopElements`; ``es``: the elements' state)."""
     for e in range(table.shape[0]):
@@ -68,7 +98,7 @@ def _apply_elements(hook, t, dt, k, signal, vid, fns, table, ep, es, data):  # p
 
 
 @njit(cache=True, error_model="numpy")
-def _hook_counts(table):  # pragma: no cover - compiled
+def _hook_counts(table: FloatArray) -> tuple[int, int]:  # pragma: no cover - compiled
     """(number of sensor elements, number of actuator elements) in the element table."""
     n_sensor = 0
     n_actuator = 0
@@ -81,7 +111,7 @@ def _hook_counts(table):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _record_states(k, nb, vid, x, X):  # pragma: no cover - compiled
+def _record_states(k: int, nb: int, vid: IntArray, x: FloatArray, X: FloatArray) -> None:  # pragma: no cover - compiled
     """Record x_k of every active variant."""
     for b in range(nb):
         v = vid[b]
@@ -90,7 +120,21 @@ def _record_states(k, nb, vid, x, X):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _record_inputs(k, nb, n, vid, u, uc, log, stopped, U, LOG, status, n_valid, fail_index):  # pragma: no cover
+def _record_inputs(
+    k: int,
+    nb: int,
+    n: int,
+    vid: IntArray,
+    u: FloatArray,
+    uc: FloatArray,
+    log: FloatArray,
+    stopped: BoolArray,
+    U: FloatArray,
+    LOG: FloatArray,
+    status: IntArray,
+    n_valid: IntArray,
+    fail_index: IntArray,
+) -> int:  # pragma: no cover
     """Record the logs and the applied input u_k of every active row and hold it by columns
     in uc (the plant's input over the step); a row whose input is not finite stops (its
     outcome: status, failing input). Returns the number of rows stopped."""
@@ -114,7 +158,20 @@ def _record_inputs(k, nb, n, vid, u, uc, log, stopped, U, LOG, status, n_valid, 
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _accept_states(k, nb, vid, x, bw, xf, xnf, bwf, stopped, status, n_valid, fail_index):  # pragma: no cover
+def _accept_states(
+    k: int,
+    nb: int,
+    vid: IntArray,
+    x: FloatArray,
+    bw: FloatArray,
+    xf: FloatArray,
+    xnf: FloatArray,
+    bwf: FloatArray,
+    stopped: BoolArray,
+    status: IntArray,
+    n_valid: IntArray,
+    fail_index: IntArray,
+) -> int:  # pragma: no cover
     """x_{k+1} for every active variant; one whose state is non-finite or past its bound
     stops (its outcome: status and the first failing state). Returns the number of variants
     stopped.
@@ -149,7 +206,9 @@ def _accept_states(k, nb, vid, x, bw, xf, xnf, bwf, stopped, status, n_valid, fa
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _no_friction_recorded(k, nb, vid, stopped, FRICTION):  # pragma: no cover - compiled
+def _no_friction_recorded(
+    k: int, nb: int, vid: IntArray, stopped: BoolArray, FRICTION: FloatArray
+) -> None:  # pragma: no cover - compiled
     """Zero friction force at t_k for every active row of a batch without friction."""
     for b in range(nb):
         if stopped[b]:
@@ -159,10 +218,10 @@ def _no_friction_recorded(k, nb, vid, stopped, FRICTION):  # pragma: no cover - 
 
 
 @njit(cache=True, error_model="numpy")
-def _step_batch(
-    integration, plant, controller, elements, forces, records, outcome, friction_path, slots, n_free, signals, stages,
-    work,
-):  # pragma: no cover - compiled  # fmt: skip
+def _step_batch(integration: Integration, plant: PlantCall, controller: ControllerCall, elements: LoopElements,
+                forces: PlantForces, records: Records, outcome: Outcome, friction_path: FrictionPath, slots: Slots,
+                n_free: int, signals: Signals, stages: StageColumns,
+                work: FrictionWork) -> None:  # pragma: no cover - compiled  # fmt: skip
     """The sampling steps of :func:`simulate` over its working slots, signals, stage columns and
     friction work space, until every variant stopped or reached t_K."""
     rhs, C, ref, step, callbacks = plant.rhs, plant.C, controller.ref, controller.step, controller.callbacks
@@ -232,7 +291,16 @@ def _step_batch(
 
 
 @njit(SIMULATE_SIG, cache=True, error_model="numpy")
-def simulate(integration, plant, controller, elements, forces, records, outcome, friction_path):  # pragma: no cover
+def simulate(
+    integration: Integration,
+    plant: PlantCall,
+    controller: ControllerCall,
+    elements: LoopElements,
+    forces: PlantForces,
+    records: Records,
+    outcome: Outcome,
+    friction_path: FrictionPath,
+) -> None:  # pragma: no cover
     """Integrate a batch of closed loops in lock step (see the module docstring): at t_k = k dt
     y_k = C x_k, SENSOR elements, controller -> u_k, ACTUATOR elements; u_k held while the
     method of ``integration`` integrates to t_{k+1}, disturbances at the stage times, friction

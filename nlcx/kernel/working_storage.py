@@ -9,14 +9,18 @@ active ones.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numba import njit
 
 from nlcx.kernel.abi import MAX_STAGES, STATUS_OK, shared_row
 from nlcx.kernel.friction import FA, has_friction, initial_modes
+from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.kernel.structures import FrictionScratch, FrictionWork, OneColumn, Slots
+
+if TYPE_CHECKING:
+    from nlcx.kernel.structures import ControllerCall, Outcome, PlantCall
 
 
 class WorkingRows(NamedTuple):
@@ -82,7 +86,7 @@ class FlatViews(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy")
-def swap_variants(i, j, slots):  # pragma: no cover - compiled
+def swap_variants(i: int, j: int, slots: Slots) -> None:  # pragma: no cover - compiled
     """Exchange the working slots i and j (two variants' state, parameters and bookkeeping):
     columns of the plant's state, parameters and bounds, rows of the rest."""
     if i == j:
@@ -100,21 +104,21 @@ def swap_variants(i, j, slots):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _swap_rows(a, i, j):  # pragma: no cover - compiled
+def _swap_rows(a: FloatArray, i: int, j: int) -> None:  # pragma: no cover - compiled
     """Exchange rows i and j of a 2-D array."""
     for c in range(a.shape[1]):
         a[i, c], a[j, c] = a[j, c], a[i, c]
 
 
 @njit(cache=True, error_model="numpy")
-def _swap_columns(a, i, j):  # pragma: no cover - compiled
+def _swap_columns(a: FloatArray, i: int, j: int) -> None:  # pragma: no cover - compiled
     """Exchange columns i and j of a 2-D array."""
     for r in range(a.shape[0]):
         a[r, i], a[r, j] = a[r, j], a[r, i]
 
 
 @njit(cache=True, error_model="numpy")
-def _swap_rows3(a, i, j):  # pragma: no cover - compiled
+def _swap_rows3(a: FloatArray, i: int, j: int) -> None:  # pragma: no cover - compiled
     """Exchange rows i and j of a 3-D array."""
     for c in range(a.shape[1]):
         for d in range(a.shape[2]):
@@ -122,7 +126,7 @@ def _swap_rows3(a, i, j):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _row_order(friction, n_batch):  # pragma: no cover - compiled
+def _row_order(friction: FloatArray, n_batch: int) -> tuple[IntArray, int]:  # pragma: no cover - compiled
     """(vid, n_free): the variants without friction first (stepped together), then those with
     friction (stepped one by one); vid maps a working row to its variant."""
     vid = np.empty(n_batch, dtype=np.int64)
@@ -140,7 +144,9 @@ def _row_order(friction, n_batch):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def working_rows(plant, controller, friction, n_u):  # pragma: no cover - compiled
+def working_rows(
+    plant: PlantCall, controller: ControllerCall, friction: FloatArray, n_u: int
+) -> tuple[WorkingRows, int]:  # pragma: no cover - compiled
     """(rows, n_free): the working copies (:class:`WorkingRows`), the variants without friction
     first (the first n_free, stepped together), then those with friction (stepped one by one)."""
     x0, p, bounds, cp, cs0 = plant.x0, plant.p, plant.bounds, controller.cp, controller.cs0
@@ -174,7 +180,7 @@ def working_rows(plant, controller, friction, n_u):  # pragma: no cover - compil
 
 
 @njit(cache=True, error_model="numpy")
-def friction_modes(axes, xrow):  # pragma: no cover - compiled
+def friction_modes(axes: FloatArray, xrow: FloatArray) -> FrictionModes:  # pragma: no cover - compiled
     """The friction modes of every slot's axes at t_0 (Appendix A) from the initial states by
     rows, xrow; no slot stopped (:class:`FrictionModes`)."""
     n_batch, n_u = axes.shape[0], axes.shape[1]
@@ -188,7 +194,7 @@ def friction_modes(axes, xrow):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def working_slots(rows, modes, log):  # pragma: no cover - compiled
+def working_slots(rows: WorkingRows, modes: FrictionModes, log: FloatArray) -> Slots:  # pragma: no cover - compiled
     """The working slots (:class:`~nlcx.kernel.structures.Slots`) of the working rows, the
     friction modes and the controller's log."""
     return Slots(
@@ -198,14 +204,14 @@ def working_slots(rows, modes, log):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _copy_row(src, i, dst, j):  # pragma: no cover - compiled
+def _copy_row(src: FloatArray, i: int, dst: FloatArray, j: int) -> None:  # pragma: no cover - compiled
     """dst[j, :] = src[i, :] element by element (a slice assignment compiles a shape check)."""
     for c in range(src.shape[1]):
         dst[j, c] = src[i, c]
 
 
 @njit(cache=True, error_model="numpy")
-def friction_work(n, n_u, n_p, n_stage, n_d):  # pragma: no cover - compiled
+def friction_work(n: int, n_u: int, n_p: int, n_stage: int, n_d: int) -> FrictionWork:  # pragma: no cover - compiled
     """Work space of the one-variant friction path (:class:`~nlcx.kernel.structures.FrictionWork`),
     allocated once per :func:`~nlcx.kernel.integrator.simulate` call."""
     one = OneColumn(x=np.empty((n, 1)), u=np.empty((n_u, 1)), p=np.empty((n_p, 1)), dx=np.empty((n, 1)))
@@ -219,7 +225,7 @@ def friction_work(n, n_u, n_p, n_stage, n_d):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def clear_columns(start, stop, arrays):  # pragma: no cover - compiled
+def clear_columns(start: int, stop: int, arrays: tuple[FloatArray, ...]) -> None:  # pragma: no cover - compiled
     """Zero columns start..stop-1 (variants that just left the batch) of ``arrays``: the state,
     x_{k+1} and the stage derivatives. The flat loops over every column then keep them zero and
     within bounds, whichever tableau integrates."""
@@ -230,7 +236,7 @@ def clear_columns(start, stop, arrays):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def compact(nb, n_free, slots):  # pragma: no cover - compiled
+def compact(nb: int, n_free: int, slots: Slots) -> tuple[int, int]:  # pragma: no cover - compiled
     """Move the stopped variants behind the active ones, keeping the frictionless slots in
     front: a stopped frictionless slot trades places with the last frictionless one, which
     then trades with the last active one. Returns the new (nb, n_free)."""
@@ -251,7 +257,7 @@ def compact(nb, n_free, slots):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def signal_rows(xrow, n_y, n_r, n_u, n_log):  # pragma: no cover - compiled
+def signal_rows(xrow: FloatArray, n_y: int, n_r: int, n_u: int, n_log: int) -> Signals:  # pragma: no cover - compiled
     """The work arrays of the signals (:class:`Signals`) beside the controller's copy of the
     state, xrow."""
     n_batch = xrow.shape[0]
@@ -262,13 +268,13 @@ def signal_rows(xrow, n_y, n_r, n_u, n_log):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def stage_columns(n_batch, n):  # pragma: no cover - compiled
+def stage_columns(n_batch: int, n: int) -> StageColumns:  # pragma: no cover - compiled
     """The work arrays of a Runge-Kutta step (:class:`StageColumns`)."""
     return StageColumns(x_new=np.empty((n, n_batch)), xs=np.empty((n, n_batch)), k=np.zeros((MAX_STAGES, n, n_batch)))
 
 
 @njit(cache=True, error_model="numpy")
-def flat_views(slots, stages):  # pragma: no cover - compiled
+def flat_views(slots: Slots, stages: StageColumns) -> FlatViews:  # pragma: no cover - compiled
     """Flat views, made once, on the (n, B) arrays of a step: x, a stage's input, x_{k+1}, the
     bounds and the stage derivatives. The RK4 sums and the acceptance of x_{k+1} are one loop
     over every column, the inactive ones included (their values are never read again): a loop
@@ -283,7 +289,7 @@ def flat_views(slots, stages):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def init_outcome(n_steps, outcome):  # pragma: no cover - compiled
+def init_outcome(n_steps: int, outcome: Outcome) -> None:  # pragma: no cover - compiled
     """Every variant ok until it stops."""
     status, n_valid, fail_index = outcome.status, outcome.n_valid, outcome.fail_index
     for v in range(status.shape[0]):
