@@ -35,7 +35,7 @@ import functools
 import math
 import re
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeAlias
 
 import numpy as np
 
@@ -56,6 +56,7 @@ from nlcx.kernel.stepping import (
     stage_nodes,
 )
 from nlcx.kernel.structures import CLASSIC_RK4, Integration
+from nlcx.protocols import CompiledFunction
 
 EE = ELEMENT_ENTRY.at
 #: What a recorded signal is (column 0 of ``recorded``): a state, an output (row of C), an input,
@@ -222,6 +223,11 @@ def _steps() -> tuple[Any, Any, Any, Any]:
     return sample, hold, advance, failing
 
 
+#: The device functions of a closed-loop kernel: (rhs, controller step, sensor chain, actuator
+#: chain, friction path).
+LoopDevices: TypeAlias = tuple[CompiledFunction, CompiledFunction, CompiledFunction, CompiledFunction, FrictionDevices]
+
+
 def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, friction: FrictionDevices) -> Any:
     """The kernel of ``shape``: the thread's closed loop from t_0 to t_K (the module docstring),
     with the plugins' device functions, the friction path and the stage combination of its method.
@@ -232,7 +238,7 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
     return _thread_loop(shape, (rhs, step, sensor, actuator, friction), combination)
 
 
-def _thread_loop(shape: LoopShape, devices: tuple[Any, Any, Any, Any, FrictionDevices], combination: int) -> Any:
+def _thread_loop(shape: LoopShape, devices: LoopDevices, combination: int) -> CompiledFunction:
     """The kernel of :func:`_build`; the thread's own state, signals and rows live in its local memory."""
     from numba import float64, int64
 
