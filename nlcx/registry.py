@@ -393,7 +393,7 @@ def register_builtins() -> None:
     uncertainties.register("friction", "nlcx.uncertainty.friction:Friction")
     uncertainties.register("actuator_lag", "nlcx.uncertainty.actuator_lag:ActuatorLag")
     uncertainties.register("actuator_saturation", "nlcx.uncertainty.actuator_saturation:ActuatorSaturation")
-    references.register("constant", "nlcx.references.basic:Constant")
+    references.register("constant", "nlcx.references.basic:ConstantReference")
     references.register("step", "nlcx.references.basic:Step")
     references.register("filtered_step", "nlcx.references.basic:FilteredStep")
     references.register("sine", "nlcx.references.basic:Sine")

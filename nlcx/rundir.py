@@ -57,7 +57,7 @@ from nlcx.pages.writing import ReportError, write_pages
 
 if TYPE_CHECKING:
     from nlcx.drawing import Painter
-    from nlcx.engine import Result
+    from nlcx.engine.results import ExperimentResult
 
 #: The kinds of output directory nlcx writes whole, as its manifest names them under :data:`MARKER`.
 KINDS = ("run", "sweep", "reproduction", "linearize", "baselines")
@@ -394,7 +394,7 @@ def link_or_copy(source: Path, destination: Path) -> None:
 
 
 def save_run(
-    result: Result,
+    result: ExperimentResult,
     out_dir: Path,
     *,
     with_report: bool = True,

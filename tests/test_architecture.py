@@ -234,6 +234,27 @@ def test_no_module_longer_than_600_lines() -> None:
     assert long == {}
 
 
+def _class_homes(sources: dict[str, str]) -> dict[str, list[str]]:
+    """Each class name defined more than once, with where (``module:line``) it is defined."""
+    homes: dict[str, list[str]] = {}
+    for module, source in sources.items():
+        for node in ast.walk(ast.parse(source)):
+            if isinstance(node, ast.ClassDef):
+                homes.setdefault(node.name, []).append(f"{module}:{node.lineno}")
+    return {name: where for name, where in homes.items() if len(where) > 1}
+
+
+def test_class_name_checker_flags_a_shared_name() -> None:
+    assert _class_homes({"a": "class A: ...", "b": "class B: ..."}) == {}
+    assert _class_homes({"a": "class A: ...", "b": "class A: ..."}) == {"A": ["a:1", "b:1"]}
+
+
+def test_no_two_classes_share_a_name() -> None:
+    """One class per name across nlcx: a name says which class it is wherever it is read."""
+    sources = {name: path.read_text() for name, path in _modules().items()}
+    assert _class_homes(sources) == {}
+
+
 def _in_thesis(module: str) -> bool:
     return module == THESIS or module.startswith(THESIS + ".")
 

@@ -21,7 +21,7 @@ import pytest
 from nlcx import config, registry
 from nlcx.errors import NlcxError
 from nlcx.thesis import catalog, claims
-from nlcx.thesis.claims import KINDS, Check, Run
+from nlcx.thesis.claims import KINDS, Check, ClaimRun
 from nlcx.thesis.cstr import CSTR_METRICS
 from nlcx.thesis.reproduce import Record
 
@@ -109,7 +109,7 @@ def _check(kind: str, **fields: Any) -> Check:
 
 
 def _holds(kind: str, records: list[Any], limits: dict[str, float] | None = None, **fields: Any) -> tuple[bool, str]:
-    runs = [Run(f"Fig. 2.{k}", fields.pop("uncertainty", "none"), r) for k, r in enumerate(records)]
+    runs = [ClaimRun(f"Fig. 2.{k}", fields.pop("uncertainty", "none"), r) for k, r in enumerate(records)]
     return KINDS[kind].evaluate(_check(kind, **fields), runs, limits or {})
 
 
@@ -275,15 +275,18 @@ def test_a_claim_is_yes_when_every_check_holds_partly_when_some_no_when_none(
     prop_overshoot: float, prop_ts_theta: float, prop_ess: float, verdict: str, evidence: str
 ) -> None:
     table = claims.parse(MINI, "mini.yaml")
-    runs = {"Table 2.3": Run("Table 2.3", "none", _mini_record(prop_overshoot, prop_ts_theta, prop_ess))}
+    runs = {"Table 2.3": ClaimRun("Table 2.3", "none", _mini_record(prop_overshoot, prop_ts_theta, prop_ess))}
     assert claims.judge(table.claims[0], runs, table) == (verdict, evidence)
 
 
-def _cstr_runs(ga_rise: float, ga_overshoot: float, hinf_effort: float) -> dict[str, Run]:
+def _cstr_runs(ga_rise: float, ga_overshoot: float, hinf_effort: float) -> dict[str, ClaimRun]:
     """Table 5.8 (t_r of ZN to ANFIS: 1, 1.5, 3, 2.5) and Fig. 5.19 (H2's control effort 30)."""
     values = _table_5_8(tr_s=(1.0, 1.5, 3.0, 2.5, ga_rise), Mp_percent=(20.0, 18.0, 10.0, 1.0, ga_overshoot))
     effort = {("h2", "u", "control_effort"): 30.0, ("hinf", "u", "control_effort"): hinf_effort}
-    return {"Table 5.8": Run("Table 5.8", "none", values), "Fig. 5.19": Run("Fig. 5.19", "", _preview(effort))}
+    return {
+        "Table 5.8": ClaimRun("Table 5.8", "none", values),
+        "Fig. 5.19": ClaimRun("Fig. 5.19", "", _preview(effort)),
+    }
 
 
 @pytest.mark.parametrize(

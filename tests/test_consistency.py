@@ -24,7 +24,7 @@ from nlcx.thesis.consistency.spec import (
     with_intervals,
 )
 from nlcx.thesis.fitting import DEFINITIONS, FLOORS, measure_cells
-from nlcx.thesis.pages.tolerances import Tolerances
+from nlcx.thesis.pages.tolerances import ReproductionTolerances
 
 ROOT = Path(__file__).resolve().parents[1]
 THESIS = ROOT / "configs" / "thesis"
@@ -69,7 +69,7 @@ def test_a_printed_cell_covers_its_rounding_widened_by_its_relative_tolerance() 
 
 
 def test_each_cell_is_widened_by_its_metrics_relative_tolerance() -> None:
-    rules = Tolerances.model_validate({
+    rules = ReproductionTolerances.model_validate({
         "table": {"reproduced": 0.9, "partly": 0.5},
         "cells": {"default": {"rel": 0.5, "abs": 9.0, "reason": "-"},
                   "by_metric": {"Mp": {"rel": 0.1, "abs": 9.0, "reason": "-"}, "tr": {"rel": 0.0, "reason": "-"}}},
@@ -81,7 +81,7 @@ def test_each_cell_is_widened_by_its_metrics_relative_tolerance() -> None:
     }  # fmt: skip
     for cell, (lower, upper) in expected.items():
         assert (cells.lower[cell], cells.upper[cell]) == pytest.approx((lower, upper)), cell
-    declared = with_intervals(column_cells("2.3"), Tolerances.model_validate(yaml.safe_load(
+    declared = with_intervals(column_cells("2.3"), ReproductionTolerances.model_validate(yaml.safe_load(
         (THESIS / "tolerances.yaml").read_text())), None).set_index("cell")  # fmt: skip
     assert declared.upper["x.tr"] == pytest.approx(2.07 + 0.005 + REL["tr"] * 2.07)
 

@@ -223,13 +223,13 @@ def test_every_drifting_cell_is_counted_and_only_the_first_are_held(
     pq.write_table(base, tmp_path / "base.parquet")
     pq.write_table(new, tmp_path / "new.parquet")
     held = []
-    offer = diff_stream._Tally.offer
+    offer = diff_stream._DriftTally.offer
 
-    def watched(self: diff_stream._Tally, found: list[diff_stream._Found]) -> None:
+    def watched(self: diff_stream._DriftTally, found: list[diff_stream._Found]) -> None:
         offer(self, found)
         held.append(len(self.kept))
 
-    monkeypatch.setattr(diff_stream._Tally, "offer", watched)
+    monkeypatch.setattr(diff_stream._DriftTally, "offer", watched)
     report = diff_dirs(tmp_path / "base.parquet", tmp_path / "new.parquet", ZERO)
     (table,) = report.files
     assert (table.cells, table.missing_rows, table.extra_rows, table.status_changes) == (2 * rows, 0, 0, 0)

@@ -436,7 +436,7 @@ def test_a_population_packed_into_prepared_tables_gives_each_candidate_s_own_cel
     train = cells[cells.part == "train"].reset_index(drop=True)
     hyp = next(h for h in hypotheses.family(spec.families, 1) if h.name == name)
     box = {**spec.free, **hyp.free()}
-    objective = fitting.Objective(THESIS, hyp, box, train)
+    objective = fitting.FitObjective(THESIS, hyp, box, train)
     lower, upper = (np.array([b[i] for b in box.values()]) for i in (0, 1))
     X = np.vstack([lower, upper, np.random.default_rng(3).uniform(lower, upper, size=(6, len(box)))])
     packing = objective.packing()

@@ -64,7 +64,7 @@ class Block:
 
 
 @dataclass(frozen=True)
-class Target:
+class SignalTarget:
     """What a signal is measured against, and how.
 
     ``step``: :func:`nlcx.metrics.step_info` from ``t_step`` to ``final`` (None: the signal's
@@ -220,7 +220,7 @@ def source_of(name: str, reference: float | str | None, columns: list[str]) -> f
     return name + REF_SUFFIX if name + REF_SUFFIX in columns else None
 
 
-def _target(t: np.ndarray, y: np.ndarray, r: np.ndarray | None, source: Any, t_step: float | None) -> Target:
+def _target(t: np.ndarray, y: np.ndarray, r: np.ndarray | None, source: Any, t_step: float | None) -> SignalTarget:
     """How a signal with samples ``y`` is measured against ``source`` (a number, None: its last
     sample, or a column whose samples are ``r``); ``t_step``: ``--t-step`` if given.
 
@@ -232,21 +232,21 @@ def _target(t: np.ndarray, y: np.ndarray, r: np.ndarray | None, source: Any, t_s
 
     start = 0.0 if t_step is None else t_step
     if r is None:
-        return Target("step", source, start)
+        return SignalTarget("step", source, start)
     changes = np.flatnonzero(r[1:] != r[:-1])
     final = float(r[-1])
     if changes.size == 0:
         at_start = float(np.interp(start, t, y))
         if final == 0.0 or final == at_start:
             why = "is constant 0" if final == 0.0 else f"is constant {final:g}, the value the signal starts at"
-            return Target("regulated", final, start, source, f"{source} {why}")
-        return Target("step", final, start, source)
+            return SignalTarget("regulated", final, start, source, f"{source} {why}")
+        return SignalTarget("step", final, start, source)
     if changes.size == 1:
-        return Target("step", final, float(t[changes[0] + 1]) if t_step is None else t_step, source)
-    return Target("tracked", None, start, source, f"{source} varies and is not one step")
+        return SignalTarget("step", final, float(t[changes[0] + 1]) if t_step is None else t_step, source)
+    return SignalTarget("tracked", None, start, source, f"{source} varies and is not one step")
 
 
-def _check_t_step(block: Block, file: Path, target: Target) -> None:
+def _check_t_step(block: Block, file: Path, target: SignalTarget) -> None:
     t = block.t
     if not t[0] <= target.t_step <= t[-3]:
         allowed = f"{t[0]:g} <= t_step <= {t[-3]:g} (at least 3 samples from the step on)"
@@ -254,8 +254,8 @@ def _check_t_step(block: Block, file: Path, target: Target) -> None:
         raise metrics_error("--t-step", f"{target.t_step:g}", problem, allowed)
 
 
-def _measure(t: np.ndarray, y: np.ndarray, r: np.ndarray | None, target: Target, s: Settings) -> dict[str, float]:
-    """The metrics of one signal by its target's kind (see :class:`Target`)."""
+def _measure(t: np.ndarray, y: np.ndarray, r: np.ndarray | None, target: SignalTarget, s: Settings) -> dict[str, float]:
+    """The metrics of one signal by its target's kind (see :class:`SignalTarget`)."""
     import numpy as np
 
     from nlcx.metrics import error_integrals, regulation_metrics, step_info
@@ -280,7 +280,7 @@ class Measured:
     """One controller's (or the file's) metrics: per signal, its target and values."""
 
     block: Block
-    targets: dict[str, Target]
+    targets: dict[str, SignalTarget]
     values: dict[str, dict[str, float]]
 
 

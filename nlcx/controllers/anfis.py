@@ -30,6 +30,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from nlcx._numba_compat import hot_njit
 from nlcx.controllers.schedules import GainRange, ScheduleConfig, ScheduleModel
+from nlcx.kernel.signatures import FloatArray
 from nlcx.layout import Layout
 from nlcx.tuning.anfis import CONSEQUENT, MODEL, N_INPUTS, AnfisModel
 
@@ -118,7 +119,7 @@ class ANFISConfig(ScheduleConfig):
 
 
 @njit(cache=True, error_model="numpy")
-def _mf(kind, x, c, a, b):  # pragma: no cover - compiled
+def _mf(kind: int, x: float, c: float, a: float, b: float) -> float:  # pragma: no cover - compiled
     z = (x - c) / a
     if kind == 0.0:
         return 1.0 / (1.0 + abs(z) ** (2.0 * b))
@@ -126,7 +127,7 @@ def _mf(kind, x, c, a, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def anfis_eval(sp, off, x1, x2, clip):  # pragma: no cover - compiled
+def anfis_eval(sp: FloatArray, off: int, x1: float, x2: float, clip: float) -> float:  # pragma: no cover - compiled
     """The TS model packed at sp[off:] (:meth:`AnfisModel.to_vector` layout) at (x1, x2)."""
     kind = sp[off + M.mf]
     n = int(sp[off + M.n_mfs])
@@ -156,7 +157,9 @@ def anfis_eval(sp, off, x1, x2, clip):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _anfis_gain(p, o, which, e, edot, clip):  # pragma: no cover - compiled
+def _anfis_gain(
+    p: FloatArray, o: int, which: int, e: float, edot: float, clip: float
+) -> float:  # pragma: no cover - compiled
     """Gain ``which`` (0 k_p, 1 k_i, 2 k_d) of the packed schedule at p[o:] (one row), clipped if set."""
     g = anfis_eval(p, o + int(p[o + A.kp_model + which]), e, edot, clip)
     h = o + A.kp_clip + CLIP_SIZE * which
@@ -166,7 +169,9 @@ def _anfis_gain(p, o, which, e, edot, clip):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, error_model="numpy")
-def anfis_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+def anfis_gains(
+    t: float, e: float, edot: float, p: FloatArray, row: int, o: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Eq. 5.12-5.14's gains from three TS models: p[row, o:] = an :data:`ANFIS_HEAD` (its
     model offsets relative to o), then the three packed models (:data:`MODEL` layout)."""
     sp = p[row]

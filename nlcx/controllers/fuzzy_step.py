@@ -17,10 +17,13 @@ a few hundred min/max operations and allocates nothing.
 
 from __future__ import annotations
 
+from typing import TypeAlias
+
 from numba import njit
 
 from nlcx._numba_compat import hot_njit
 from nlcx.controllers.fuzzy_config import OUTPUT_UNIVERSE, OUTPUTS, SET_NAMES
+from nlcx.kernel.signatures import FloatArray
 from nlcx.layout import Layout
 
 #: The head of the schedule block sp: output grid resolution n, centroid (0 discrete, 1
@@ -43,8 +46,14 @@ RULE_TABLE = GAIN_RANGES + N_OUTPUTS * RANGE_SIZE
 OUTPUT_GRID = RULE_TABLE + N_OUTPUTS * N_SETS * N_SETS
 
 
+#: The memberships of one input in its five sets.
+Memberships: TypeAlias = tuple[float, float, float, float, float]
+
+
 @njit(cache=True, error_model="numpy")
-def _mf(x, lower, upper, position, umin, umax):  # pragma: no cover - compiled
+def _mf(
+    x: float, lower: float, upper: float, position: int, umin: float, umax: float
+) -> float:  # pragma: no cover - compiled
     """Membership of x in the set at ``position`` (0 NB shoulder, 4 PB shoulder, else triangle)."""
     if position == 0:
         if x <= umin:
@@ -67,13 +76,15 @@ def _mf(x, lower, upper, position, umin, umax):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _output_mu(sp, base, n, s, k):  # pragma: no cover - compiled
+def _output_mu(sp: FloatArray, base: int, n: int, s: int, k: int) -> float:  # pragma: no cover - compiled
     """mu_s(z_k) of one output whose membership table starts at sp[base]."""
     return sp[base + s * n + k]
 
 
 @njit(cache=True, error_model="numpy")
-def _aggregate(sp, base, n, k, w0, w1, w2, w3, w4):  # pragma: no cover - compiled
+def _aggregate(
+    sp: FloatArray, base: int, n: int, k: int, w0: float, w1: float, w2: float, w3: float, w4: float
+) -> float:  # pragma: no cover - compiled
     """max_s min(W_s, mu_s(z_k)) of one output (base: its membership table)."""
     a = min(w0, _output_mu(sp, base, n, 0, k))
     a = max(a, min(w1, _output_mu(sp, base, n, 1, k)))
@@ -83,7 +94,9 @@ def _aggregate(sp, base, n, k, w0, w1, w2, w3, w4):  # pragma: no cover - compil
 
 
 @njit(cache=True, error_model="numpy")
-def _centroid(sp, base, n, piecewise, w0, w1, w2, w3, w4):  # pragma: no cover - compiled
+def _centroid(
+    sp: FloatArray, base: int, n: int, piecewise: bool, w0: float, w1: float, w2: float, w3: float, w4: float
+) -> float:  # pragma: no cover - compiled
     """Centroid of the aggregated output on the grid z (discrete, or of its piecewise-linear
     interpolation); the universe's middle if nothing fires."""
     z0 = OUTPUT_GRID
@@ -113,7 +126,9 @@ def _centroid(sp, base, n, piecewise, w0, w1, w2, w3, w4):  # pragma: no cover -
 
 
 @njit(cache=True, error_model="numpy")
-def _fuzzy_gain(sp, g, me, md, n, piecewise):  # pragma: no cover - compiled
+def _fuzzy_gain(
+    sp: FloatArray, g: int, me: Memberships, md: Memberships, n: int, piecewise: bool
+) -> float:  # pragma: no cover - compiled
     """Output g (0 k_p1, 1 k_i1, 2 k_d1) for the input memberships me (e) and md (de/dt),
     scaled to its gain range (eqs. 5.12-5.14)."""
     # W_s = max over the rules concluding set s of min(mu_e, mu_de): max_r min(w_r, mu_s(z))
@@ -150,14 +165,18 @@ def _fuzzy_gain(sp, g, me, md, n, piecewise):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _set_mu(x, sp, ranges, i, umin, umax):  # pragma: no cover - compiled
+def _set_mu(
+    x: float, sp: FloatArray, ranges: int, i: int, umin: float, umax: float
+) -> float:  # pragma: no cover - compiled
     """Membership of x in input set i, whose crisp range is the i-th RANGE at sp[ranges]."""
     at = ranges + RANGE_SIZE * i
     return _mf(x, sp[at + R.lower], sp[at + R.upper], i, umin, umax)
 
 
 @hot_njit(cache=True, error_model="numpy")
-def fuzzy_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+def fuzzy_gains(
+    t: float, e: float, edot: float, p: FloatArray, row: int, o: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Mamdani self-tuning PID, section 5.4.1: (e, de/dt) -> (k_p1, k_i1, k_d1) -> eqs. 5.12-5.14.
 
     The packed tables start at p[row, o] (layout above)."""

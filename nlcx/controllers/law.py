@@ -47,6 +47,7 @@ from nlcx import registry
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.controllers.law_shape import LawShape, ParamSpec, shape_of
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import FloatArray
 from nlcx.plants.base import Plant
 
 __all__ = ["LawController", "LawShape", "controller", "law_model", "step_source"]
@@ -94,7 +95,7 @@ def _measure_function() -> Any:
     ``-code - 1`` of y."""
     from numba import njit
 
-    def measure(x, y, b, code):  # pragma: no cover - compiled
+    def measure(x: FloatArray, y: FloatArray, b: int, code: int) -> float:  # pragma: no cover - compiled
         c = int(code)
         return x[b, c] if c >= 0 else y[b, -c - 1]
 
@@ -324,15 +325,14 @@ def controller(
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Register a control law written for one variant, ``law(t, dt, y, r, s, p) -> (u, s_next)``.
 
-    ``y``, ``r`` and ``s`` are tuples of floats in the declared orders of ``measures``,
-    ``references`` and ``states`` (index them: ``y[0]``); ``p`` holds the parameters by name
-    (``p.k1``); ``dt`` is the law's period. The law returns a tuple of the inputs it drives, in
-    the order of ``inputs``, and a tuple of the next values of its states (with ``signals``, a
-    third tuple of internal signals to log). It may use ``math`` and the numpy functions numba
-    compiles. The decorator compiles the law, wraps it for the kernel (the rows of the module
-    docstring), calls it once at the zero point with the default parameters (a wrong arity,
-    return shape or value is one line naming the controller) and registers it in
-    :data:`nlcx.registry.controllers`; the function itself is returned unchanged.
+    ``y``, ``r`` and ``s`` are tuples of floats in the declared orders of ``measures``, ``references``
+    and ``states`` (index them: ``y[0]``); ``p`` holds the parameters by name (``p.k1``); ``dt`` is the
+    law's period. The law returns a tuple of the inputs it drives, in the order of ``inputs``, and a
+    tuple of the next values of its states (with ``signals``, a third tuple of internal signals to
+    log). It may use ``math`` and the numpy functions numba compiles. The decorator compiles the law,
+    wraps it for the kernel (the rows of the module docstring), calls it once at the zero point with
+    the default parameters (a wrong arity, return shape or value is one line naming the controller)
+    and registers it in :data:`nlcx.registry.controllers`; the function itself is returned unchanged.
 
     Parameters
     ----------
@@ -380,7 +380,12 @@ def controller(
     >>> result.status("lqi"), round(float(result.trajectory("lqi")["x"].iloc[-1]), 3)
     ('ok', 1.0)
     """
-    shape = shape_of(name, measures, references, inputs, states, params, signals, sample_time)
+    return _registrar(name, shape_of(name, measures, references, inputs, states, params, signals, sample_time), replace)
+
+
+def _registrar(name: str, shape: LawShape, replace: bool) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """The decorator of :func:`controller`: registers a law of ``shape`` under ``name`` (replacing
+    a law registered before only if ``replace``) and returns the law."""
 
     def register(f: Callable[..., Any]) -> Callable[..., Any]:
         existing = registry.controllers.get(name) if name in registry.controllers else None

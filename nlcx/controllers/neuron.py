@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from nlcx._numba_compat import hot_njit
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import Callbacks, FloatArray
 from nlcx.layout import Layout
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join
@@ -78,7 +79,9 @@ G = NEURON_LOG.at
 
 
 @njit(cache=True, error_model="numpy")
-def _neuron_row(t, dt, y, r, cp, cs, u, log):  # pragma: no cover - compiled
+def _neuron_row(
+    t: float, dt: float, y: FloatArray, r: FloatArray, cp: FloatArray, cs: FloatArray, u: FloatArray, log: FloatArray
+) -> None:  # pragma: no cover - compiled
     """Eqs. 5.15-5.19 for one variant at every ``hold``-th simulation step; the input is
     held in between."""
     yi, ri, ui = int(cp[N.y_index]), int(cp[N.r_index]), int(cp[N.u_index])
@@ -122,7 +125,18 @@ def _neuron_row(t, dt, y, r, cp, cs, u, log):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, error_model="numpy")
-def neuron_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
+def neuron_step(
+    t: float,
+    dt: float,
+    x: FloatArray,
+    y: FloatArray,
+    r: FloatArray,
+    cp: FloatArray,
+    cs: FloatArray,
+    u: FloatArray,
+    log: FloatArray,
+    callbacks: Callbacks,
+) -> None:  # pragma: no cover - compiled
     """The single-neuron adaptive PID (eqs. 5.15-5.19), every row."""
     for b in range(y.shape[0]):
         _neuron_row(t, dt, y[b], r[b], cp[b], cs[b], u[b], log[b])

@@ -9,6 +9,7 @@ from pydantic import Field
 
 from nlcx._numba_compat import hot_njit
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
+from nlcx.kernel.signatures import Callbacks, FloatArray
 from nlcx.plants.base import Plant
 
 
@@ -19,7 +20,18 @@ class OpenLoopConfig(ControllerConfig):
 
 
 @hot_njit(cache=True, error_model="numpy")
-def open_loop_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
+def open_loop_step(
+    t: float,
+    dt: float,
+    x: FloatArray,
+    y: FloatArray,
+    r: FloatArray,
+    cp: FloatArray,
+    cs: FloatArray,
+    u: FloatArray,
+    log: FloatArray,
+    callbacks: Callbacks,
+) -> None:  # pragma: no cover - compiled
     """u_j(t) = r_j(t): the reference channels are the plant inputs (every row)."""
     for b in range(u.shape[0]):
         for j in range(u.shape[1]):

@@ -43,6 +43,7 @@ import numpy as np
 from nlcx._numba_compat import hot_njit
 from nlcx.controllers.schedules import constant_gains, error_ags_gains, time_ags_gains
 from nlcx.kernel.abi import CONTROLLER_SIG
+from nlcx.kernel.signatures import Callbacks, FloatArray
 from nlcx.layout import Layout
 from nlcx.uncertainty.actuator_saturation import saturate
 
@@ -95,7 +96,7 @@ ANTI_WINDUP = {"off": -1, "none": 0, "clamping": 1, "back_calculation": 2}
 
 
 @hot_njit(cache=True, inline="always", error_model="numpy")
-def _within(value, limit):  # pragma: no cover - compiled
+def _within(value: float, limit: float) -> float:  # pragma: no cover - compiled
     """``value`` held within [-limit, limit], as a Simulink Integrator block's output limits hold
     its state: unchanged inside them and where it is NaN, so a limit of inf changes no bit."""
     if value > limit:
@@ -106,7 +107,9 @@ def _within(value, limit):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, error_model="numpy")
-def _saturate(row, cp, cs, u, log):  # pragma: no cover - compiled
+def _saturate(
+    row: int, cp: FloatArray, cs: FloatArray, u: FloatArray, log: FloatArray
+) -> None:  # pragma: no cover - compiled
     """Clip each limited input to [-limit, limit] (:func:`~nlcx.uncertainty.actuator_saturation.saturate`)
     and correct the integrators of the loops on it that updated at this step (clamping: undo
     this sample's increment if it pushes further into the limit; back-calculation:
@@ -138,7 +141,9 @@ def _saturate(row, cp, cs, u, log):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, error_model="numpy")
-def _update_period(t, dt, sample_time, cs, row, c):  # pragma: no cover - compiled
+def _update_period(
+    t: float, dt: float, sample_time: float, cs: FloatArray, row: int, c: int
+) -> float:  # pragma: no cover - compiled
     """The period a loop updates over at t: dt for a continuous PID (T_s = 0); T_s at a
     discrete PID's sampling instant (the next one scheduled T_s later); 0 while it holds."""
     if sample_time == 0.0:
@@ -150,7 +155,9 @@ def _update_period(t, dt, sample_time, cs, row, c):  # pragma: no cover - compil
 
 
 @hot_njit(cache=True, inline="always", error_model="numpy")
-def _head_structure(structure, cp, row):  # pragma: no cover - compiled
+def _head_structure(
+    structure: Structure | None, cp: FloatArray, row: int
+) -> tuple[int, int, bool, bool]:  # pragma: no cover - compiled
     """(inputs, loops, sampled, saturated) of a row: read from its head (``structure`` None) or
     the constants of a :class:`Structure`. ``sampled``: whether its loops may hold their output
     between samples (a discrete PID); the step for any structure leaves it to
@@ -161,7 +168,9 @@ def _head_structure(structure, cp, row):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, inline="always", error_model="numpy")
-def _loop_signals(structure, cp, row, h, i):  # pragma: no cover - compiled
+def _loop_signals(
+    structure: Structure | None, cp: FloatArray, row: int, h: int, i: int
+) -> tuple[int, int, int]:  # pragma: no cover - compiled
     """(output, reference, input) index of loop i: read from its :data:`LOOP` block at h
     (``structure`` None) or the constants of a :class:`Structure`."""
     if structure is None:
@@ -170,7 +179,9 @@ def _loop_signals(structure, cp, row, h, i):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, inline="always", error_model="numpy")
-def _loop_options(structure, cp, row, h, i):  # pragma: no cover - compiled
+def _loop_options(
+    structure: Structure | None, cp: FloatArray, row: int, h: int, i: int
+) -> tuple[int, int, int, bool, bool, bool, int, bool]:  # pragma: no cover - compiled
     """(direct schedule, slot, schedule offset, filtered, on the measurement, gain inside, form,
     limited integral) of loop i: read from its :data:`LOOP` block at h (``structure`` None) or
     the constants of a :class:`Structure`, where the compiler drops the branches the loop does
@@ -190,7 +201,9 @@ def _loop_options(structure, cp, row, h, i):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, inline="always", error_model="numpy")
-def via_slot(callbacks, slot, t, e, edot, p, row, offset):  # pragma: no cover - compiled
+def via_slot(
+    callbacks: Callbacks, slot: int, t: float, e: float, edot: float, p: FloatArray, row: int, offset: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """The gains of the schedule in slot ``slot`` of the callback table (a registered schedule
     that is not built in): ``callbacks[slot](t, e, edot, p, row, offset)``. The GPU, which has
     no function values, replaces this function by a branch over the schedules in use
@@ -199,7 +212,21 @@ def via_slot(callbacks, slot, t, e, edot, p, row, offset):  # pragma: no cover -
 
 
 @hot_njit(cache=True, inline="always", error_model="numpy")
-def _loop_update(structure, i, t, period, y_i, r_i, cp, cs, log, row, h, c, callbacks):  # pragma: no cover - compiled
+def _loop_update(
+    structure: Structure | None,
+    i: int,
+    t: float,
+    period: float,
+    y_i: float,
+    r_i: float,
+    cp: FloatArray,
+    cs: FloatArray,
+    log: FloatArray,
+    row: int,
+    h: int,
+    c: int,
+    callbacks: Callbacks,
+) -> float:  # pragma: no cover - compiled
     """Loop i's sample (see :func:`pid_step`), its options by :func:`_loop_options`: its state
     updated, its gains logged; returns its signed contribution to its input."""
     direct, slot, off, filtered, on_measurement, inside, form, limited = _loop_options(structure, cp, row, h, i)
@@ -249,7 +276,19 @@ def _loop_update(structure, i, t, period, y_i, r_i, cp, cs, log, row, h, c, call
 
 
 @hot_njit(cache=True, inline="always", error_model="numpy")
-def _pid_rows(structure, t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
+def _pid_rows(
+    structure: Structure | None,
+    t: float,
+    dt: float,
+    x: FloatArray,
+    y: FloatArray,
+    r: FloatArray,
+    cp: FloatArray,
+    cs: FloatArray,
+    u: FloatArray,
+    log: FloatArray,
+    callbacks: Callbacks,
+) -> None:  # pragma: no cover - compiled
     """The PID's one body (see :func:`pid_step`), every row, with the loop structure read
     from each row (``structure`` None) or a :class:`Structure`'s constants (:func:`step_for`)."""
     for row in range(x.shape[0]):
@@ -274,7 +313,18 @@ def _pid_rows(structure, t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: 
 
 
 @hot_njit(CONTROLLER_SIG, cache=True, error_model="numpy")
-def pid_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
+def pid_step(
+    t: float,
+    dt: float,
+    x: FloatArray,
+    y: FloatArray,
+    r: FloatArray,
+    cp: FloatArray,
+    cs: FloatArray,
+    u: FloatArray,
+    log: FloatArray,
+    callbacks: Callbacks,
+) -> None:  # pragma: no cover - compiled
     """The PID controller, every row; u[row, j] = bias_j + sum of its loops' outputs, clipped
     to the input's limit when saturated.
 
@@ -353,7 +403,18 @@ def step_for(structure: Structure | None) -> Any:
     if structure is None:
         return pid_step
 
-    def pid_step_for_structure(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
+    def pid_step_for_structure(
+        t: float,
+        dt: float,
+        x: FloatArray,
+        y: FloatArray,
+        r: FloatArray,
+        cp: FloatArray,
+        cs: FloatArray,
+        u: FloatArray,
+        log: FloatArray,
+        callbacks: Callbacks,
+    ) -> None:  # pragma: no cover - compiled
         _pid_rows(structure, t, dt, x, y, r, cp, cs, u, log, callbacks)
 
     # its own name, hence its own symbols and its own cache files (see the module docstring)

@@ -7,6 +7,7 @@ import numpy as np
 from numba import njit
 
 from nlcx._numba_compat import hot_njit
+from nlcx.kernel.signatures import Callbacks, FloatArray
 from nlcx.layout import Layout
 
 #: Head of the parameter row cp: plant order n, inputs m, preview length h, integrator (0/1),
@@ -27,7 +28,9 @@ LOG_SIZE = PREVIEW_LOG.size
 
 
 @njit(cache=True, error_model="numpy")
-def _preview_row(t, dt, x, r, cp, cs, u, log):  # pragma: no cover - compiled
+def _preview_row(
+    t: float, dt: float, x: FloatArray, r: FloatArray, cp: FloatArray, cs: FloatArray, u: FloatArray, log: FloatArray
+) -> None:  # pragma: no cover - compiled
     """Preview servo (eq. 5.21) for one variant, sampled every Ts = N dt and held in between.
 
     cp: a PREVIEW head, then x* (n), u* (m), c (n), Kx (m x n), Kv (m), Kd (m x (h+1)).
@@ -81,7 +84,18 @@ def _preview_row(t, dt, x, r, cp, cs, u, log):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, error_model="numpy")
-def preview_step(t, dt, x, y, r, cp, cs, u, log, callbacks):  # pragma: no cover - compiled
+def preview_step(
+    t: float,
+    dt: float,
+    x: FloatArray,
+    y: FloatArray,
+    r: FloatArray,
+    cp: FloatArray,
+    cs: FloatArray,
+    u: FloatArray,
+    log: FloatArray,
+    callbacks: Callbacks,
+) -> None:  # pragma: no cover - compiled
     """The preview servo (eq. 5.21), every row (full state information: it reads x)."""
     for b in range(x.shape[0]):
         _preview_row(t, dt, x[b], r[b], cp[b], cs[b], u[b], log[b])

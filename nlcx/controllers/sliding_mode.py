@@ -71,7 +71,9 @@ SHAPE = LawShape(
 )
 
 
-def sliding_mode_law(t, dt, y, r, s, p):  # pragma: no cover - compiled
+def sliding_mode_law(
+    t: float, dt: float, y: tuple[float, ...], r: tuple[float, ...], s: tuple[float, ...], p: Any
+) -> tuple[tuple[float], tuple[()], tuple[float]]:  # pragma: no cover - compiled
     """Eqs. 1-2 for one variant: y = (x, x_dot, theta, theta_dot), r = (x_ref, theta_ref)."""
     e1, e2, e3, e4 = y[0] - r[0], y[1], y[2] - r[1], y[3]
     S = p.alpha * (p.c1 * e1 + e2) + p.c2 * e3 + e4  # eq. 1

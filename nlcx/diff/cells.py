@@ -1,7 +1,7 @@
 """The cells of a column ``nlcx diff`` compares: its kind, and its cells as text, as numbers and
 as row hashes.
 
-A column is compared as numbers or as text according to its :class:`Kind`: a Parquet column by
+A column is compared as numbers or as text according to its :class:`ColumnKind`: a Parquet column by
 its type; a CSV column as pandas types it (:meth:`nlcx.diff.tables.TableSource.kinds`): numbers
 when every cell that is not empty is a number (a column holding the text ``nan`` is text),
 booleans when every cell is ``True`` or ``False`` (``TRUE``, ``true``, ...), text otherwise, and
@@ -39,7 +39,7 @@ NUMBER, BOOLEAN, TEXT = "number", "boolean", "text"
 
 
 @dataclass(frozen=True)
-class Kind:
+class ColumnKind:
     """How a column of one table reads: ``name`` is :data:`NUMBER`, :data:`BOOLEAN` or
     :data:`TEXT`; ``has_values``: whether a column of numbers holds any (None: not known yet)."""
 
@@ -71,15 +71,15 @@ class CsvScan:
         if self.booleans:
             self.booleans = _all_booleans(cells)
 
-    def kind(self, rows: int) -> Kind:
+    def kind(self, rows: int) -> ColumnKind:
         """The column's kind once every cell is seen (``rows``: the table's rows)."""
         if rows == 0:
-            return Kind(TEXT)
+            return ColumnKind(TEXT)
         if self.numbers:
-            return Kind(NUMBER, self.values)
+            return ColumnKind(NUMBER, self.values)
         if self.booleans and not self.empty:
-            return Kind(BOOLEAN)
-        return Kind(TEXT)
+            return ColumnKind(BOOLEAN)
+        return ColumnKind(TEXT)
 
     @property
     def open(self) -> bool:
@@ -115,7 +115,7 @@ def _cast_numbers(cells: pa.Array) -> pa.Array | None:
         return None
 
 
-def kind_holds(column: pa.Array, kind: Kind) -> bool:
+def kind_holds(column: pa.Array, kind: ColumnKind) -> bool:
     """Whether a chunk of a CSV column keeps to the kind its first chunk gave it: no NaN in a
     column of numbers read as float64 (pandas reads a column holding the text ``nan`` as text),
     only ``True``/``False`` in a column of booleans."""
@@ -154,7 +154,7 @@ def as_texts(column: pa.Array) -> pa.Array:
     return pc.fill_null(column.cast(pa.string()), "")
 
 
-def as_numbers(column: pa.Array, kind: Kind) -> np.ndarray:
+def as_numbers(column: pa.Array, kind: ColumnKind) -> np.ndarray:
     """A column's cells as float64 (a missing cell, or a text that is not a number, as NaN);
     booleans as 1 and 0."""
     column = _plain(column)

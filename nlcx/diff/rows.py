@@ -28,7 +28,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from nlcx.diff.cells import NUMBER, Kind, as_numbers, as_texts, hash_rows, kind_holds, mix
+from nlcx.diff.cells import NUMBER, ColumnKind, as_numbers, as_texts, hash_rows, kind_holds, mix
 from nlcx.diff.records import DESCRIPTIVE, ROW_KEYS, Drift, Tolerances, is_status_column
 from nlcx.diff.tables import KindChangedError, TableSource
 
@@ -66,7 +66,7 @@ class ColumnRoles:
     numeric: list[str]
     described: list[str]
     status: list[str]
-    kinds: tuple[dict[str, Kind], dict[str, Kind]]
+    kinds: tuple[dict[str, ColumnKind], dict[str, ColumnKind]]
     provisional: bool = False
 
     def read_as_numbers(self, side: int) -> list[str]:
@@ -111,7 +111,7 @@ def plan_columns(base: TableSource, new: TableSource, provisional: bool = False)
     )
 
 
-def _has_values(table: TableSource, column: str, kind: Kind) -> bool:
+def _has_values(table: TableSource, column: str, kind: ColumnKind) -> bool:
     return kind.has_values if kind.has_values is not None else table.has_values(column)
 
 

@@ -61,7 +61,7 @@ class _Found:
 
 
 @dataclass
-class _Tally:
+class _DriftTally:
     """The counts of one table's drifts and the first ``keep`` of them, in row order."""
 
     keep: int
@@ -165,7 +165,7 @@ class Matcher:
 
     def __init__(self, name: str, layout: ColumnRoles, tol: Tolerances, keep: int, cap: int) -> None:
         self.name, self.layout, self.tol, self.cap = name, layout, tol, cap
-        self.tally = _Tally(keep)
+        self.tally = _DriftTally(keep)
         per_row = "metric" in layout.keys
         self.waiting = [no_rows(layout, per_row), no_rows(layout, per_row)]
         self.done = [False, False]

@@ -27,7 +27,7 @@ import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
-from nlcx.diff.cells import BOOLEAN, NUMBER, TEXT, CsvScan, Kind
+from nlcx.diff.cells import BOOLEAN, NUMBER, TEXT, ColumnKind, CsvScan
 from nlcx.errors import NlcxError
 from nlcx.manifest import verify_file
 from nlcx.pages.output_tables import FLOAT_COLUMNS, STEMS, TEXT_COLUMNS, part_files
@@ -92,7 +92,7 @@ class TableSource:
             for file in self.files:
                 yield from _parquet_batches(file, list(columns))
 
-    def first_kinds(self, columns: Sequence[str]) -> dict[str, Kind]:
+    def first_kinds(self, columns: Sequence[str]) -> dict[str, ColumnKind]:
         """The kind of each of ``columns`` as far as a CSV's first chunk of rows tells (a column
         of numbers may hold text further on: :func:`kind_holds`); a Parquet file's kinds."""
         if not self.is_csv:
@@ -106,7 +106,7 @@ class TableSource:
                 scan.update(first.column(name))
         return {c: fixed[c] or scans[c].kind(rows) for c in columns}
 
-    def kinds(self, columns: Sequence[str]) -> dict[str, Kind]:
+    def kinds(self, columns: Sequence[str]) -> dict[str, ColumnKind]:
         """The kind of each of ``columns``: read from a Parquet file's types; found in one pass
         over a CSV's cells (only the columns that may be numbers)."""
         fixed = {c: self._fixed_kind(c) for c in columns}
@@ -141,12 +141,12 @@ class TableSource:
         """Whether a column of numbers holds any number (one pass over it)."""
         return any(batch.column(0).null_count < batch.num_rows for batch in self.batches([column]))
 
-    def _fixed_kind(self, column: str) -> Kind | None:
+    def _fixed_kind(self, column: str) -> ColumnKind | None:
         """The kind a sweep's table gives ``column`` whatever its cells, or None."""
         if self.is_sweep_table and column in TEXT_COLUMNS:
-            return Kind(TEXT)
+            return ColumnKind(TEXT)
         if self.is_sweep_table and column in FLOAT_COLUMNS:
-            return Kind(NUMBER, None)
+            return ColumnKind(NUMBER, None)
         return None
 
 
@@ -308,15 +308,15 @@ def _parquet_batches(file: Path, columns: list[str]) -> Iterator[pa.RecordBatch]
         raise NlcxError(f"diff error: {file}: cannot read it as Parquet: {_first_line(exc)}") from None
 
 
-def _parquet_kind(files: list[Path], column: str) -> Kind:
+def _parquet_kind(files: list[Path], column: str) -> ColumnKind:
     """A Parquet column's kind, from its type in each file: numbers (integers, floats, or all
     null), booleans, or text; text where the files disagree."""
     schemas = [pq.ParquetFile(file).schema_arrow for file in files]
     kinds = {_type_kind(schema.field(column).type) for schema in schemas if column in schema.names}
     named = sorted(k for k in kinds if k is not None)
     if not named:
-        return Kind(NUMBER, False)
-    return Kind(named[0], None) if len(named) == 1 else Kind(TEXT)
+        return ColumnKind(NUMBER, False)
+    return ColumnKind(named[0], None) if len(named) == 1 else ColumnKind(TEXT)
 
 
 def _type_kind(kind: pa.DataType) -> str | None:

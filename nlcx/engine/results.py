@@ -47,7 +47,7 @@ class MetricTable:
     (an experiment's position in the measured list), then :data:`METRIC_COLUMNS`; each
     experiment's rows contiguous. The rows are computed when the runs are measured; the
     DataFrame (and the pandas import it needs) only when :attr:`frame` is first read. ``nlcx
-    run`` never reads it: it writes metrics.csv from the rows (:attr:`Result.metric_rows`)."""
+    run`` never reads it: it writes metrics.csv from the rows (:attr:`ExperimentResult.metric_rows`)."""
 
     rows: list[list[Any]]
 
@@ -67,7 +67,7 @@ class MetricBlock(NamedTuple):
 
 
 @dataclass
-class Result:
+class ExperimentResult:
     """One experiment's runs and metrics. The metrics are a block of rows of a table shared
     by the experiments measured together (``rows``: the table and its row range), sliced
     out only when :attr:`metrics` is read (a sweep reads the shared tables instead)."""
@@ -97,7 +97,11 @@ class Result:
         return [row[1:] for row in block.table.rows[block.start : block.stop]]
 
 
-def shared_metrics(results: list[Result]) -> pd.DataFrame:
+#: :class:`ExperimentResult` under the name :mod:`nlcx.engine` exports.
+Result = ExperimentResult
+
+
+def shared_metrics(results: list[ExperimentResult]) -> pd.DataFrame:
     """The metrics of ``results`` (from one :func:`~nlcx.engine.evaluate` call) in one table, with the
     column ``experiment``: the position of the row's result in ``results``, ascending."""
     import pandas as pd

@@ -16,12 +16,16 @@ functions are then ones that do nothing.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from nlcx.kernel.device import Retarget, cuda
 from nlcx.kernel.friction import friction_forces, has_friction, initial_modes, update_friction_modes
 from nlcx.kernel.friction_path import sample_stage, step_with_friction
+from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.kernel.structures import FrictionScratch, FrictionWork, OneColumn
+
+if TYPE_CHECKING:
+    from nlcx.kernel.structures import Integration
 
 #: What :attr:`FrictionDevices.act` does: the breakaway at t_k (and the friction force there,
 #: when recorded), or the sampling step from t_k.
@@ -58,8 +62,10 @@ def friction_devices(retarget: Retarget, rhs: Any, n_x: int, n_u: int, n_stages:
     forces_at, step_one = retarget.device(friction_forces), retarget.device(step_with_friction)
 
     @gpu.jit(device=True)
-    def act(phase, t, k, kd, x, u, pc, dist, bd, dist_map, integration, c, axes, mode, direction, hold, xn, f_k,
-            record):  # pragma: no cover - device  # fmt: skip
+    def act(phase: int, t: float, k: int, kd: int, x: FloatArray, u: FloatArray, pc: FloatArray, dist: FloatArray,
+            bd: int, dist_map: IntArray, integration: Integration, c: FloatArray, axes: FloatArray, mode: IntArray,
+            direction: FloatArray, hold: FloatArray, xn: FloatArray, f_k: FloatArray,
+            record: bool) -> None:  # pragma: no cover - device  # fmt: skip
         local = cuda_module.local.array
         one = OneColumn(local((N, 1), float64), local((NU, 1), float64), pc, local((N, 1), float64))
         scratch = FrictionScratch(
@@ -94,16 +100,20 @@ def frictionless() -> FrictionDevices:
     gpu = cuda()
 
     @gpu.jit(device=True)
-    def has(axes):  # pragma: no cover - device
+    def has(axes: FloatArray) -> bool:  # pragma: no cover - device
         return False
 
     @gpu.jit(device=True)
-    def start(axes, x, mode, direction, hold):  # pragma: no cover - device
+    def start(
+        axes: FloatArray, x: FloatArray, mode: IntArray, direction: FloatArray, hold: FloatArray
+    ) -> None:  # pragma: no cover - device
         return
 
     @gpu.jit(device=True)
-    def act(phase, t, k, kd, x, u, pc, dist, bd, dist_map, integration, c, axes, mode, direction, hold, xn, f_k,
-            record):  # pragma: no cover - device  # fmt: skip
+    def act(phase: int, t: float, k: int, kd: int, x: FloatArray, u: FloatArray, pc: FloatArray, dist: FloatArray,
+            bd: int, dist_map: IntArray, integration: Integration, c: FloatArray, axes: FloatArray, mode: IntArray,
+            direction: FloatArray, hold: FloatArray, xn: FloatArray, f_k: FloatArray,
+            record: bool) -> None:  # pragma: no cover - device  # fmt: skip
         return
 
     return FrictionDevices(has, start, act)

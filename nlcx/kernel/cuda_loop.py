@@ -35,7 +35,7 @@ import functools
 import math
 import re
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeAlias
 
 import numpy as np
 
@@ -44,6 +44,7 @@ from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATU
 from nlcx.kernel.cuda_friction import AT_SAMPLE, OVER_STEP, FrictionDevices, friction_devices, frictionless
 from nlcx.kernel.device import Retarget, cuda, kept, refused
 from nlcx.kernel.friction import any_friction
+from nlcx.kernel.signatures import Callbacks, FloatArray, IntArray
 from nlcx.kernel.stepping import (
     CLASSIC,
     SEQUENTIAL,
@@ -55,6 +56,7 @@ from nlcx.kernel.stepping import (
     stage_nodes,
 )
 from nlcx.kernel.structures import CLASSIC_RK4, Integration
+from nlcx.protocols import CompiledFunction
 
 EE = ELEMENT_ENTRY.at
 #: What a recorded signal is (column 0 of ``recorded``): a state, an output (row of C), an input,
@@ -124,7 +126,9 @@ def _via_slot(retarget: Retarget, schedules: tuple[tuple[int, Any], ...]) -> Any
     gpu = cuda()
 
     @gpu.jit(device=True)
-    def none(callbacks, slot, t, e, edot, p, row, offset):  # pragma: no cover - device
+    def none(
+        callbacks: Callbacks, slot: int, t: float, e: float, edot: float, p: FloatArray, row: int, offset: int
+    ) -> tuple[float, float, float]:  # pragma: no cover - device
         return 0.0, 0.0, 0.0
 
     chain = none
@@ -135,7 +139,9 @@ def _via_slot(retarget: Retarget, schedules: tuple[tuple[int, Any], ...]) -> Any
 
 def _slot_branch(slot: int, gains: Any, rest: Any) -> Any:
     @cuda().jit(device=True)
-    def branch(callbacks, s, t, e, edot, p, row, offset):  # pragma: no cover - device
+    def branch(
+        callbacks: Callbacks, s: int, t: float, e: float, edot: float, p: FloatArray, row: int, offset: int
+    ) -> tuple[float, float, float]:  # pragma: no cover - device
         if s == slot:
             return gains(t, e, edot, p, row, offset)
         return rest(callbacks, s, t, e, edot, p, row, offset)
@@ -148,7 +154,9 @@ def _element_chain(retarget: Retarget, entries: tuple[tuple[int, Any, int, int, 
     gpu = cuda()
 
     @gpu.jit(device=True)
-    def nothing(t, dt, k, signal, vid, ep, es, data):  # pragma: no cover - device
+    def nothing(
+        t: float, dt: float, k: int, signal: FloatArray, vid: IntArray, ep: FloatArray, es: FloatArray, data: FloatArray
+    ) -> None:  # pragma: no cover - device
         return
 
     chain = nothing
@@ -160,7 +168,9 @@ def _element_chain(retarget: Retarget, entries: tuple[tuple[int, Any, int, int, 
 
 def _element_link(fn: Any, p_off: int, s_off: int, d_off: int, rest: Any) -> Any:
     @cuda().jit(device=True)
-    def link(t, dt, k, signal, vid, ep, es, data):  # pragma: no cover - device
+    def link(
+        t: float, dt: float, k: int, signal: FloatArray, vid: IntArray, ep: FloatArray, es: FloatArray, data: FloatArray
+    ) -> None:  # pragma: no cover - device
         fn(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off)
         rest(t, dt, k, signal, vid, ep, es, data)
 
@@ -213,24 +223,36 @@ def _steps() -> tuple[Any, Any, Any, Any]:
     return sample, hold, advance, failing
 
 
+#: The device functions of a closed-loop kernel: (rhs, controller step, sensor chain, actuator
+#: chain, friction path).
+LoopDevices: TypeAlias = tuple[CompiledFunction, CompiledFunction, CompiledFunction, CompiledFunction, FrictionDevices]
+
+
 def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, friction: FrictionDevices) -> Any:
-    """The kernel of ``shape``: the thread's closed loop from t_0 to t_K (the module docstring).
-    Its arguments are the arrays of a kernel call's structures (:func:`launch` passes them by
-    name); the thread's own state, signals and rows live in its local memory."""
+    """The kernel of ``shape``: the thread's closed loop from t_0 to t_K (the module docstring),
+    with the plugins' device functions, the friction path and the stage combination of its method.
+    Its arguments are the arrays of a kernel call's structures (:func:`launch` passes them by name)."""
     global cuda_module
-    gpu = cuda_module = cuda()
+    cuda_module = cuda()
+    combination = CLASSIC if shape.method == CLASSIC_RK4 else SEQUENTIAL
+    return _thread_loop(shape, (rhs, step, sensor, actuator, friction), combination)
+
+
+def _thread_loop(shape: LoopShape, devices: LoopDevices, combination: int) -> CompiledFunction:
+    """The kernel of :func:`_build`; the thread's own state, signals and rows live in its local memory."""
     from numba import float64, int64
 
-    N, NU, NY, NR = shape.n_x, max(shape.n_u, 1), max(shape.n_y, 1), max(shape.n_r, 1)
-    NLOG, NST, NCP, NCS = max(shape.n_log, 1), max(shape.n_stages, 1), max(shape.n_cp, 1), max(shape.n_cs, 1)
-    record, combination = _recorder(), CLASSIC if shape.method == CLASSIC_RK4 else SEQUENTIAL
-    sample, hold, advance, failing = _steps()
-    has_friction, start_friction, friction_at = friction
+    N, NU, NY, NR, NLOG, NST, NCP, NCS = _local_sizes(shape)
+    record, (sample, hold, advance, failing), load = _recorder(), _steps(), _thread_rows(N, NU)
+    rhs, step, sensor, actuator, (has_friction, start_friction, friction_at) = devices
 
-    @gpu.jit
-    def kernel(x0, params, C, picked, bounds, cp, cs, ref, ep, es, data, dist, dist_map, friction, rk_a, rk_b, rk_c,
-               dt, n_steps, n_u, recorded, record_friction, REC, LOGS, status, n_valid,
-               fail_index):  # pragma: no cover  # fmt: skip
+    @cuda_module.jit
+    def kernel(x0: FloatArray, params: FloatArray, C: FloatArray, picked: IntArray, bounds: FloatArray, cp: FloatArray,
+               cs: FloatArray, ref: FloatArray, ep: FloatArray, es: FloatArray, data: FloatArray, dist: FloatArray,
+               dist_map: IntArray, friction: FloatArray, rk_a: FloatArray, rk_b: FloatArray, rk_c: FloatArray,
+               dt: float, n_steps: int, n_u: int, recorded: IntArray, record_friction: bool, REC: FloatArray,
+               LOGS: FloatArray, status: IntArray, n_valid: IntArray,
+               fail_index: IntArray) -> None:  # pragma: no cover  # fmt: skip
         v = cuda_module.grid(1)
         if v >= x0.shape[0]:
             return
@@ -241,20 +263,10 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
         uc, logged, vid = local((NU, 1), float64), local((1, NLOG), float64), local(1, int64)
         cp_row, cs_row, bound = local((1, NCP), float64), local((1, NCS), float64), local((N, 1), float64)
         mode, direction, held, f_k = local(NU, int64), local(NU, float64), local(NU, float64), local((1, NU), float64)
-        for i in range(cp.shape[1]):  # the thread's rows, in its own memory
-            cp_row[0, i] = cp[v, i]
-        for i in range(cs.shape[1]):
-            cs_row[0, i] = cs[v, i]
-        for i in range(N):
-            x[i, 0] = x0[v, i]
-        for j in range(NU):
-            f_k[0, j] = 0.0
-        vid[0] = v
+        load(v, x0, cp, cs, bounds, x, cp_row, cs_row, bound, f_k, vid)  # the thread's rows, in its own memory
         pv = v if params.shape[1] > 1 else 0
         pc = params[:, pv : pv + 1]
-        bb, bd = (v if bounds.shape[0] > 1 else 0), (v if dist.shape[0] > 1 else 0)
-        for i in range(N):
-            bound[i, 0] = bounds[bb, i]
+        bd = v if dist.shape[0] > 1 else 0
         cpv, csv, logv = cp_row[:, : cp.shape[1]], cs_row[:, : cs.shape[1]], logged[:, : LOGS.shape[1]]
         yv, rv, uv, ucv = y[:, : C.shape[0]], r[:, : ref.shape[2]], u[:, :n_u], uc[:n_u, :]
         axes = friction[v if friction.shape[0] > 1 else 0]
@@ -298,12 +310,66 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
     return kernel
 
 
+def _local_sizes(shape: LoopShape) -> tuple[int, int, int, int, int, int, int, int]:
+    """The sizes of a thread's local arrays: states, inputs, outputs, references, logged values,
+    stages, controller parameters and controller states (each but the states at least 1)."""
+    return (
+        shape.n_x, max(shape.n_u, 1), max(shape.n_y, 1), max(shape.n_r, 1),
+        max(shape.n_log, 1), max(shape.n_stages, 1), max(shape.n_cp, 1), max(shape.n_cs, 1),
+    )  # fmt: skip
+
+
+@functools.cache
+def _thread_rows(n_x: int, n_u: int) -> Any:
+    """The device function that copies thread v's rows into its local memory: the controller's
+    parameters and state, the initial state and the state's bounds; no friction force yet."""
+
+    @cuda().jit(device=True)
+    def load(
+        v: int,
+        x0: FloatArray,
+        cp: FloatArray,
+        cs: FloatArray,
+        bounds: FloatArray,
+        x: FloatArray,
+        cp_row: FloatArray,
+        cs_row: FloatArray,
+        bound: FloatArray,
+        f_k: FloatArray,
+        vid: IntArray,
+    ) -> None:  # pragma: no cover - device
+        for i in range(cp.shape[1]):
+            cp_row[0, i] = cp[v, i]
+        for i in range(cs.shape[1]):
+            cs_row[0, i] = cs[v, i]
+        for i in range(n_x):
+            x[i, 0] = x0[v, i]
+        for j in range(n_u):
+            f_k[0, j] = 0.0
+        vid[0] = v
+        bb = v if bounds.shape[0] > 1 else 0
+        for i in range(n_x):
+            bound[i, 0] = bounds[bb, i]
+
+    return load
+
+
 @functools.cache
 def _recorder() -> Callable[..., Any]:
     """The device function that stores a thread's recorded signals of sample k."""
 
     @cuda().jit(device=True)
-    def record(recorded, REC, k, v, x, y, u, C, f_k):  # pragma: no cover - device
+    def record(
+        recorded: IntArray,
+        REC: FloatArray,
+        k: int,
+        v: int,
+        x: FloatArray,
+        y: FloatArray,
+        u: FloatArray,
+        C: FloatArray,
+        f_k: FloatArray,
+    ) -> None:  # pragma: no cover - device
         for q in range(recorded.shape[0]):
             kind, i = recorded[q, 0], recorded[q, 1]
             if kind == STATE:

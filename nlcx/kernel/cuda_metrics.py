@@ -18,6 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from nlcx.kernel.device import Retarget, cuda, kept
+from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.metrics.kernels import Timing
 from nlcx.metrics.sums import DEPTH
 
@@ -50,7 +51,16 @@ def _link(measure: Any, record: MeasuredRecord, rest: Any) -> Any:
     first, j, a, on_grid, t_step, shift, band, rise_low, rise_high, window, abs_tol = record.timing
 
     @cuda().jit(device=True)
-    def link(t, REC, REF, out, o, v, ranges, partial):  # pragma: no cover - device
+    def link(
+        t: FloatArray,
+        REC: FloatArray,
+        REF: FloatArray,
+        out: FloatArray,
+        o: int,
+        v: int,
+        ranges: IntArray,
+        partial: FloatArray,
+    ) -> None:  # pragma: no cover - device
         at = Timing(first, j, a, on_grid, t_step, shift, band, rise_low, rise_high, window, abs_tol)
         measure(kind, t, REC[:, q, v], REF[row], at, final, out, o, ranges, partial)
         rest(t, REC, REF, out, o + width, v, ranges, partial)
@@ -82,7 +92,16 @@ def _metrics_kernel(records: tuple[MeasuredRecord, ...]) -> Any:
     from numba import float64, int64
 
     @gpu.jit(device=True)
-    def done(t, REC, REF, out, o, v, ranges, partial):  # pragma: no cover - device
+    def done(
+        t: FloatArray,
+        REC: FloatArray,
+        REF: FloatArray,
+        out: FloatArray,
+        o: int,
+        v: int,
+        ranges: IntArray,
+        partial: FloatArray,
+    ) -> None:  # pragma: no cover - device
         return
 
     chain, measure = done, _measure()
@@ -90,7 +109,9 @@ def _metrics_kernel(records: tuple[MeasuredRecord, ...]) -> Any:
         chain = _link(measure, record, chain)
 
     @gpu.jit
-    def kernel(t, REC, REF, OUT, first):  # pragma: no cover - device
+    def kernel(
+        t: FloatArray, REC: FloatArray, REF: FloatArray, OUT: FloatArray, first: int
+    ) -> None:  # pragma: no cover - device
         v = cuda_module.grid(1)
         if v >= OUT.shape[0]:
             return

@@ -17,12 +17,16 @@ parameters of each axis are a :data:`FRICTION_AXIS` block; the configuration liv
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
 
+from nlcx.kernel.signatures import FloatArray, IntArray, RightHandSide
 from nlcx.layout import Layout
+
+if TYPE_CHECKING:
+    from nlcx.kernel.structures import FrictionScratch, OneColumn
 
 #: Friction parameters of one input's axis: model (FRICTION_NONE, _SIMPLE, _EXPONENTIAL),
 #: mu_s, mu_c, viscous coefficient eps (N s/m), normal force F_N (N), Stribeck velocity v_s
@@ -44,7 +48,16 @@ STUCK = 2
 
 
 @njit(cache=True, error_model="numpy")
-def _derivative(rhs, t, x, u, dist_row, dist_map, dx, one):  # pragma: no cover - compiled
+def _derivative(
+    rhs: RightHandSide,
+    t: float,
+    x: FloatArray,
+    u: FloatArray,
+    dist_row: FloatArray,
+    dist_map: IntArray,
+    dx: FloatArray,
+    one: OneColumn,
+) -> None:  # pragma: no cover - compiled
     """dx = f(t, x, u; p) + dist_map @ d for one variant (eqs. 2.13/2.15: d enters the
     state derivatives). ``one``: the variant as a batch of one column
     (:class:`~nlcx.kernel.structures.OneColumn`, :data:`nlcx.kernel.abi.RHS_SIG`); its p is set."""
@@ -64,7 +77,7 @@ def _derivative(rhs, t, x, u, dist_row, dist_map, dx, one):  # pragma: no cover 
 
 
 @njit(cache=True, error_model="numpy")
-def slip_friction(fric_row, v, direction):  # pragma: no cover - compiled
+def slip_friction(fric_row: FloatArray, v: float, direction: float) -> float:  # pragma: no cover - compiled
     """Friction while sliding in ``direction`` at velocity v (Appendix A).
 
     simple:      F = -mu_c F_N sgn - eps v
@@ -82,7 +95,7 @@ def slip_friction(fric_row, v, direction):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _solve_small(A, b, n):  # pragma: no cover - compiled
+def _solve_small(A: FloatArray, b: FloatArray, n: int) -> None:  # pragma: no cover - compiled
     """Solve A[:n, :n] z = b[:n] in place (Gaussian elimination, partial pivoting)."""
     for col in range(n):
         piv = col
@@ -106,7 +119,18 @@ def _solve_small(A, b, n):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def friction_forces(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, scratch):  # pragma: no cover - compiled
+def friction_forces(
+    rhs: RightHandSide,
+    t: float,
+    x: FloatArray,
+    u: FloatArray,
+    dist_row: FloatArray,
+    dist_map: IntArray,
+    fric_b: FloatArray,
+    mode: IntArray,
+    direction: FloatArray,
+    scratch: FrictionScratch,
+) -> None:  # pragma: no cover - compiled
     """Friction force on every input's axis at state x (written to ``scratch.f``; ``scratch``:
     a :class:`~nlcx.kernel.structures.FrictionScratch`).
 
@@ -157,7 +181,18 @@ def friction_forces(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, s
 
 
 @njit(cache=True, error_model="numpy")
-def update_friction_modes(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direction, scratch):  # pragma: no cover
+def update_friction_modes(
+    rhs: RightHandSide,
+    t: float,
+    x: FloatArray,
+    u: FloatArray,
+    dist_row: FloatArray,
+    dist_map: IntArray,
+    fric_b: FloatArray,
+    mode: IntArray,
+    direction: FloatArray,
+    scratch: FrictionScratch,
+) -> None:  # pragma: no cover
     """Breakaway at the start of a step: a stuck axis whose holding force would exceed
     mu_s F_N starts to slide in the direction of the net force (Appendix A's static case)."""
     f_tmp = scratch.f
@@ -174,7 +209,9 @@ def update_friction_modes(rhs, t, x, u, dist_row, dist_map, fric_b, mode, direct
 
 
 @njit(cache=True, error_model="numpy")
-def disturbance_at(drow, c, position, out):  # pragma: no cover - compiled
+def disturbance_at(
+    drow: FloatArray, c: FloatArray, position: float, out: FloatArray
+) -> None:  # pragma: no cover - compiled
     """d at fraction ``position`` of the step, interpolated linearly between the stage nodes c."""
     n_stage = c.shape[0]
     lo, hi = 0, 0
@@ -197,7 +234,7 @@ def any_friction(axes: Any) -> bool:
 
 
 @njit(cache=True, error_model="numpy")
-def has_friction(axes):  # pragma: no cover - compiled
+def has_friction(axes: FloatArray) -> bool:  # pragma: no cover - compiled
     """Whether any input's axis (rows of ``axes``, FRICTION_AXIS blocks) has a friction model."""
     for j in range(axes.shape[0]):  # noqa: SIM110 - compiled: numba has no any() over a generator
         if int(axes[j, FA.model]) != FRICTION_NONE:
@@ -206,7 +243,9 @@ def has_friction(axes):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def initial_modes(axes, x, mode, direction, hold):  # pragma: no cover - compiled
+def initial_modes(
+    axes: FloatArray, x: FloatArray, mode: IntArray, direction: FloatArray, hold: FloatArray
+) -> None:  # pragma: no cover - compiled
     """Mode of each axis at the start: stuck if its velocity is exactly zero, else sliding
     in the direction of the velocity; a stuck axis is held at its initial position."""
     for j in range(axes.shape[0]):

@@ -12,18 +12,41 @@ compiles it; the GPU compiles the same functions for a thread (:mod:`nlcx.kernel
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from numba import njit
 
 from nlcx.kernel.abi import Padding, shared_row
 from nlcx.kernel.friction import FA, SLIP, STUCK, disturbance_at, friction_forces, update_friction_modes
+from nlcx.kernel.signatures import FloatArray, IntArray, RightHandSide
 from nlcx.kernel.stepping import SEQUENTIAL, FrictionStage, rk_step
 from nlcx.kernel.structures import FRICTION_SAMPLE_SIG, FRICTION_STEP_SIG, FrictionPath
+
+if TYPE_CHECKING:
+    from nlcx.kernel.structures import FrictionScratch, FrictionWork, Integration, PlantForces, Records, Slots
 
 
 @njit(cache=True, error_model="numpy")
 def _step_part(
-    rhs, t, h, frac0, h_frac, x_in, x_out, u, dist, bd, kd, c, dist_map, axes, mode, direction, integration, scratch
-):  # pragma: no cover - compiled
+    rhs: RightHandSide,
+    t: float,
+    h: float,
+    frac0: float,
+    h_frac: float,
+    x_in: FloatArray,
+    x_out: FloatArray,
+    u: FloatArray,
+    dist: FloatArray,
+    bd: int,
+    kd: int,
+    c: FloatArray,
+    dist_map: IntArray,
+    axes: FloatArray,
+    mode: IntArray,
+    direction: FloatArray,
+    integration: Integration,
+    scratch: FrictionScratch,
+) -> None:  # pragma: no cover - compiled
     """One Runge-Kutta step of size h from x_in at t into x_out (columns (n, 1)) covering the
     fraction [frac0, frac0 + h_frac] of the sampling step, friction in every stage's input;
     the variant's disturbance is row (bd, kd) of ``dist``. (rk_step types its frictionless
@@ -37,8 +60,20 @@ def _step_part(
 
 @njit(cache=True, error_model="numpy")
 def step_with_friction(
-    rhs, t, work, dist, bd, kd, c, dist_map, fb, mode, direction, hold, integration
-):  # pragma: no cover - compiled
+    rhs: RightHandSide,
+    t: float,
+    work: FrictionWork,
+    dist: FloatArray,
+    bd: int,
+    kd: int,
+    c: FloatArray,
+    dist_map: IntArray,
+    fb: FloatArray,
+    mode: IntArray,
+    direction: FloatArray,
+    hold: FloatArray,
+    integration: Integration,
+) -> None:  # pragma: no cover - compiled
     """One sampling step of one variant with friction (Appendix A), its disturbance row (bd, kd)
     of ``dist``, from ``work.x`` held ``work.u`` into ``work.x_new`` (``work``: a
     :class:`~nlcx.kernel.structures.FrictionWork`, allocated once per kernel call): a sliding
@@ -81,7 +116,18 @@ def step_with_friction(
 
 
 @njit(cache=True, error_model="numpy")
-def frictional_sample(rhs, t, k, nb, n_free, slots, u, forces, work, records):  # pragma: no cover - compiled
+def frictional_sample(
+    rhs: RightHandSide,
+    t: float,
+    k: int,
+    nb: int,
+    n_free: int,
+    slots: Slots,
+    u: FloatArray,
+    forces: PlantForces,
+    work: FrictionWork,
+    records: Records,
+) -> None:  # pragma: no cover - compiled
     """Breakaway at t_k for the frictional variants (Appendix A's static case), and the friction
     force on each axis at t_k when it is recorded (the step evaluates its own). ``slots``: the
     working slots (:class:`~nlcx.kernel.structures.Slots`), u by rows."""
@@ -108,7 +154,7 @@ def frictional_sample(rhs, t, k, nb, n_free, slots, u, forces, work, records):  
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _disturbance_at_sample(drows, k):  # pragma: no cover - compiled
+def _disturbance_at_sample(drows: FloatArray, k: int) -> FloatArray:  # pragma: no cover - compiled
     """d at the sample t_k from one variant's stage table ``drows`` (steps, stages, n_d; one
     row when shared over time): the first stage of step k (c = 0, t_k), and at the final sample
     t_K, which begins no step, the last stage of the last step (t_K itself for RK4 and Heun,
@@ -118,7 +164,7 @@ def _disturbance_at_sample(drows, k):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def sample_stage(drows, k):  # pragma: no cover - compiled
+def sample_stage(drows: FloatArray, k: int) -> tuple[int, int]:  # pragma: no cover - compiled
     """(step, stage) of the row of ``drows`` that holds d at the sample t_k
     (:func:`_disturbance_at_sample`)."""
     if drows.shape[0] == 1:
@@ -129,7 +175,7 @@ def sample_stage(drows, k):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _load_one(b, slots, u, work):  # pragma: no cover - compiled
+def _load_one(b: int, slots: Slots, u: FloatArray, work: FrictionWork) -> None:  # pragma: no cover - compiled
     """Copy working slot b's state and plant parameters (columns b of ``slots.x`` and
     ``slots.p``) and its input (row b of u) into the one-variant work space."""
     for i in range(slots.x.shape[0]):
@@ -141,7 +187,20 @@ def _load_one(b, slots, u, work):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def frictional_step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c):  # pragma: no cover
+def frictional_step(
+    rhs: RightHandSide,
+    t: float,
+    kd: int,
+    nb: int,
+    n_free: int,
+    slots: Slots,
+    x_new: FloatArray,
+    u: FloatArray,
+    forces: PlantForces,
+    work: FrictionWork,
+    integration: Integration,
+    c: FloatArray,
+) -> None:  # pragma: no cover
     """One sampling step of each frictional variant, one at a time, into x_new (by columns)."""
     dist, dist_map = forces.dist, forces.dist_map
     for b in range(n_free, nb):
@@ -157,11 +216,35 @@ def frictional_step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integ
             x_new[i, b] = work.x_new[i, 0]
 
 
-def _no_frictional_sample(rhs, t, k, nb, n_free, slots, u, forces, work, records):  # pragma: no cover - compiled
+def _no_frictional_sample(
+    rhs: RightHandSide,
+    t: float,
+    k: int,
+    nb: int,
+    n_free: int,
+    slots: Slots,
+    u: FloatArray,
+    forces: PlantForces,
+    work: FrictionWork,
+    records: Records,
+) -> None:  # pragma: no cover - compiled
     return
 
 
-def _no_frictional_step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c):  # pragma: no cover
+def _no_frictional_step(
+    rhs: RightHandSide,
+    t: float,
+    kd: int,
+    nb: int,
+    n_free: int,
+    slots: Slots,
+    x_new: FloatArray,
+    u: FloatArray,
+    forces: PlantForces,
+    work: FrictionWork,
+    integration: Integration,
+    c: FloatArray,
+) -> None:  # pragma: no cover
     return
 
 

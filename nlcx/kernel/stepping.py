@@ -21,13 +21,17 @@ holds bit-identical to :func:`rk_step` with :data:`CLASSIC`.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numba import njit
 
 from nlcx.kernel.abi import shared_row
 from nlcx.kernel.friction import disturbance_at, friction_forces
+from nlcx.kernel.signatures import FloatArray, IntArray, RightHandSide
+
+if TYPE_CHECKING:
+    from nlcx.kernel.structures import FrictionScratch
 
 #: How :func:`rk_step` adds up its stages: a running sum x + h b_1 k_1 + h b_2 k_2 + ... (any
 #: tableau; the steps of variants with friction), or the classic RK4's
@@ -36,7 +40,7 @@ SEQUENTIAL, CLASSIC = 0, 1
 
 
 @njit(cache=True, error_model="numpy")
-def stage_nodes(rk_a):  # pragma: no cover - compiled
+def stage_nodes(rk_a: FloatArray) -> FloatArray:  # pragma: no cover - compiled
     """c_i = sum_j a_ij: the stage times t_k + c_i dt."""
     n_stage = rk_a.shape[0]
     c = np.zeros(n_stage)
@@ -47,7 +51,7 @@ def stage_nodes(rk_a):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def output_picks(C):  # pragma: no cover - compiled
+def output_picks(C: FloatArray) -> IntArray:  # pragma: no cover - compiled
     """picked[i] = j where row i of C is the unit vector e_j (y_i = x_j exactly), else -1."""
     n_y, n = C.shape
     picked = np.full(n_y, -1)
@@ -64,7 +68,19 @@ def output_picks(C):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def sample_signals(nb, vid, x, xrow, C, picked, y, ref, kr, r, u):  # pragma: no cover - compiled
+def sample_signals(
+    nb: int,
+    vid: IntArray,
+    x: FloatArray,
+    xrow: FloatArray,
+    C: FloatArray,
+    picked: IntArray,
+    y: FloatArray,
+    ref: FloatArray,
+    kr: int,
+    r: FloatArray,
+    u: FloatArray,
+) -> None:  # pragma: no cover - compiled
     """At t_k, for the first nb variants: x_k (columns of x) into the controller's rows xrow,
     y_k = C x_k (a row of C that selects one state copies it), r_k (sample kr of each
     variant's references, rows ``ref``), u cleared."""
@@ -88,7 +104,7 @@ def sample_signals(nb, vid, x, xrow, C, picked, y, ref, kr, r, u):  # pragma: no
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def hold_input(b, u, uc):  # pragma: no cover - compiled
+def hold_input(b: int, u: FloatArray, uc: FloatArray) -> int:  # pragma: no cover - compiled
     """Hold row b of the input u_k over the step (column b of uc, the plant's); the first input
     that is not finite, or -1."""
     bad = -1
@@ -100,7 +116,7 @@ def hold_input(b, u, uc):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def first_failing_state(x, b, bounds):  # pragma: no cover - compiled
+def first_failing_state(x: FloatArray, b: int, bounds: FloatArray) -> int:  # pragma: no cover - compiled
     """The first state of column b of x that is not finite or past its bound (column b of
     ``bounds``), or -1."""
     for i in range(x.shape[0]):
@@ -110,7 +126,9 @@ def first_failing_state(x, b, bounds):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def add_disturbances(dx, nb, dist, vid, kd, stage, dist_map):  # pragma: no cover - compiled
+def add_disturbances(
+    dx: FloatArray, nb: int, dist: FloatArray, vid: IntArray, kd: int, stage: int, dist_map: IntArray
+) -> None:  # pragma: no cover - compiled
     """dx[:, b] += dist_map @ d for the first nb columns, d the disturbance of column b's
     variant at step kd and ``stage`` (eqs. 2.13/2.15: d enters the state derivatives)."""
     n_d = dist.shape[3]
@@ -127,8 +145,26 @@ def add_disturbances(dx, nb, dist, vid, kd, stage, dist_map):  # pragma: no cove
 
 @njit(cache=True, error_model="numpy")
 def rk_step(
-    rhs, t, h, nb, x, x_out, u, p, ks, xs, rk_a, rk_b, c, combination, dist, vid, kd, dist_map, friction
-):  # pragma: no cover - compiled
+    rhs: RightHandSide,
+    t: float,
+    h: float,
+    nb: int,
+    x: FloatArray,
+    x_out: FloatArray,
+    u: FloatArray,
+    p: FloatArray,
+    ks: FloatArray,
+    xs: FloatArray,
+    rk_a: FloatArray,
+    rk_b: FloatArray,
+    c: FloatArray,
+    combination: int,
+    dist: FloatArray,
+    vid: IntArray,
+    kd: int,
+    dist_map: IntArray,
+    friction: FrictionStage | None,
+) -> None:  # pragma: no cover - compiled
     """One explicit Runge-Kutta step of size h from x at t into x_out, for the first nb columns,
     the input u held: the stages
 
@@ -181,11 +217,22 @@ class FrictionStage(NamedTuple):
     axes: np.ndarray
     mode: np.ndarray
     direction: np.ndarray
-    scratch: object
+    scratch: FrictionScratch
 
 
 @njit(cache=True, error_model="numpy")
-def frictional_stage(rhs, ts, s, xs, u, p, dx, c, dist_map, friction):  # pragma: no cover - compiled
+def frictional_stage(
+    rhs: RightHandSide,
+    ts: float,
+    s: int,
+    xs: FloatArray,
+    u: FloatArray,
+    p: FloatArray,
+    dx: FloatArray,
+    c: FloatArray,
+    dist_map: IntArray,
+    friction: FrictionStage,
+) -> None:  # pragma: no cover - compiled
     """k_s = f(ts, xs, u + F(xs); p) + dist_map d_s of one variant with friction (column 0 of xs,
     dx and the held input u): F the friction forces at the stage's state
     (:func:`~nlcx.kernel.friction.friction_forces`), d_s the disturbance at the stage node of a

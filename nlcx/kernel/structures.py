@@ -45,6 +45,7 @@ from nlcx.kernel.abi import (
     FunctionTable,
     RhsFn,
 )
+from nlcx.kernel.signatures import ControllerStep, RightHandSide
 
 IMAT = types.int64[:, ::1]
 BVEC = types.boolean[::1]
@@ -151,7 +152,7 @@ class PlantCall(NamedTuple):
     x0 (B, n), parameters p (B|1, n_p), output matrix C (n_y, n) and bounds (B|1, n):
     |x_i| > bounds[i] stops a run."""
 
-    rhs: Any
+    rhs: RightHandSide
     x0: np.ndarray
     p: np.ndarray
     C: np.ndarray
@@ -163,7 +164,7 @@ class ControllerCall(NamedTuple):
     (:func:`~nlcx.kernel.abi.callback_slots`), parameters cp (B, n_cp), initial state
     cs0 (B, n_cs) and references ref (B|1, K+1|1, n_r) at the sampling instants."""
 
-    step: Any
+    step: ControllerStep
     callbacks: FunctionTable
     cp: np.ndarray
     cs0: np.ndarray

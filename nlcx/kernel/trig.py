@@ -26,6 +26,7 @@ import math
 from numba import njit
 
 from nlcx._numba_compat import hot_njit
+from nlcx.kernel.signatures import FloatArray
 
 #: Batches of at least this many variants take :func:`sincos_column`; smaller ones call
 #: :func:`sincos` per variant. Below it the column's fixed costs (its work array, and no full
@@ -61,7 +62,7 @@ C6 = -1.13596475577881948265e-11
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _kernel_sin(x, y):  # pragma: no cover - compiled
+def _kernel_sin(x: float, y: float) -> float:  # pragma: no cover - compiled
     """sin(x + y) for |x| <= pi/4, y the tail of x (msun k_sin.c)."""
     z = x * x
     w = z * z
@@ -71,7 +72,7 @@ def _kernel_sin(x, y):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _kernel_cos(x, y):  # pragma: no cover - compiled
+def _kernel_cos(x: float, y: float) -> float:  # pragma: no cover - compiled
     """cos(x + y) for |x| <= pi/4, y the tail of x (msun k_cos.c)."""
     z = x * x
     w = z * z
@@ -82,7 +83,7 @@ def _kernel_cos(x, y):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _sincos_of(x, y0, y1, n):  # pragma: no cover - compiled
+def _sincos_of(x: float, y0: float, y1: float, n: int) -> tuple[float, float]:  # pragma: no cover - compiled
     """(sin x, cos x) from the reduction x = n pi/2 + (y0 + y1), n mod 4 the quadrant."""
     s = _kernel_sin(y0, y1)
     c = _kernel_cos(y0, y1)
@@ -96,7 +97,7 @@ def _sincos_of(x, y0, y1, n):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _sincos_reduced(x):  # pragma: no cover - compiled
+def _sincos_reduced(x: float) -> tuple[float, float]:  # pragma: no cover - compiled
     """(sin x, cos x) for |x| <= :data:`REDUCTION_LIMIT` in branch-free arithmetic (the
     module docstring); the caller sends larger or non-finite x to libm."""
     fn = math.floor(x * INV_PIO2 + 0.5)
@@ -110,7 +111,9 @@ def _sincos_reduced(x):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, error_model="numpy")
-def sincos_column(angles, nb, sines, cosines):  # pragma: no cover - compiled
+def sincos_column(
+    angles: FloatArray, nb: int, sines: FloatArray, cosines: FloatArray
+) -> None:  # pragma: no cover - compiled
     """sines[b] = sin angles[b], cosines[b] = cos angles[b] for the first nb angles.
 
     The three are contiguous (an angle's row of a plant's (n, B) state, and two rows of its
@@ -127,7 +130,7 @@ def sincos_column(angles, nb, sines, cosines):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def sincos(x):  # pragma: no cover - compiled
+def sincos(x: float) -> tuple[float, float]:  # pragma: no cover - compiled
     """(sin x, cos x) of one angle, the same bits as :func:`sincos_column` gives it.
 
     Below :data:`NO_REDUCTION` the reduction is skipped: there it yields n = 0, y0 = x and

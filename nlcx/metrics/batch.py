@@ -8,9 +8,12 @@ The work space of the pairwise sums is made once per call.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
+from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.metrics.kernels import (
     error_integrals,
     input_effort,
@@ -22,15 +25,26 @@ from nlcx.metrics.kernels import (
 )
 from nlcx.metrics.sums import DEPTH
 
+if TYPE_CHECKING:
+    from nlcx.metrics.kernels import Timing
+
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _stack():  # pragma: no cover - compiled
+def _stack() -> tuple[IntArray, FloatArray]:  # pragma: no cover - compiled
     """The pairwise sums' work space (:func:`nlcx.metrics.sums.stack`)."""
     return np.zeros((DEPTH, 3), dtype=np.int64), np.zeros((DEPTH, 3))
 
 
 @njit(cache=True, error_model="numpy")
-def step_response_rows(t, Y, m, initial, has_initial, final, out):  # pragma: no cover - compiled
+def step_response_rows(
+    t: FloatArray,
+    Y: FloatArray,
+    m: Timing,
+    initial: FloatArray,
+    has_initial: bool,
+    final: FloatArray,
+    out: FloatArray,
+) -> None:  # pragma: no cover - compiled
     """:func:`~nlcx.metrics.kernels.step_response` of every row (initial: y(t_step) unless given)."""
     ranges, partial = _stack()
     for b in range(Y.shape[0]):
@@ -40,7 +54,16 @@ def step_response_rows(t, Y, m, initial, has_initial, final, out):  # pragma: no
 
 
 @njit(cache=True, error_model="numpy")
-def step_info_rows(t, Y, m, initial, has_initial, final, has_final, out):  # pragma: no cover - compiled
+def step_info_rows(
+    t: FloatArray,
+    Y: FloatArray,
+    m: Timing,
+    initial: FloatArray,
+    has_initial: bool,
+    final: FloatArray,
+    has_final: bool,
+    out: FloatArray,
+) -> None:  # pragma: no cover - compiled
     """:func:`~nlcx.metrics.kernels.step_info` of every row (initial: y(t_step), final: the
     row's last sample, unless given)."""
     for b in range(Y.shape[0]):
@@ -51,7 +74,9 @@ def step_info_rows(t, Y, m, initial, has_initial, final, has_final, out):  # pra
 
 
 @njit(cache=True, error_model="numpy")
-def regulation_rows(t, Y, m, reference, out):  # pragma: no cover - compiled
+def regulation_rows(
+    t: FloatArray, Y: FloatArray, m: Timing, reference: FloatArray, out: FloatArray
+) -> None:  # pragma: no cover - compiled
     """:func:`~nlcx.metrics.kernels.regulation` of every row."""
     ranges, partial = _stack()
     for b in range(Y.shape[0]):
@@ -59,7 +84,9 @@ def regulation_rows(t, Y, m, reference, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def error_integral_rows(t, E, first, start, out):  # pragma: no cover - compiled
+def error_integral_rows(
+    t: FloatArray, E: FloatArray, first: int, start: float, out: FloatArray
+) -> None:  # pragma: no cover - compiled
     """:func:`~nlcx.metrics.kernels.error_integrals` of every row of errors E (e = E - 0, the
     same bits)."""
     ranges, partial = _stack()
@@ -69,7 +96,7 @@ def error_integral_rows(t, E, first, start, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def input_rows(t, U, out):  # pragma: no cover - compiled
+def input_rows(t: FloatArray, U: FloatArray, out: FloatArray) -> None:  # pragma: no cover - compiled
     """:func:`~nlcx.metrics.kernels.input_effort` of every row."""
     ranges, partial = _stack()
     for b in range(U.shape[0]):
@@ -77,7 +104,16 @@ def input_rows(t, U, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def measure_rows(kind, t, Y, R, rows, m, final, out):  # pragma: no cover - compiled
+def measure_rows(
+    kind: int,
+    t: FloatArray,
+    Y: FloatArray,
+    R: FloatArray,
+    rows: IntArray,
+    m: Timing,
+    final: float,
+    out: FloatArray,
+) -> None:  # pragma: no cover - compiled
     """:func:`~nlcx.metrics.kernels.measure` of the rows ``rows`` of Y (row rows[k] into
     out[k]) against the reference rows R (one row shared by all, or one a row of Y)."""
     ranges, partial = _stack()

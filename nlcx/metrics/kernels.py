@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.metrics.scans import (
     deviation_peak,
     extremes,
@@ -83,14 +84,16 @@ def timing(
 
 
 @njit(cache=True, error_model="numpy")
-def value_at_step(y, m):  # pragma: no cover - compiled
+def value_at_step(y: FloatArray, m: Timing) -> float:  # pragma: no cover - compiled
     """y(t_step): sample j, or interpolated linearly between samples j and j+1."""
     j = m.j
     return y[j] if m.on_grid else y[j] + m.a * (y[j + 1] - y[j])
 
 
 @njit(cache=True, error_model="numpy")
-def window_mean(t, y, first, window, ranges, partial):  # pragma: no cover - compiled
+def window_mean(
+    t: FloatArray, y: FloatArray, first: int, window: float, ranges: IntArray, partial: FloatArray
+) -> float:  # pragma: no cover - compiled
     """Time-weighted (trapezoidal) mean of the row from ``first`` over [t_end - window, t_end],
     y interpolated linearly at the window's start; the whole considered record if it is shorter."""
     n = y.shape[0]
@@ -108,7 +111,9 @@ def window_mean(t, y, first, window, ranges, partial):  # pragma: no cover - com
 
 
 @njit(cache=True, error_model="numpy")
-def _step_core(t, y, m, initial, final, out, o):  # pragma: no cover - compiled
+def _step_core(
+    t: FloatArray, y: FloatArray, m: Timing, initial: float, final: float, out: FloatArray, o: int
+) -> tuple[bool, float, int, int]:  # pragma: no cover - compiled
     """Rise time, settling time, overshoot and undershoot of a step initial -> final into
     out[o:o+4] (NaN where final == initial); returns (final != initial, the time and index of
     the upper rise level, the first peak of s*y)."""
@@ -129,7 +134,17 @@ def _step_core(t, y, m, initial, final, out, o):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def step_response(t, y, m, initial, final, out, o, ranges, partial):  # pragma: no cover - compiled
+def step_response(
+    t: FloatArray,
+    y: FloatArray,
+    m: Timing,
+    initial: float,
+    final: float,
+    out: FloatArray,
+    o: int,
+    ranges: IntArray,
+    partial: FloatArray,
+) -> None:  # pragma: no cover - compiled
     """:func:`nlcx.metrics.step_response_metrics` of the row: rise time, settling time,
     overshoot, undershoot, peak, peak time (the step's metrics NaN where final == initial) and
     the steady-state error final - mean(y) over the window."""
@@ -141,7 +156,9 @@ def step_response(t, y, m, initial, final, out, o, ranges, partial):  # pragma: 
 
 
 @njit(cache=True, error_model="numpy")
-def step_info(t, y, m, initial, final, out, o):  # pragma: no cover - compiled
+def step_info(
+    t: FloatArray, y: FloatArray, m: Timing, initial: float, final: float, out: FloatArray, o: int
+) -> None:  # pragma: no cover - compiled
     """:func:`nlcx.metrics.step_info` of the row against ``final``: rise time, settling time,
     overshoot, undershoot, peak max |y| and its time, the steady-state value and the settling
     range (the extremes of y from the upper rise level on, and of final)."""
@@ -162,7 +179,9 @@ def step_info(t, y, m, initial, final, out, o):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _shift_event_times(out, settling, peak_time, shift):  # pragma: no cover - compiled
+def _shift_event_times(
+    out: FloatArray, settling: int, peak_time: int, shift: float
+) -> None:  # pragma: no cover - compiled
     """The event times measured from the origin: tau + (t_step - origin) (:func:`nlcx.metrics.measured_from`)."""
     if shift != 0.0:
         out[settling] = out[settling] + shift
@@ -170,7 +189,16 @@ def _shift_event_times(out, settling, peak_time, shift):  # pragma: no cover - c
 
 
 @njit(cache=True, error_model="numpy")
-def regulation(t, y, m, reference, out, o, ranges, partial):  # pragma: no cover - compiled
+def regulation(
+    t: FloatArray,
+    y: FloatArray,
+    m: Timing,
+    reference: float,
+    out: FloatArray,
+    o: int,
+    ranges: IntArray,
+    partial: FloatArray,
+) -> None:  # pragma: no cover - compiled
     """:func:`nlcx.metrics.regulation_metrics` of the row held at ``reference``, over the whole
     record: peak deviation, its time, the settling time (band max(band * peak, abs_tol)) and
     the steady-state error."""
@@ -183,7 +211,17 @@ def regulation(t, y, m, reference, out, o, ranges, partial):  # pragma: no cover
 
 
 @njit(cache=True, error_model="numpy")
-def error_integrals(t, y, ref, first, start, out, o, ranges, partial):  # pragma: no cover - compiled
+def error_integrals(
+    t: FloatArray,
+    y: FloatArray,
+    ref: FloatArray,
+    first: int,
+    start: float,
+    out: FloatArray,
+    o: int,
+    ranges: IntArray,
+    partial: FloatArray,
+) -> None:  # pragma: no cover - compiled
     """:func:`nlcx.metrics.error_integrals` of e = ref - y from sample ``first``: ISE, IAE,
     ITAE (time from ``start``), max |e| and the RMS error sqrt(ISE / duration)."""
     n = y.shape[0]
@@ -203,7 +241,9 @@ def error_integrals(t, y, ref, first, start, out, o, ranges, partial):  # pragma
 
 
 @njit(cache=True, error_model="numpy")
-def input_effort(t, u, out, o, ranges, partial):  # pragma: no cover - compiled
+def input_effort(
+    t: FloatArray, u: FloatArray, out: FloatArray, o: int, ranges: IntArray, partial: FloatArray
+) -> None:  # pragma: no cover - compiled
     """:func:`nlcx.metrics.input_metrics` of the row: the effort (integral of u^2), max |u| and
     the total variation sum |u_k - u_{k-1}|."""
     effort, variation, _ = pairwise_sums(INPUT, t, u, u, 0.0, 0, u.shape[0] - 1, ranges, partial)
@@ -213,7 +253,18 @@ def input_effort(t, u, out, o, ranges, partial):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def measure(kind, t, y, ref, m, final, out, o, ranges, partial):  # pragma: no cover - compiled
+def measure(
+    kind: int,
+    t: FloatArray,
+    y: FloatArray,
+    ref: FloatArray,
+    m: Timing,
+    final: float,
+    out: FloatArray,
+    o: int,
+    ranges: IntArray,
+    partial: FloatArray,
+) -> None:  # pragma: no cover - compiled
     """The metric values of one measured signal of a run (``kind``: :data:`STEP`, ...), in
     the order of :data:`nlcx.metrics.names.MEASURED`: a step response (from y(t_step) to
     ``final``) or a regulation to ``final``, each followed by the error integrals of

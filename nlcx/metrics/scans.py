@@ -18,9 +18,11 @@ import math
 
 from numba import njit
 
+from nlcx.kernel.signatures import FloatArray
+
 
 @njit(cache=True, error_model="numpy")
-def clip01(x):  # pragma: no cover - compiled
+def clip01(x: float) -> float:  # pragma: no cover - compiled
     """np.clip(x, 0, 1): NaN stays NaN, -0.0 stays -0.0."""
     if x < 0.0:
         return 0.0
@@ -30,7 +32,7 @@ def clip01(x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def sign(x):  # pragma: no cover - compiled
+def sign(x: float) -> float:  # pragma: no cover - compiled
     """np.sign(x): -1, 0 or 1, NaN for NaN."""
     if x > 0.0:
         return 1.0
@@ -42,7 +44,7 @@ def sign(x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def np_maximum(a, b):  # pragma: no cover - compiled
+def np_maximum(a: float, b: float) -> float:  # pragma: no cover - compiled
     """np.maximum(a, b): NaN if either is NaN, else a where a > b, else b (of two equal
     values, +0.0 and -0.0 among them, numpy returns the second)."""
     if a != a:
@@ -53,7 +55,7 @@ def np_maximum(a, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def np_minimum(a, b):  # pragma: no cover - compiled
+def np_minimum(a: float, b: float) -> float:  # pragma: no cover - compiled
     """np.minimum(a, b): NaN if either is NaN, else a where a < b, else b."""
     if a != a:
         return a
@@ -63,7 +65,7 @@ def np_minimum(a, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def search_right(t, first, value):  # pragma: no cover - compiled
+def search_right(t: FloatArray, first: int, value: float) -> int:  # pragma: no cover - compiled
     """np.searchsorted(t, value, side="right") over t[first:], as an index of t: the first
     sample after ``value`` (len(t) if none), by bisection."""
     lo, hi = first, t.shape[0]
@@ -77,7 +79,9 @@ def search_right(t, first, value):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def first_crossing(t, y, first, t0, s, s_level):  # pragma: no cover - compiled
+def first_crossing(
+    t: FloatArray, y: FloatArray, first: int, t0: float, s: float, s_level: float
+) -> tuple[float, int]:  # pragma: no cover - compiled
     """(time from t0, index from ``first``) of the first sample with s*y >= s_level (s: the
     sign of the step, so s*(y - level) >= 0): tau of ``first`` if that sample satisfies it,
     otherwise interpolated linearly between the last sample before and the first one that
@@ -95,7 +99,9 @@ def first_crossing(t, y, first, t0, s, s_level):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def last_exit(t, y, first, t0, center, band):  # pragma: no cover - compiled
+def last_exit(
+    t: FloatArray, y: FloatArray, first: int, t0: float, center: float, band: float
+) -> float:  # pragma: no cover - compiled
     """Time from t0 of the last exit of the row from |y - center| <= band (the last-exit rule).
 
     With k the last sample where |y_k - center| > band: none gives 0, k the last sample gives
@@ -118,7 +124,9 @@ def last_exit(t, y, first, t0, center, band):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def extremes(y, first, s, s_final, s_initial):  # pragma: no cover - compiled
+def extremes(
+    y: FloatArray, first: int, s: float, s_final: float, s_initial: float
+) -> tuple[float, float, int]:  # pragma: no cover - compiled
     """(max(s*y - s_final), max(s_initial - s*y), index of the first maximum of s*y) over the
     row from ``first``: each maximum NaN if a term is NaN (np.max), the index that of the first
     maximum or the first NaN (np.argmax)."""
@@ -140,7 +148,7 @@ def extremes(y, first, s, s_final, s_initial):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def deviation_peak(y, first, center):  # pragma: no cover - compiled
+def deviation_peak(y: FloatArray, first: int, center: float) -> int:  # pragma: no cover - compiled
     """The index of the first largest |y - center| from ``first``, or of the first NaN (np.argmax)."""
     best, at = abs(y[first] - center), first
     if best != best:
@@ -155,7 +163,7 @@ def deviation_peak(y, first, center):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def max_abs(y, first):  # pragma: no cover - compiled
+def max_abs(y: FloatArray, first: int) -> float:  # pragma: no cover - compiled
     """max |y| over the row from ``first``, NaN if it holds a NaN (np.max)."""
     m = -math.inf
     for i in range(first, y.shape[0]):

@@ -182,6 +182,17 @@ def step_info(
     >>> float(info["overshoot"])
     0.0
     """
+    out, squeeze = _step_info_table(t, y, reference, t_step, y_initial, settling_band, rise_limits)
+    result = by_name(out, STEP_INFO_METRICS, squeeze)
+    return {k: float(v) for k, v in result.items()} if squeeze else result
+
+
+def _step_info_table(
+    t: ArrayLike, y: ArrayLike, reference: ArrayLike | None, t_step: float, y_initial: ArrayLike | None,
+    settling_band: float, rise_limits: tuple[float, float],
+) -> tuple[np.ndarray, bool]:  # fmt: skip
+    """:func:`step_info`'s arguments checked and measured: one row of :data:`STEP_INFO_METRICS`
+    per response, and whether ``y`` was one response (1-D)."""
     t_arr, y2, squeeze = prepare(t, y, "y")
     n_rows = y2.shape[0]
     limits = check_rise_limits(rise_limits)
@@ -190,8 +201,7 @@ def step_info(
     final, has_final = _optional_rows(reference, n_rows, "reference")
     out = np.empty((n_rows, len(STEP_INFO_METRICS)))
     step_info_rows(t_arr, y2, g, start, has_initial, final, has_final, out)
-    result = by_name(out, STEP_INFO_METRICS, squeeze)
-    return {k: float(v) for k, v in result.items()} if squeeze else result
+    return out, squeeze
 
 
 def measured_from(values: MetricDict, t_step: float, origin: float) -> MetricDict:

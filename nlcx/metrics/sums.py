@@ -23,6 +23,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from nlcx.kernel.signatures import FloatArray, IntArray, Sums
+
 ERRORS, TRAPEZOID, INPUT = 0, 1, 2
 #: Terms numpy adds one by one, and the most it adds in eight partial sums.
 _UNROLL, _BLOCK = 8, 128
@@ -36,7 +38,9 @@ def stack() -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _terms(kind, t, y, ref, start, k):  # pragma: no cover - compiled
+def _terms(
+    kind: int, t: FloatArray, y: FloatArray, ref: FloatArray, start: float, k: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """The terms of sample pair (k, k+1) for ``kind`` (module docstring); unused ones 0."""
     dt = t[k + 1] - t[k]
     if kind == ERRORS:
@@ -51,7 +55,9 @@ def _terms(kind, t, y, ref, start, k):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _block_sums(kind, t, y, ref, start, lo, n):  # pragma: no cover - compiled
+def _block_sums(
+    kind: int, t: FloatArray, y: FloatArray, ref: FloatArray, start: float, lo: int, n: int
+) -> Sums:  # pragma: no cover - compiled
     """The sums of the terms lo .. lo+n-1 (n <= 128) as numpy adds a block: one by one below
     eight terms, else in eight interleaved partial sums ((r0 + r1) + (r2 + r3)) + ((r4 + r5) +
     (r6 + r7)) and the rest one by one."""
@@ -105,14 +111,24 @@ def _block_sums(kind, t, y, ref, start, lo, n):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _left_half(n):  # pragma: no cover - compiled
+def _left_half(n: int) -> int:  # pragma: no cover - compiled
     """The terms of the first half of a range numpy splits: n/2, down to a multiple of eight."""
     half = n // 2
     return half - half % _UNROLL
 
 
 @njit(cache=True, error_model="numpy")
-def pairwise_sums(kind, t, y, ref, start, lo, n, ranges, partial):  # pragma: no cover - compiled
+def pairwise_sums(
+    kind: int,
+    t: FloatArray,
+    y: FloatArray,
+    ref: FloatArray,
+    start: float,
+    lo: int,
+    n: int,
+    ranges: IntArray,
+    partial: FloatArray,
+) -> Sums:  # pragma: no cover - compiled
     """The sums of the terms lo .. lo+n-1 of ``kind`` (the module docstring), each as
     ``np.sum`` adds the array of its terms (an empty sum is 0). ``ranges`` and ``partial`` are
     the work space (:func:`stack`): a range waiting for its halves holds (first term, number of

@@ -19,6 +19,7 @@ import numpy as np
 from pydantic import Field
 
 from nlcx._numba_compat import hot_njit
+from nlcx.kernel.signatures import FloatArray
 from nlcx.layout import Layout
 from nlcx.plants.base import PlantModel, PlantParams, Signal
 
@@ -37,7 +38,9 @@ K = PARAMS.at
 
 
 @hot_njit(cache=True, error_model="numpy")
-def cstr_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+def cstr_rhs(
+    t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray, nb: int
+) -> None:  # pragma: no cover - compiled
     """Eqs. 5.1-5.2 for each of the first nb columns (variants) b: p[:, b] a :data:`PARAMS`
     block, u[:, b] = (F/V,)."""
     for b in range(nb):

@@ -19,13 +19,16 @@ import numpy as np
 from nlcx import registry
 from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import FloatArray
 from nlcx.plants.base import Plant, PlantModel, PlantParams, Signal, divergence_bounds, initial_state
 
 __all__ = ["LTIPlant", "from_control", "lti_rhs"]
 
 
 @hot_njit(cache=True, error_model="numpy")
-def lti_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+def lti_rhs(
+    t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray, nb: int
+) -> None:  # pragma: no cover - compiled
     """dx/dt = A x + B u for each of the first nb columns (variants) b: p[:, b] holds A row by
     row (n x n), then B row by row (n x m)."""
     n, m = x.shape[0], u.shape[0]

@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 from pydantic import Field
 
+from nlcx.kernel.signatures import FloatArray, VariantEquations
 from nlcx.layout import Layout
 from nlcx.plants.base import PlantModel, PlantParams, Signal
 
@@ -77,7 +78,9 @@ PARAMS = Layout("pendulum", ("M", "m", "l", "g"))
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def by_variant(equations, t, x, u, p, dx, nb):  # pragma: no cover - compiled
+def by_variant(
+    equations: VariantEquations, t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray, nb: int
+) -> None:  # pragma: no cover - compiled
     """A right-hand side (:data:`nlcx.kernel.abi.RHS_SIG`) from ``equations(t, x, u, p, dx)``
     written for one variant's 1-D vectors, as the printed equations are. For each of the first
     nb columns b, column b of x, u and p is copied into vectors (one allocation per call, no

@@ -243,6 +243,22 @@ def plant(
     >>> bool(abs(result.trajectory("pid")["x"].iloc[-1] - 1.0) < 0.01)
     True
     """
+    return _registrar(name, states, inputs, outputs, params, bounds, loop_inputs, velocity_states, replace)
+
+
+def _registrar(
+    name: str,
+    states: Mapping[str, SignalSpec] | Sequence[str],
+    inputs: Mapping[str, SignalSpec] | Sequence[str],
+    outputs: Sequence[str] | None,
+    params: Mapping[str, ParamSpec] | None,
+    bounds: Mapping[str, float] | None,
+    loop_inputs: Mapping[str, str] | None,
+    velocity_states: Sequence[str],
+    replace: bool,
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """The decorator of :func:`plant`: the declaration (names, outputs, loop inputs) checked
+    before ``f`` is seen, then ``f`` registered with it."""
     declared = _declared(name, states, inputs, outputs, params)
     out_names = _outputs(declared, velocity_states, bounds)
     loops = _loop_inputs(declared, out_names, loop_inputs)

@@ -8,6 +8,7 @@ import numpy as np
 from pydantic import Field, field_validator, model_validator
 
 from nlcx._numba_compat import hot_njit
+from nlcx.kernel.signatures import FloatArray
 from nlcx.plants.base import (
     Plant,
     PlantModel,
@@ -47,7 +48,9 @@ class TransferFunctionParams(PlantParams):
 
 
 @hot_njit(cache=True, error_model="numpy")
-def companion_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+def companion_rhs(
+    t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray, nb: int
+) -> None:  # pragma: no cover - compiled
     """Controllable canonical form for each of the first nb columns (variants) b:
     x_i' = x_{i+1}, x_n' = -sum_j a_j x_{j+1} + u, p[:, b] = a_0..a_{n-1}."""
     n = x.shape[0]

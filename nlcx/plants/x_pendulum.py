@@ -17,6 +17,7 @@ from types import MappingProxyType
 from numba import njit
 
 from nlcx._numba_compat import hot_njit
+from nlcx.kernel.signatures import FloatArray
 from nlcx.kernel.trig import COLUMN_ROWS, sincos, sincos_column
 from nlcx.plants.generated.pendulums import x_derived_rhs, x_energy
 from nlcx.plants.pendulum import (
@@ -36,7 +37,9 @@ class XPendulumParams(PendulumParams):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _x_printed_column(b, x, u, p, dx, s, c):  # pragma: no cover - compiled
+def _x_printed_column(
+    b: int, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray, s: float, c: float
+) -> None:  # pragma: no cover - compiled
     """Eqs. 2.8-2.11 as printed for column (variant) b: p[:, b] = (M, m, l, g), u[:, b] = (F_x,),
     s and c the sine and cosine of its theta."""
     M, m, l, g = p[P.M, b], p[P.m, b], p[P.l, b], p[P.g, b]
@@ -50,7 +53,9 @@ def _x_printed_column(b, x, u, p, dx, s, c):  # pragma: no cover - compiled
 
 
 @hot_njit(cache=True, error_model="numpy")
-def x_pendulum_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+def x_pendulum_rhs(
+    t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray, nb: int
+) -> None:  # pragma: no cover - compiled
     """Eqs. 2.8-2.11 as printed, for each of the first nb columns (variants) of x.
 
     sin and cos of theta from nlcx.kernel.trig as for the derived equations: for the whole

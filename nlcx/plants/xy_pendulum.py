@@ -16,6 +16,7 @@ from types import MappingProxyType
 
 from numba import njit
 
+from nlcx.kernel.signatures import FloatArray
 from nlcx.kernel.trig import sincos
 from nlcx.plants.generated.pendulums import xy_derived_rhs, xy_energy
 from nlcx.plants.pendulum import (
@@ -31,7 +32,9 @@ P = PARAMS.at
 
 
 @njit(cache=True, error_model="numpy")
-def _xy_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
+def _xy_printed_row(
+    t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray
+) -> None:  # pragma: no cover - compiled
     """Eqs. 3.11-3.18 transcribed literally (typos included), p = (M, m, l, g), u = (F_x, F_y)."""
     M, m, l, g = p[P.M], p[P.m], p[P.l], p[P.g]
     F_x, F_y = u[0], u[1]
@@ -81,7 +84,9 @@ def _xy_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def xy_printed_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+def xy_printed_rhs(
+    t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray, nb: int
+) -> None:  # pragma: no cover - compiled
     """The printed equations for each of the first nb columns (variants) b of x (one variant:
     :func:`_xy_printed_row`)."""
     by_variant(_xy_printed_row, t, x, u, p, dx, nb)

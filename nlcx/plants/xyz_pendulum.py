@@ -17,6 +17,7 @@ from types import MappingProxyType
 
 from numba import njit
 
+from nlcx.kernel.signatures import FloatArray
 from nlcx.kernel.trig import sincos
 from nlcx.plants.generated.pendulums import xyz_derived_rhs, xyz_energy
 from nlcx.plants.pendulum import (
@@ -32,7 +33,9 @@ P = PARAMS.at
 
 
 @njit(cache=True, error_model="numpy")
-def _xyz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
+def _xyz_printed_row(
+    t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray
+) -> None:  # pragma: no cover - compiled
     """Eqs. 4.18-4.27 transcribed literally (typos included), p = (M, m, l, g), u = (F_x, F_y, F_z).
 
     Eq. 4.21 writes sin(theta) for sin(x7); eq. 4.25 has x9^2 where x10^2 is expected.
@@ -101,7 +104,9 @@ def _xyz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def xyz_printed_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+def xyz_printed_rhs(
+    t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray, nb: int
+) -> None:  # pragma: no cover - compiled
     """The printed equations for each of the first nb columns (variants) b of x (one variant:
     :func:`_xyz_printed_row`)."""
     by_variant(_xyz_printed_row, t, x, u, p, dx, nb)

@@ -17,6 +17,7 @@ from types import MappingProxyType
 
 from numba import njit
 
+from nlcx.kernel.signatures import FloatArray
 from nlcx.kernel.trig import sincos
 from nlcx.plants.generated.pendulums import xz_derived_rhs, xz_energy
 from nlcx.plants.pendulum import (
@@ -32,7 +33,9 @@ P = PARAMS.at
 
 
 @njit(cache=True, error_model="numpy")
-def _xz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
+def _xz_printed_row(
+    t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray
+) -> None:  # pragma: no cover - compiled
     """Eqs. 3.42-3.47 transcribed literally (typos included), p = (M, m, l, g), u = (F_x, F_z).
 
     The printed equations write theta and theta_dot for x5 and x6.
@@ -54,7 +57,9 @@ def _xz_printed_row(t, x, u, p, dx):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def xz_printed_rhs(t, x, u, p, dx, nb):  # pragma: no cover - compiled
+def xz_printed_rhs(
+    t: float, x: FloatArray, u: FloatArray, p: FloatArray, dx: FloatArray, nb: int
+) -> None:  # pragma: no cover - compiled
     """The printed equations for each of the first nb columns (variants) b of x (one variant:
     :func:`_xz_printed_row`)."""
     by_variant(_xz_printed_row, t, x, u, p, dx, nb)

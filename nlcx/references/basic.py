@@ -10,7 +10,7 @@ from pydantic import Field
 from nlcx.references.base import ReferenceConfig, ReferenceModel, SignalPlan
 
 
-class ConstantConfig(ReferenceConfig):
+class ConstantReferenceConfig(ReferenceConfig):
     kind: Literal["constant"] = Field(
         "constant", description="registered name of this reference; selects the model that validates this section"
     )
@@ -56,15 +56,15 @@ class SineConfig(ReferenceConfig):
     offset: float = Field(0.0, description="constant added to the sine, in the signal's unit")
 
 
-class Constant(ReferenceModel):
+class ConstantReference(ReferenceModel):
     """r(t) = value; the signal is regulated (default for outputs without a reference)."""
 
-    Config = ConstantConfig
+    Config = ConstantReferenceConfig
 
-    def values(self, cfg: ConstantConfig, t: np.ndarray) -> np.ndarray:
+    def values(self, cfg: ConstantReferenceConfig, t: np.ndarray) -> np.ndarray:
         return np.full(t.shape, cfg.value)
 
-    def signal_plan(self, cfg: ConstantConfig) -> SignalPlan:
+    def signal_plan(self, cfg: ConstantReferenceConfig) -> SignalPlan:
         return SignalPlan("regulation", final=cfg.value)
 
 

@@ -87,7 +87,7 @@ def target_cells(target: Target) -> pd.DataFrame:
     return rows[["signal", "metric", "value"]].reset_index(drop=True)
 
 
-class Objective:
+class CalibrationObjective:
     """Loss of a batch of candidates (rows of X); picklable for a process pool."""
 
     def __init__(self, base_raw: dict[str, Any], spec: CalibrationSpec) -> None:
@@ -146,7 +146,7 @@ def calibrate(
     spec = load_spec(path, overrides)
     base_path = (path.parent / spec.base).resolve()
     base_raw = cfg.read_config(base_path)
-    objective = Objective(base_raw, spec)
+    objective = CalibrationObjective(base_raw, spec)
     cfg.build(objective.candidate_config(np.array([np.mean(b) for b in spec.parameters.values()])))
     lower = np.array([b[0] for b in spec.parameters.values()])
     upper = np.array([b[1] for b in spec.parameters.values()])

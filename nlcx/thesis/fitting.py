@@ -3,7 +3,7 @@
 The pieces every identification study shares (:mod:`nlcx.thesis.identify`, the lockstep fits of
 :mod:`nlcx.thesis.lockstep`, the consistency study): each table's experiment with candidate values
 and a hypothesis applied (:class:`TableRuns`), our value of each thesis cell (:func:`measure_cells`),
-the train loss a GA minimises (:func:`train_loss`, :class:`Objective`), a fitted hypothesis's
+the train loss a GA minimises (:func:`train_loss`, :class:`FitObjective`), a fitted hypothesis's
 summary and fit table (:func:`search`, :func:`fitted`) and its scores per part (:func:`scores`).
 """
 
@@ -22,6 +22,7 @@ from nlcx import config as cfg
 from nlcx import engine, report
 from nlcx.engine.gpu import Ensemble
 from nlcx.engine.metric_rows import MetricColumns
+from nlcx.engine.results import ExperimentResult
 from nlcx.thesis import catalog, hypotheses, packed_cells, profiles
 from nlcx.thesis.tables import lookup_value, rows_lookup
 from nlcx.tuning.optimise import OptimResult
@@ -84,7 +85,7 @@ def measure_cells(
     return cell_values(engine.evaluate(exps, record_logs=False), cells, len(candidates))
 
 
-def cell_values(results: list[engine.Result], cells: pd.DataFrame, n_candidates: int) -> np.ndarray:
+def cell_values(results: list[ExperimentResult], cells: pd.DataFrame, n_candidates: int) -> np.ndarray:
     """The cells (rows) of each candidate (columns) from the results of its tables' experiments
     (candidate-major, tables in the order of ``cells``)."""
     tables = list(dict.fromkeys(cells.table))
@@ -113,7 +114,7 @@ def train_loss(ours: np.ndarray, cells: pd.DataFrame) -> np.ndarray:
     return np.mean(residual**2, axis=0)
 
 
-class Objective:
+class FitObjective:
     """Train loss of a population (rows of X: the free values of ``box``, in its order): packed into
     each table whose free values land in its arrays as themselves (:mod:`nlcx.thesis.packed_cells`),
     built candidate by candidate elsewhere (:func:`measure_cells`); the same cells bit for bit."""
@@ -201,7 +202,7 @@ class Search(NamedTuple):
     """A hypothesis's GA search: its objective, the box [lower, upper] of its free values (in the
     objective's order) and the rows seeding its first population (None: drawn at random)."""
 
-    objective: Objective
+    objective: FitObjective
     lower: np.ndarray
     upper: np.ndarray
     start: np.ndarray | None
@@ -219,10 +220,10 @@ def search(
     train = cells[cells.part == "train"].reset_index(drop=True)
     lower, upper = (np.array([b[i] for b in bounds.values()]) for i in (0, 1))
     seed = None if start is None else np.array([[{**start, **hyp.neutral()}[k] for k in keys]])
-    return Search(Objective(root, hyp, bounds, train, device, runs), lower, upper, seed)
+    return Search(FitObjective(root, hyp, bounds, train, device, runs), lower, upper, seed)
 
 
-def fitted_values(objective: Objective, result: OptimResult) -> dict[str, float]:
+def fitted_values(objective: FitObjective, result: OptimResult) -> dict[str, float]:
     """The GA's best candidate as the free values by key."""
     return dict(zip(objective.keys, map(float, result.x), strict=True))
 

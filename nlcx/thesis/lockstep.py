@@ -27,7 +27,7 @@ import pandas as pd
 
 from nlcx.engine.gpu import ensembles_metrics
 from nlcx.thesis import hypotheses
-from nlcx.thesis.fitting import Objective, Search, TableRuns, fitted, fitted_values, measure_fits, search
+from nlcx.thesis.fitting import FitObjective, Search, TableRuns, fitted, fitted_values, measure_fits, search
 from nlcx.tuning.optimise import GASettings, OptimResult, evolution
 
 #: Fitted hypotheses measured on every table in one pipeline call (their trajectories come back
@@ -75,7 +75,7 @@ def evolve_together(searches: list[Search], settings: GASettings) -> list[OptimR
     return [results[k] for k in range(len(searches))]
 
 
-def generation_losses(objectives: list[Objective], populations: list[np.ndarray]) -> list[np.ndarray]:
+def generation_losses(objectives: list[FitObjective], populations: list[np.ndarray]) -> list[np.ndarray]:
     """The train loss of each population under its objective, every packed table's ensemble of
     every population simulated and measured in one call (on the GPU: together)."""
     ensembles = [o.ensembles(X) for o, X in zip(objectives, populations, strict=True)]

@@ -32,7 +32,7 @@ def metric_lookup(metrics: pd.DataFrame) -> dict[tuple[str, str, str], float]:
 
 def rows_lookup(rows: Iterable[Sequence[Any]]) -> dict[tuple[str, str, str], float]:
     """:func:`metric_lookup` of metric rows that start (controller, signal, metric, value), as
-    :attr:`nlcx.engine.Result.metric_rows` gives them without building a DataFrame (a missing
+    :attr:`nlcx.engine.results.ExperimentResult.metric_rows` gives them without building a DataFrame (a missing
     value is NaN, as in the frame)."""
     out: dict[tuple[str, str, str], float] = {}
     for controller, signal, metric, value, *_ in rows:

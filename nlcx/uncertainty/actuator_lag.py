@@ -19,6 +19,7 @@ from pydantic import Field
 
 from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.layout import Layout
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
@@ -42,7 +43,19 @@ class ActuatorLagConfig(UncertaintyConfig):
 
 
 @hot_njit(cache=True, error_model="numpy")
-def first_order_lag(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
+def first_order_lag(
+    t: float,
+    dt: float,
+    k: int,
+    signal: FloatArray,
+    vid: IntArray,
+    ep: FloatArray,
+    es: FloatArray,
+    data: FloatArray,
+    p_off: int,
+    s_off: int,
+    d_off: int,
+) -> None:  # pragma: no cover - compiled
     """v = v + alpha (u - v) on every lagged input of every row; u becomes v."""
     for b in range(signal.shape[0]):
         v_id = vid[b]

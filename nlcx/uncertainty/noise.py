@@ -17,6 +17,7 @@ from pydantic import Field
 
 from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
 
@@ -83,7 +84,19 @@ class Noise(UncertaintyModel):
 
 
 @hot_njit(cache=True, error_model="numpy")
-def add_samples(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
+def add_samples(
+    t: float,
+    dt: float,
+    k: int,
+    signal: FloatArray,
+    vid: IntArray,
+    ep: FloatArray,
+    es: FloatArray,
+    data: FloatArray,
+    p_off: int,
+    s_off: int,
+    d_off: int,
+) -> None:  # pragma: no cover - compiled
     """signal[b, j] += data[variant of b, k, d_off + j]: a sampled sequence added to every
     channel of the signal (the noise sample of each output or input at t_k)."""
     kk = k if data.shape[1] > 1 else 0

@@ -45,7 +45,7 @@ from matplotlib.figure import Figure
 from nlcx.drawing import new_figure
 from nlcx.thesis import cstr
 from nlcx.thesis.catalog import FigureSpec, TableSpec
-from nlcx.thesis.claims.checks import KINDS, Check, Run
+from nlcx.thesis.claims.checks import KINDS, Check, ClaimRun
 from nlcx.thesis.claims.table import CHAPTER_PLANTS, Claim, ClaimTable, Threshold, claim_table, parse, thesis_runs
 
 __all__ = [
@@ -53,8 +53,8 @@ __all__ = [
     "KINDS",
     "Check",
     "Claim",
+    "ClaimRun",
     "ClaimTable",
-    "Run",
     "Threshold",
     "claim_table",
     "claims_for",
@@ -78,7 +78,7 @@ def configs_for(root: Path, chapters: set[int]) -> list[Path]:
     return list(dict.fromkeys(root / config for ref in refs for config in thesis_runs()[ref].configs))
 
 
-def judge(claim: Claim, runs: Mapping[str, Run], table: ClaimTable) -> tuple[str, str]:
+def judge(claim: Claim, runs: Mapping[str, ClaimRun], table: ClaimTable) -> tuple[str, str]:
     """(reproduced, evidence) of one claim on the runs of the thesis tables and figures it reads
     (``runs``: reference -> run): yes when every check holds, partly when some do (no for an
     ``all_or_nothing`` claim), no when none; the evidence of the checks it shows."""
@@ -91,7 +91,7 @@ def judge(claim: Claim, runs: Mapping[str, Run], table: ClaimTable) -> tuple[str
     return verdict, " | ".join(text for check, (_, text) in zip(claim.checks, results, strict=True) if check.shown)
 
 
-def _runs(root: Path, records: Mapping[Path, Any]) -> dict[str, Run]:
+def _runs(root: Path, records: Mapping[Path, Any]) -> dict[str, ClaimRun]:
     """Every thesis table and figure the claims read whose runs are all among ``records``."""
     runs = {}
     for ref, spec in thesis_runs().items():
@@ -99,9 +99,9 @@ def _runs(root: Path, records: Mapping[Path, Any]) -> dict[str, Run]:
         if not all(config in records for config in configs):
             continue
         if isinstance(spec, TableSpec):  # Table 5.8: our values, one run per tuning method
-            runs[ref] = Run(ref, "none", cstr.method_values(records, root))
+            runs[ref] = ClaimRun(ref, "none", cstr.method_values(records, root))
         else:
-            runs[ref] = Run(ref, spec.uncertainty, records[configs[0]])
+            runs[ref] = ClaimRun(ref, spec.uncertainty, records[configs[0]])
     return runs
 
 

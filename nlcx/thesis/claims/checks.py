@@ -1,6 +1,6 @@
 """The kinds of check a claim is made of: one evaluator each, registered by name in :data:`KINDS`.
 
-A check reads cells of the runs behind thesis figures and tables (a :class:`Run` each): the
+A check reads cells of the runs behind thesis figures and tables (a :class:`ClaimRun` each): the
 ``metric`` of each of its ``signals`` under each of its ``controllers``. Its evaluator says
 whether it holds and gives the numbers it looked at (the evidence). The limits it compares
 against are named thresholds of the claims table, handed over by the role the kind gives
@@ -71,7 +71,7 @@ class Check:
 
 
 @dataclass(frozen=True)
-class Run:
+class ClaimRun:
     """The run behind one thesis table or figure, as a check reads it.
 
     ``record`` is what the reproduction keeps of the run (:class:`nlcx.thesis.reproduce.Record`:
@@ -87,7 +87,7 @@ class Run:
 
 
 Outcome = tuple[bool, str]
-Evaluator = Callable[[Check, Sequence[Run], Mapping[str, float]], Outcome]
+Evaluator = Callable[[Check, Sequence[ClaimRun], Mapping[str, float]], Outcome]
 
 
 @dataclass(frozen=True)
@@ -155,7 +155,7 @@ def _joined(outcomes: Sequence[Outcome]) -> Outcome:
     return all(ok for ok, _ in outcomes), "; ".join(text for _, text in outcomes)
 
 
-def _pairs(check: Check, run: Run) -> list[tuple[str, float, float]]:
+def _pairs(check: Check, run: ClaimRun) -> list[tuple[str, float, float]]:
     """(signal, conventional's value, proposed's value) of the check's metric on each signal."""
     return [
         (
@@ -167,7 +167,7 @@ def _pairs(check: Check, run: Run) -> list[tuple[str, float, float]]:
     ]
 
 
-def _versus(check: Check, run: Run, holds: Callable[[float, float], bool]) -> Outcome:
+def _versus(check: Check, run: ClaimRun, holds: Callable[[float, float], bool]) -> Outcome:
     """``holds(conventional, proposed)`` on every signal; evidence "Mp x: conv 0.5 vs prop 0.33"."""
     return _joined(
         [
@@ -178,35 +178,35 @@ def _versus(check: Check, run: Run, holds: Callable[[float, float], bool]) -> Ou
 
 
 @kind("proposed_lower")
-def proposed_lower(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def proposed_lower(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The tables' "improvement": the proposed controller's ``metric`` is below the conventional
     one's on every signal (a lower M_p, t_r, t_s, undershoot)."""
     return _versus(check, runs[0], lambda c, p: p < c)
 
 
 @kind("proposed_higher")
-def proposed_higher(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def proposed_higher(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The tables' "deterioration": the proposed controller's ``metric`` is above the
     conventional one's on every signal (a longer rise time)."""
     return _versus(check, runs[0], lambda c, p: p > c)
 
 
 @kind("proposed_zero", thresholds=("limit",))
-def proposed_zero(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def proposed_zero(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The thesis's "overshoot reduced to zero": the proposed controller's ``metric`` is at most
     ``limit`` on every signal (the conventional value shown beside it)."""
     return _versus(check, runs[0], lambda c, p: p <= limits["limit"])
 
 
 @kind("less_chattering", mode="", metric="total_variation")
-def less_chattering(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def less_chattering(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The thesis's "less chattering" with noise in the controllers: every input force of the
     proposed controller has a lower total variation sum |F_k - F_(k-1)| than the conventional
     one's (the two runs see the same noise)."""
     return _joined([(p < c, f"TV({f}): conv {fmt(c)} N vs prop {fmt(p)} N") for f, c, p in _pairs(check, runs[0])])
 
 
-def _bounded(run: Run, controller: str, signals: Sequence[str], limit: float) -> Outcome:
+def _bounded(run: ClaimRun, controller: str, signals: Sequence[str], limit: float) -> Outcome:
     """Whether the controller's run neither diverged nor took a position beyond +-``limit``."""
     record = run.record
     if record.status[controller] != "ok":
@@ -217,21 +217,21 @@ def _bounded(run: Run, controller: str, signals: Sequence[str], limit: float) ->
 
 
 @kind("bounded", controllers=None, metric="max_abs", thresholds=("limit",))
-def bounded(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def bounded(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The thesis's "stable", "satisfactory" response: each controller's run neither diverged (the
     run's status) nor took a position beyond +-``limit``."""
     return _joined([_bounded(runs[0], c, check.signals, limits["limit"]) for c in check.controllers])
 
 
 @kind("unbounded", controllers=None, metric="max_abs", thresholds=("limit",))
-def unbounded(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def unbounded(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The thesis's "unbounded", "unstable" response: each controller's run diverged or took a
     position beyond +-``limit``."""
     outcomes = [_bounded(runs[0], c, check.signals, limits["limit"]) for c in check.controllers]
     return _joined([(not ok, text) for ok, text in outcomes])
 
 
-def _oscillation(run: Run, controller: str, signals: Sequence[str], limit: float) -> tuple[bool | None, str]:
+def _oscillation(run: ClaimRun, controller: str, signals: Sequence[str], limit: float) -> tuple[bool | None, str]:
     """Whether a position of the controller's run still moves more than ``limit`` peak to peak
     over the last 5 s (None if the run failed)."""
     status = run.record.status[controller]
@@ -242,7 +242,7 @@ def _oscillation(run: Run, controller: str, signals: Sequence[str], limit: float
 
 
 @kind("oscillatory", controllers=None, metric="tail_ptp", thresholds=("limit",))
-def oscillatory(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def oscillatory(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The thesis's "oscillatory response": each controller's run completed and a position still
     moves more than ``limit`` peak to peak over its last 5 s."""
     outcomes = [_oscillation(runs[0], c, check.signals, limits["limit"]) for c in check.controllers]
@@ -250,7 +250,7 @@ def oscillatory(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) 
 
 
 @kind("not_oscillatory", controllers=None, metric="tail_ptp", thresholds=("limit",))
-def not_oscillatory(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def not_oscillatory(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The thesis's "almost perfect control": each controller's run completed and no position moves
     more than ``limit`` peak to peak over its last 5 s."""
     outcomes = [_oscillation(runs[0], c, check.signals, limits["limit"]) for c in check.controllers]
@@ -258,7 +258,7 @@ def not_oscillatory(check: Check, runs: Sequence[Run], limits: Mapping[str, floa
 
 
 @kind("zero_ess", controllers=None, metric="ess", thresholds=("tolerance",))
-def zero_ess(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def zero_ess(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The thesis's "zero steady-state error": each controller's run completed with |e_ss| at most
     ``tolerance`` on every signal (positions, per unit step)."""
     record = runs[0].record
@@ -272,7 +272,7 @@ def zero_ess(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> 
     return _joined(outcomes)
 
 
-def _tracking(run: Run, controller: str, signals: Sequence[str], fraction: float) -> tuple[bool | None, str]:
+def _tracking(run: ClaimRun, controller: str, signals: Sequence[str], fraction: float) -> tuple[bool | None, str]:
     """Whether the controller's RMS tracking error over the last 5 s is at most ``fraction`` of
     the sine's amplitude on every signal (None if the run failed)."""
     status = run.record.status[controller]
@@ -284,7 +284,7 @@ def _tracking(run: Run, controller: str, signals: Sequence[str], fraction: float
 
 
 @kind("tracks", mode="tracking", controllers=None, metric="tail_rms_error", thresholds=("fraction",))
-def tracks(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def tracks(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The thesis's "good reference tracking": each controller's run completed with an RMS tracking
     error over the last 5 s of at most ``fraction`` of the sine's amplitude on every signal."""
     outcomes = [_tracking(runs[0], c, check.signals, limits["fraction"]) for c in check.controllers]
@@ -292,7 +292,7 @@ def tracks(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Ou
 
 
 @kind("fails_to_track", mode="tracking", controllers=None, metric="tail_rms_error", thresholds=("fraction",))
-def fails_to_track(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def fails_to_track(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The thesis's "fails to respond": each controller's run failed, or its RMS tracking error
     over the last 5 s exceeds ``fraction`` of the sine's amplitude on some signal."""
     outcomes = [_tracking(runs[0], c, check.signals, limits["fraction"]) for c in check.controllers]
@@ -300,7 +300,7 @@ def fails_to_track(check: Check, runs: Sequence[Run], limits: Mapping[str, float
 
 
 @kind("better_tracking", mode="tracking", metric="tail_rms_error")
-def better_tracking(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def better_tracking(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The thesis's "better reference tracking": the proposed controller's largest RMS tracking
     error over the last 5 s is below the conventional one's (a failed run's counts as infinite)."""
     run = runs[0]
@@ -315,7 +315,7 @@ def better_tracking(check: Check, runs: Sequence[Run], limits: Mapping[str, floa
     )
 
 
-def _lyapunov(run: Run, controller: str, limits: Mapping[str, float]) -> Outcome:
+def _lyapunov(run: ClaimRun, controller: str, limits: Mapping[str, float]) -> Outcome:
     """V̇ of one controller's run against sum F v, and its decay over the final window."""
     if controller not in run.record.lyapunov:
         return False, f"{controller} run unavailable"
@@ -329,14 +329,14 @@ def _lyapunov(run: Run, controller: str, limits: Mapping[str, float]) -> Outcome
 
 
 @kind("lyapunov", controllers=None, metric="", signals=False, thresholds=("agreement", "decay", "window"))
-def lyapunov(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def lyapunov(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """Theorems 2.1-4.1: along each controller's nominal run, V̇ from the trajectory equals the
     input power sum F v (max deviation below ``agreement`` of max |V̇|), and V̇ tends to zero
     (max |V̇| over the final ``window`` s below ``decay`` of its peak)."""
     return _joined([_lyapunov(runs[0], c, limits) for c in check.controllers])
 
 
-def _schedules(check: Check, runs: Sequence[Run], error_lower: bool) -> Outcome:
+def _schedules(check: Check, runs: Sequence[ClaimRun], error_lower: bool) -> Outcome:
     """The proposed controller's ``metric`` under error-AGS (runs[1]) against time-AGS (runs[0])."""
     outcomes = []
     for s in check.signals:
@@ -347,14 +347,14 @@ def _schedules(check: Check, runs: Sequence[Run], error_lower: bool) -> Outcome:
 
 
 @kind("error_ags_lower", schedules=("time", "error"), controllers=("proposed",))
-def error_ags_lower(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def error_ags_lower(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The chapters' comparative study: the proposed controller's ``metric`` is lower under
     error-AGS (the second run) than under time-AGS (the first) on every signal."""
     return _schedules(check, runs, error_lower=True)
 
 
 @kind("time_ags_lower", schedules=("time", "error"), controllers=("proposed",))
-def time_ags_lower(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def time_ags_lower(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The chapters' comparative study: the proposed controller's ``metric`` is lower under
     time-AGS (the first run) than under error-AGS (the second) on every signal."""
     return _schedules(check, runs, error_lower=False)
@@ -370,7 +370,7 @@ READS_TABLE_5_8 = {"reads": "Table 5.8", "mode": "", "controllers": None, "choic
 
 
 @kind("method_lower", metrics=tuple(TABLE_5_8_LABELS), rivals=True, **READS_TABLE_5_8)
-def method_lower(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def method_lower(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """Table 5.8's comparisons ("the rise time which is less in case of ZN", "the best
     performance in terms of settling time ... given by ANFIS"): each of the check's methods has
     a lower value in the ``metric`` column than each method it is compared with (``than``); a
@@ -381,7 +381,7 @@ def method_lower(check: Check, runs: Sequence[Run], limits: Mapping[str, float])
 
 
 @kind("method_zero_ess", metric="ess", thresholds=("tolerance",), **READS_TABLE_5_8)
-def method_zero_ess(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def method_zero_ess(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """Table 5.8's zero steady-state errors: each of the check's methods has |e_ss| at most
     ``tolerance`` (the CSTR's step is a unit step). The evidence lists the column."""
     values = runs[0].record
@@ -390,7 +390,7 @@ def method_zero_ess(check: Check, runs: Sequence[Run], limits: Mapping[str, floa
 
 
 @kind("method_no_overshoot", metric="Mp_percent", thresholds=("limit",), **READS_TABLE_5_8)
-def method_no_overshoot(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def method_no_overshoot(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """Section 5.4.4's "zero maximum overshoot": each of the check's methods has an M_p (in %, as
     Table 5.8 prints it) of at most ``limit``, an overshoot fraction."""
     values = runs[0].record
@@ -403,7 +403,7 @@ def method_no_overshoot(check: Check, runs: Sequence[Run], limits: Mapping[str, 
 
 
 @kind("method_inverse_response", metric="inverse_response_percent", thresholds=("limit",), **READS_TABLE_5_8)
-def method_inverse_response(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def method_inverse_response(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """The "inverse response behavior ... due to RHP zero": each of the check's methods' step
     response first moves the wrong way by more than ``limit`` % of the step (our undershoot)."""
     values = runs[0].record
@@ -416,7 +416,7 @@ def method_inverse_response(check: Check, runs: Sequence[Run], limits: Mapping[s
 
 
 @kind("hinf_lower", reads="Fig. 5.19", mode="", controllers=("h2", "hinf"), metrics=("ise", "control_effort"))
-def hinf_lower(check: Check, runs: Sequence[Run], limits: Mapping[str, float]) -> Outcome:
+def hinf_lower(check: Check, runs: Sequence[ClaimRun], limits: Mapping[str, float]) -> Outcome:
     """Section 5.5's "improvement in the steady state tracking performance ... with minimum
     control effort": the H∞ preview controller's ``metric`` (ISE, or the control effort, the
     integral of u²) is below the H2 one's on every signal."""

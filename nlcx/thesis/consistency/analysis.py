@@ -102,7 +102,7 @@ def nearest_miss(ev: Evidence, subset: tuple[int, ...]) -> tuple[float, int]:
 
 
 def analyse(
-    spec: ConsistencySpec, store: Store, families: dict[Column, Family], rules: tolerances.Tolerances
+    spec: ConsistencySpec, store: Store, families: dict[Column, Family], rules: tolerances.ReproductionTolerances
 ) -> pd.DataFrame:
     """columns.csv, cells.csv, subsets.csv, summary.json and consistency.png from the stored loops."""
     columns, cell_rows, subset_rows, clouds, summary = [], [], [], {}, []

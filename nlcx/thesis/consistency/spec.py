@@ -127,7 +127,9 @@ def printed_interval(text: str, rel: float, zero_decimals: int | None = None) ->
     return value - half, value + half
 
 
-def with_intervals(cells: pd.DataFrame, rules: tolerances.Tolerances, zero_decimals: int | None) -> pd.DataFrame:
+def with_intervals(
+    cells: pd.DataFrame, rules: tolerances.ReproductionTolerances, zero_decimals: int | None
+) -> pd.DataFrame:
     """``cells`` with the interval each printed text covers (``lower``, ``upper``;
     :func:`printed_interval`), widened by the relative tolerance of its metric in
     tolerances.yaml (``cells.by_metric``, a measured response's; its absolute tolerance is the

@@ -24,7 +24,7 @@ from nlcx.pages.kinds import ReportPage
 from nlcx.thesis import catalog
 from nlcx.thesis.pages import bars
 from nlcx.thesis.pages.tables import TableComparison, compare
-from nlcx.thesis.pages.tolerances import Tolerances
+from nlcx.thesis.pages.tolerances import ReproductionTolerances
 from nlcx.thesis.pages.tolerances import load as load_tolerances
 
 CITATION = (
@@ -134,7 +134,7 @@ def deviations(directory: Path, repo: Path | None) -> dict[str, list[dict[str, A
 
 def context(directory: Path, configs: Path, repo: Path | None) -> dict[str, Any]:
     """Everything the reproduction page shows."""
-    tolerances: Tolerances = load_tolerances(configs / "tolerances.yaml")
+    tolerances: ReproductionTolerances = load_tolerances(configs / "tolerances.yaml")
     tables: list[TableComparison] = compare(directory, tolerances)
     claim_rows = claims(directory)
     figures = gallery(directory, configs)

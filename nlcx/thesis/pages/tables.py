@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from nlcx.thesis.pages.tolerances import Tolerances
+from nlcx.thesis.pages.tolerances import ReproductionTolerances
 
 #: Columns that name a cell (the first present is its metric for the tolerance).
 METRIC_COLUMNS = ("metric", "parameter")
@@ -70,7 +70,7 @@ def _number(value: object) -> float:
         return math.nan
 
 
-def cells_of(frame: pd.DataFrame, tolerances: Tolerances) -> list[Cell]:
+def cells_of(frame: pd.DataFrame, tolerances: ReproductionTolerances) -> list[Cell]:
     """Every (thesis, nlcx) cell of a table CSV, judged by its metric's tolerance."""
     cells = []
     pairs = [c.removeprefix("thesis_") for c in frame.columns if c.startswith("thesis_") and f"nlcx_{c[7:]}" in frame]
@@ -88,7 +88,7 @@ def cells_of(frame: pd.DataFrame, tolerances: Tolerances) -> list[Cell]:
     return cells
 
 
-def compare(directory: Path, tolerances: Tolerances) -> list[TableComparison]:
+def compare(directory: Path, tolerances: ReproductionTolerances) -> list[TableComparison]:
     """Every table of ``directory/tables`` in thesis order, its cells judged."""
     out = []
     for path in sorted((directory / "tables").glob("*.csv"), key=_order):

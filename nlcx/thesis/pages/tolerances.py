@@ -41,7 +41,7 @@ class CellRules(BaseModel):
     by_metric: dict[str, Tolerance] = Field(default_factory=dict)
 
 
-class Tolerances(BaseModel):
+class ReproductionTolerances(BaseModel):
     model_config = ConfigDict(extra="forbid")
     table: TableRule
     cells: CellRules
@@ -57,5 +57,5 @@ class Tolerances(BaseModel):
         return "reproduced" if share >= self.table.reproduced else "partly" if share >= self.table.partly else "not"
 
 
-def load(path: Path) -> Tolerances:
-    return validate_model(Tolerances, safe_yaml.load_file(path) or {}, "tolerances")
+def load(path: Path) -> ReproductionTolerances:
+    return validate_model(ReproductionTolerances, safe_yaml.load_file(path) or {}, "tolerances")
