@@ -43,7 +43,7 @@ from nlcx.analysis.linear import (
     pole_counts,
     poles_table,
 )
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.limits import MAX_POINTS, check_count
 
 if TYPE_CHECKING:
@@ -225,7 +225,8 @@ def _chosen(exp: Experiment, controller: str | None) -> PluginSection:
     if controller is not None:
         section = next((c for c in exp.controllers if c.label == controller), None)
         if section is None:
-            raise ConfigError("controller", controller, f"not a controller of {exp.name}; allowed: {', '.join(labels)}")
+            problem = f"not a controller of {exp.name}{did_you_mean(controller, labels)}"
+            raise ConfigError("controller", controller, f"{problem}; allowed: {', '.join(labels)}")
         if not (_is_pid(section) or _is_law(section)):
             raise ConfigError(
                 f"controllers.{controller}.kind", section.kind, "linearize analyses PID controllers (pid) and control "

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
 import math
 from pathlib import Path
 from typing import Annotated
@@ -25,7 +24,7 @@ from nlcx.cli.metric_files import (
     signals_of,
     source_of,
 )
-from nlcx.errors import NlcxError
+from nlcx.errors import NlcxError, did_you_mean
 from nlcx.terminal import echo
 
 
@@ -236,7 +235,8 @@ def metrics_command(
     frame = read_frame(file)
     columns = list(frame.columns)
     if time_column not in columns:
-        raise metrics_error("--time", time_column, f"not a column of {file.name}", name_list(columns))
+        problem = f"not a column of {file.name}{did_you_mean(time_column, columns)}"
+        raise metrics_error("--time", time_column, problem, name_list(columns))
     ref = reference_option(reference, frame, file, time_column)
     names = signals_of(frame, file, time_column, signals or [], ref)
     sources = {name: source_of(name, ref, columns) for name in names}
@@ -269,8 +269,7 @@ def _kind(text: str) -> str:
     kind = registry.kind_named(text)
     if kind is None:
         words = [*registry.ALL, *registry.SINGULAR.values()]
-        close = difflib.get_close_matches(text, words, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        hint = did_you_mean(text, words)
         raise NlcxError(f"list error: KIND = {text}: unknown kind{hint}; allowed: {', '.join(registry.ALL)}")
     return kind
 
