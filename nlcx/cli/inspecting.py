@@ -52,17 +52,27 @@ def diff(
             show_default=False,
         ),
     ] = None,
+    cells: Annotated[
+        bool, typer.Option("--cells", help="List the drifted cells (the first of each file), not only their count.")
+    ] = False,
 ) -> None:
-    """Compare the CSV and Parquet tables of NEW against BASE; exit 1 and list the drift if any cell moved.
+    """Compare the CSV and Parquet tables of NEW against BASE; exit 1 if any cell moved.
 
-    A table held as CSV in one and as Parquet in the other (a sweep's metrics.csv and
-    metrics.parquet) is compared as one table."""
-    from nlcx.diff import diff_dirs, parse_tolerances, render, summary
+    First the resolved configs' differences (key: old → new, from each directory's
+    config.yaml), then per file the drifted cells' count and largest |diff| (--cells lists
+    them). A table held as CSV in one and as Parquet in the other (a sweep's metrics.csv and
+    metrics.parquet) is compared as one table; tables of the same bytes are not parsed."""
+    from nlcx.diff import config_changes, diff_dirs, file_summaries, parse_tolerances, render, summary
 
     tol = parse_tolerances(rtol or [], atol or [])
     report = diff_dirs(base, new, tol, only or [])
+    changes = config_changes(base, new)
+    if changes is not None:
+        echo("\n".join(["config:", *(f"  {line}" for line in changes)]) if changes else "config: identical")
     if report.drifted:
-        echo(render(report))
+        echo("\n".join(file_summaries(report)))
+        if details := render(report, cells=cells):  # status changes, cells, notes
+            echo(details)
         echo(summary(report))
         raise typer.Exit(1)
     echo(f"no drift: {report.n_files} file(s) within rtol {tol.rtol} atol {tol.atol}")
