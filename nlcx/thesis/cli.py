@@ -206,8 +206,8 @@ def identify(
     device: DeviceOpt = None,
 ) -> None:
     """Fit loop hypotheses to the train tables, rank them on validation (resumable).
-    A spec with ``chapter: 5`` is chapter 5's study (Table 5.8), ranked by train loss; one with
-    ``kind: consistency`` asks of each printed conventional column whether any loop gives it."""
+    A spec with "chapter: 5" is chapter 5's study (Table 5.8), ranked by train loss; one with
+    "kind: consistency" asks of each printed conventional column whether any loop gives it."""
 
     from nlcx import manifest, rundir
     from nlcx.thesis.consistency import consistency
