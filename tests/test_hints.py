@@ -131,3 +131,21 @@ def test_an_index_out_of_range_is_one_line() -> None:
         "config error: metrics.rise_limits.2 = 2: index 2 is out of range: metrics.rise_limits has 2 element(s), "
         "allowed: 0 to 1"
     )
+
+
+def test_a_run_directory_whose_time_series_was_deleted_says_it_is_missing(tmp_path: Path) -> None:
+    import nlcx
+    from nlcx.manifest import IntegrityError
+
+    result = nlcx.run(CONFIG, ["simulation.t_end=0.5", "outputs.figure=false"])
+    run = result.save(tmp_path / "run", report=False)
+    (run / "timeseries.csv").unlink()
+    with pytest.raises(IntegrityError) as caught:
+        nlcx.load_run(run)
+    assert str(caught.value) == (
+        f"integrity error: {run / 'timeseries.csv'}: missing: the run wrote it and its manifest lists it; "
+        f"allowed: write the run again: nlcx run {run / 'config.yaml'} --out {run}"
+    )
+    without = nlcx.run(CONFIG, ["simulation.t_end=0.5", "outputs.figure=false", "outputs.timeseries=false"])
+    loaded = nlcx.load_run(without.save(tmp_path / "bare", report=False))
+    assert loaded.metrics.equals(without.metrics)
