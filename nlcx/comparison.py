@@ -16,7 +16,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, cast
 
-from nlcx.errors import NlcxError
+from nlcx.errors import NlcxError, did_you_mean
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -124,7 +124,8 @@ def _selected(records: list[Mapping[str, Any]], names: Sequence[str] | str | Non
     unknown = [n for n in wanted if n not in present]
     if unknown:
         raise NlcxError(
-            f"compare: names = {unknown!r} are not metrics of this frame; allowed: {', '.join(present) or '(none)'}"
+            f"compare: names = {unknown!r} are not metrics of this frame{did_you_mean(unknown[0], present)}; "
+            f"allowed: {', '.join(present) or '(none)'}"
         )
     return wanted
 

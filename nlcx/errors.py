@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Callable, Iterable
 from typing import Any
 
 
@@ -42,3 +44,14 @@ def _short_repr(value: Any, limit: int = 80) -> str:
 
 
 MISSING = _MISSING
+
+
+def did_you_mean(name: object, choices: Iterable[str], shown: Callable[[str], str] = str) -> str:
+    """`` (did you mean 'NAME'?)``, the closest of ``choices`` to ``name`` by
+    :func:`difflib.get_close_matches` as ``shown`` writes it (e.g. a file's name as its path);
+    empty when none is close (or ``name`` is not text). Every error about an unknown name
+    carries this hint."""
+    if not isinstance(name, str):
+        return ""
+    close = difflib.get_close_matches(name, [str(c) for c in choices], n=1)
+    return f" (did you mean {shown(close[0])!r}?)" if close else ""

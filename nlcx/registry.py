@@ -18,7 +18,6 @@ of its kind's protocol, and refuses it in one line naming what it lacks.
 
 from __future__ import annotations
 
-import difflib
 import importlib
 import json
 import re
@@ -29,7 +28,7 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.protocols import (
     ControllerPlugin,
     PlantPlugin,
@@ -152,10 +151,7 @@ class Registry(Generic[T]):
         """'unknown <kind>; allowed: ...' with a close match suggested when there is one."""
         names = self.names()
         message = f"unknown {self.kind}; allowed: {', '.join(sorted(names))}"
-        if isinstance(name, str):
-            close = difflib.get_close_matches(name, names, n=1)
-            if close:
-                message += f" (did you mean {close[0]!r}?)"
+        message += did_you_mean(name, names)
         return message + (
             f"; one of your own: name its file in the config's imports: [my_{self.kind}s.py] (or --plugins FILE), "
             f"or install a package that declares it under the entry-point group {self.group}"

@@ -358,8 +358,9 @@ def load_run(directory: str | os.PathLike[str]) -> Result:
     nlcx.errors.ConfigError
         If ``directory`` is not a directory.
     nlcx.manifest.IntegrityError
-        If its manifest cannot be read or is not a run's, or a file it reads does not match
-        the checksum the manifest recorded (truncated or altered): nothing is read in part.
+        If its manifest cannot be read or is not a run's, a file it reads does not match
+        the checksum the manifest recorded (truncated or altered): nothing is read in part;
+        or the time series its config wrote is missing (the line says how to write it again).
 
     Examples
     --------
@@ -381,11 +382,14 @@ def load_run(directory: str | os.PathLike[str]) -> Result:
             path / manifest.MANIFEST, "not the manifest of a run with checksums of its files (an output of "
             "another kind, or of an nlcx that recorded none)", "a run directory: write it again with nlcx run",
         )  # fmt: skip
-    series = timeseries_file(path, listed)
-    manifest.verify(path, ["config.yaml", "metrics.csv", *([series.name] if series is not None else [])])
+    manifest.verify(path, ["config.yaml", "metrics.csv"])
     config = safe_yaml.load_file(path / "config.yaml")
     if not isinstance(config, dict):
         raise manifest.IntegrityError(path / "config.yaml", "not a mapping of sections", "the config nlcx wrote")
+    outputs = config.get("outputs")
+    series = timeseries_file(path, listed, written=isinstance(outputs, dict) and outputs.get("timeseries") is True)
+    if series is not None:
+        manifest.verify(path, [series.name])
     metrics = read_metrics(path / "metrics.csv")
     statuses = {r["controller"]: r["status"] for r in record.get("runs", [])}
     if not statuses:

@@ -38,12 +38,35 @@ def read_metrics(path: Path) -> pd.DataFrame:
     return metrics_frame(frame)
 
 
-def timeseries_file(directory: Path, listed: Mapping[str, Any]) -> Path | None:
-    """The time series file the manifest lists (timeseries.csv or .parquet), or None."""
+def timeseries_file(directory: Path, listed: Mapping[str, Any], written: bool = False) -> Path | None:
+    """The time series file the manifest lists (timeseries.csv or .parquet), or None where the
+    run wrote none.
+
+    ``written``: the run's config wrote one (``outputs.timeseries: true``), so the manifest
+    must list it. A time series listed but absent, or written but not listed, is missing: one
+    line naming it and how to write it again.
+
+    Raises
+    ------
+    nlcx.manifest.IntegrityError
+        The time series file is missing."""
+    from nlcx.manifest import IntegrityError
+
     for name in ("timeseries.parquet", "timeseries.csv"):
         if name in listed:
+            if not (directory / name).is_file():
+                raise IntegrityError(directory / name, "missing: the run wrote it and its manifest lists it",
+                                     _rewrite(directory))  # fmt: skip
             return directory / name
+    if written:
+        raise IntegrityError(directory / "timeseries.csv", "missing: the run's config wrote a time series "
+                             "(outputs.timeseries: true) and its manifest lists none", _rewrite(directory))  # fmt: skip
     return None
+
+
+def _rewrite(directory: Path) -> str:
+    """How to write a run directory's files again: run its config once more."""
+    return f"write the run again: nlcx run {directory / 'config.yaml'} --out {directory}"
 
 
 def read_timeseries(path: Path | None) -> dict[str, pd.DataFrame] | None:

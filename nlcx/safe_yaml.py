@@ -24,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 
 __all__ = ["MAX_BYTES", "MAX_DEPTH", "MAX_NODES", "load_file", "load_text", "surrogate_free"]
 
@@ -54,7 +54,7 @@ def load_file(path: str | os.PathLike[str]) -> Any:
         if not path.is_file():
             raise IsADirectoryError
     except OSError:
-        raise ConfigError("", source, "config file not found") from None
+        raise not_found(path) from None
     if size > MAX_BYTES:
         raise ConfigError("", source, f"{size:,} bytes; allowed: a YAML file of at most {MAX_BYTES:,} bytes")
     try:
@@ -62,6 +62,17 @@ def load_file(path: str | os.PathLike[str]) -> Any:
     except OSError as exc:
         raise ConfigError("", source, f"cannot be read ({exc.strerror or 'input/output error'})") from None
     return load_text(_decoded(data, source), source)
+
+
+def not_found(path: Path) -> ConfigError:
+    """``config file not found``, the closest file name of its directory suggested as a path
+    written like ``path``."""
+    try:
+        names = [p.name for p in path.parent.iterdir() if p.is_file()] if path.parent.is_dir() else []
+    except OSError:
+        names = []
+    hint = did_you_mean(path.name, names, lambda name: str(path.with_name(name)))
+    return ConfigError("", str(path), f"config file not found{hint}")
 
 
 def _decoded(data: bytes, source: str) -> str:

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import difflib
 import types
 import typing
 from typing import Any, TypeVar, Union
 
 from pydantic import BaseModel, ValidationError
 
-from nlcx.errors import MISSING, ConfigError
+from nlcx.errors import MISSING, ConfigError, did_you_mean
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -40,10 +39,7 @@ def config_error(model: type[BaseModel], exc: ValidationError, path: str) -> Con
     value = err.get("input", MISSING)
     if kind == "extra_forbidden":
         allowed_keys = _allowed_keys(model, loc[:-1])
-        message = f"unknown key; allowed keys: {', '.join(allowed_keys)}"
-        close = difflib.get_close_matches(str(loc[-1]), allowed_keys, n=1)
-        if close:
-            message += f" (did you mean {close[0]!r}?)"
+        message = f"unknown key; allowed keys: {', '.join(allowed_keys)}{did_you_mean(str(loc[-1]), allowed_keys)}"
         return ConfigError(where, value, message)
     if kind == "missing":
         return ConfigError(where, MISSING, "required key is missing")

@@ -288,6 +288,9 @@ def test_reproduce_only_some_figures_and_tables(tmp_path: Path) -> None:
     assert np.allclose(printed.nlcx, printed.thesis)  # the ranges run are Table 2.2's
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["nlcx_output"] == "reproduction" and manifest["overrides"] == [] and manifest["argv"] == sys.argv
+    assert manifest["only"] == ["fig-2.4", "fig-2.3", "table-2.3", "table-2.1", "table-2.2"]
+    page = (out / "report.md").read_text()
+    assert "- Figures: generated 2, missing 0" in page  # the two figures asked for, not the thesis's all
     assert {"started", "duration_s", "host", "platform", "versions", "git", "profile", "wall_s"} <= set(manifest)
     written = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     bad = runner.invoke(app, ["reproduce", "--only", "fig-9.9", "--out", str(out)])

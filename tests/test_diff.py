@@ -33,7 +33,7 @@ def test_diff_catches_injected_drift(tmp_path: Path) -> None:
     row = (table.signal == "x") & (table.metric == "ts") & (table.controller == "proposed")
     table.loc[row, "nlcx"] *= 1 + 1e-4  # a 0.01 % drift of one settling time
     table.to_csv(new / "table_2_3.csv", index=False)
-    result = runner.invoke(app, ["diff", str(BASELINE), str(new)])
+    result = runner.invoke(app, ["diff", str(BASELINE), str(new), "--cells"])
     assert result.exit_code == 1
     assert "table_2_3.csv" in result.output and "x | ts | proposed" in result.output and "nlcx" in result.output
     assert "drift: 1 cell(s) in 1 of 8 file(s)" in result.output
@@ -49,7 +49,7 @@ def test_a_changed_verdict_is_a_missing_and_an_extra_row(tmp_path: Path) -> None
     rows = {"table": ["Table 2.3", "Table 2.4"], "cells": [14, 14], "within_tolerance": [7, 3]}
     pd.DataFrame(rows | {"verdict": ["partly", "not"]}).to_csv(base, index=False)
     pd.DataFrame(rows | {"verdict": ["not", "not"]}).to_csv(new, index=False)
-    result = runner.invoke(app, ["diff", str(base), str(new), "--rtol", "0", "--atol", "0"])
+    result = runner.invoke(app, ["diff", str(base), str(new), "--rtol", "0", "--atol", "0", "--cells"])
     assert result.exit_code == 1, result.output
     assert "Table 2.3 | partly" in result.output and "missing in NEW" in result.output
     assert "Table 2.3 | not" in result.output and "extra in NEW" in result.output
@@ -63,10 +63,11 @@ def test_an_infinity_equals_itself_and_nothing_else(tmp_path: Path) -> None:
     cells = {"cell": ["a", "b", "c", "d"]}
     pd.DataFrame(cells | {"rel_error": [float("inf"), 0.5, float("inf"), float("-inf")]}).to_csv(base, index=False)
     pd.DataFrame(cells | {"rel_error": [float("inf"), 0.5, 2.0, float("inf")]}).to_csv(new, index=False)
-    result = runner.invoke(app, ["diff", str(base), str(new), "--rtol", "0", "--atol", "0"])
+    result = runner.invoke(app, ["diff", str(base), str(new), "--rtol", "0", "--atol", "0", "--cells"])
     assert result.exit_code == 1, result.output
     lines = result.output.strip().splitlines()
-    assert [line.split()[1] for line in lines[1:-1]] == ["c", "d"], result.output
+    assert lines[0] == "base.csv: 2 cell(s) drifted (rel_error)", result.output  # no finite |diff|
+    assert [line.split()[1] for line in lines[2:-1]] == ["c", "d"], result.output
     assert lines[-1].startswith("drift: 2 cell(s)"), result.output
 
 
@@ -100,7 +101,7 @@ def test_a_changed_status_is_one_line_not_missing_rows(run_dirs: tuple[Path, Pat
     base, new = run_dirs
     statuses = pd.read_csv(new / "metrics.csv").groupby("controller").status.unique()
     assert list(statuses["proposed"]) == ["unstable"] and list(statuses["conventional"]) == ["ok"]
-    result = runner.invoke(app, ["diff", str(base), str(new), "--only", "metrics.csv"])
+    result = runner.invoke(app, ["diff", str(base), str(new), "--only", "metrics.csv", "--cells"])
     assert result.exit_code == 1, result.output
     assert "metrics.csv  proposed  status: ok -> unstable" in result.output
     assert "missing" not in result.output and "extra" not in result.output
@@ -112,7 +113,7 @@ def test_a_changed_status_is_one_line_not_missing_rows(run_dirs: tuple[Path, Pat
 def test_only_and_the_drift_of_each_file(run_dirs: tuple[Path, Path]) -> None:
     """Every file by default, its drift counted per file; the time series capped in the table."""
     base, new = run_dirs
-    result = runner.invoke(app, ["diff", str(base), str(new)])
+    result = runner.invoke(app, ["diff", str(base), str(new), "--cells"])
     assert result.exit_code == 1
     series = {
         name: pd.read_csv(d / "timeseries.csv").groupby("controller").size()
@@ -149,9 +150,9 @@ def test_a_changed_note_is_a_changed_cell(tmp_path: Path) -> None:
     base, new = tmp_path / "base.csv", tmp_path / "new.csv"
     pd.DataFrame(rows | {"value": [5.0, 9.5], "status": "ok", "note": ["", ""]}).to_csv(base, index=False)
     pd.DataFrame(rows | {"value": [5.0, None], "status": "ok", "note": ["", "did not settle"]}).to_csv(new, index=False)
-    result = runner.invoke(app, ["diff", str(base), str(new)])
+    result = runner.invoke(app, ["diff", str(base), str(new), "--cells"])
     assert result.exit_code == 1, result.output
-    lines = result.output.splitlines()
+    lines = result.output.splitlines()[1:]  # after the file's summary
     assert lines[1].split() == ["base.csv", "a", "|", "x", "|", "settling_time", "|", "s", "value", "9.5", "nan", "nan"]
     assert lines[2].split()[-4:] == ["note", "did", "not", "settle"]
     assert "missing" not in result.output and lines[-1] == "drift: 2 cell(s) in 1 of 1 file(s): base.csv 2"
@@ -410,3 +411,55 @@ def test_a_truncated_table_is_refused_in_one_line(tmp_path: Path) -> None:
     assert result.exit_code == 2, result.output
     (line,) = result.stderr.splitlines()
     assert line.startswith(f"integrity error: {new / 'metrics.csv'}: ") and "truncated" in line
+
+
+def test_diff_shows_the_configs_differences_then_each_files_drift(run_dirs: tuple[Path, Path]) -> None:
+    """The resolved configs first (key: old → new), then per file its drifted cells' count and
+    largest |diff|, without the cells unless --cells asks for them."""
+    base, new = run_dirs
+    result = runner.invoke(app, ["diff", str(base), str(new), "--only", "metrics.csv", "--rtol", "0", "--atol", "0"])
+    assert result.exit_code == 1, result.output
+    lines = result.output.splitlines()
+    assert lines[:2] == ["config:", "  simulation.bounds.theta: (absent) → 0.2"]
+    assert lines[2:] == [
+        "metrics.csv: 1 status change(s)",
+        "metrics.csv  proposed  status: ok -> unstable",
+        "drift: 1 cell(s) in 1 of 1 file(s): metrics.csv 1 (1 status change(s))",
+    ]
+    same = runner.invoke(app, ["diff", str(base), str(base), "--rtol", "0", "--atol", "0"])
+    assert same.exit_code == 0 and same.output.splitlines()[0] == "config: identical", same.output
+
+
+def test_the_summary_of_a_file_counts_its_cells_and_their_largest_difference(tmp_path: Path) -> None:
+    base, new = tmp_path / "base.csv", tmp_path / "new.csv"
+    cells = {"cell": ["a", "b", "c"]}
+    pd.DataFrame(cells | {"u": [1.0, 2.0, 3.0], "v": [0.0, 0.0, 0.0]}).to_csv(base, index=False)
+    pd.DataFrame(cells | {"u": [1.5, 2.0, 3.25], "v": [0.0, -2.0, 0.0]}).to_csv(new, index=False)
+    result = runner.invoke(app, ["diff", str(base), str(new), "--rtol", "0", "--atol", "0"])
+    assert result.exit_code == 1, result.output
+    assert result.output.splitlines() == [
+        "base.csv: 3 cell(s) drifted (u, v), largest |diff| 2",
+        "drift: 3 cell(s) in 1 of 1 file(s): base.csv 3",
+    ]
+    cells = runner.invoke(app, ["diff", str(base), str(new), "--rtol", "0", "--atol", "0", "--cells"])
+    assert cells.exit_code == 1
+    assert cells.output.splitlines()[1].split() == ["file", "row", "column", "base", "new", "|diff|"]
+    assert [line.split()[1:3] for line in cells.output.splitlines()[2:-1]] == [["a", "u"], ["b", "v"], ["c", "u"]]
+    loose = runner.invoke(app, ["diff", str(base), str(new), "--atol", "2"])
+    assert loose.exit_code == 0 and loose.output.startswith("no drift: 1 file(s)"), loose.output
+
+
+def test_a_run_diffed_with_itself_is_identical_by_its_bytes(
+    run_dirs: tuple[Path, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """No table of a self-diff is parsed: each is the same bytes, reported identical."""
+    base, _ = run_dirs
+
+    def refused(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a table of the same bytes was compared")
+
+    monkeypatch.setattr(diff_stream, "compare_tables", refused)
+    report = diff_dirs(base, base, Tolerances())
+    assert report.n_files == 2 and all(f.identical for f in report.files) and not report.drifted
+    result = runner.invoke(app, ["diff", str(base), str(base)])
+    assert result.exit_code == 0 and "no drift: 2 file(s)" in result.output, result.output

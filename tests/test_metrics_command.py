@@ -187,7 +187,7 @@ def test_console_entry_end_to_end(rig_csv: Path, tmp_path: Path) -> None:
     bad = subprocess.run([*nlcx, "--signal", "yy"], capture_output=True, text=True, env=env)
     assert bad.returncode == 2
     assert bad.stderr.splitlines() == [
-        "metrics error: --signal = yy: not a column of data.csv; allowed: y, y_nmp, u, note"
+        "metrics error: --signal = yy: not a column of data.csv (did you mean 'y'?); allowed: y, y_nmp, u, note"
     ]
 
 

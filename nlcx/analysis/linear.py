@@ -189,6 +189,41 @@ def pole_counts(poles: pd.DataFrame) -> tuple[int, int]:
     return int(np.sum(values.real > tolerance)), int(np.sum(np.abs(values.real) <= tolerance))
 
 
+#: A direction whose plant part is below this share of it lies along the controller's states.
+STRUCTURAL_TOLERANCE = 1e-6
+
+
+def structural_poles(system: ct.StateSpace) -> list[tuple[str, complex]]:
+    """The structural poles at 0 of a closed loop: (the state each lies along, the pole).
+
+    A null vector v of A (A v = 0, within rounding of its largest singular value) without a
+    component on the plant's states (labels ``plant_...``) is a mode of the controller's
+    states that nothing moves and that moves nothing: an integrator redundant with another
+    on the same input, whose difference no output sees. Each such direction is named by the
+    controller state with its largest component (its label without ``controller_``); its
+    pole is one of the poles nearest 0, in that order."""
+    if not system.nstates:
+        return []
+    A = np.asarray(system.A, dtype=float)
+    labels = list(system.state_labels)
+    plant = [i for i, name in enumerate(labels) if name.startswith("plant_")]
+    _, singular, vt = np.linalg.svd(A)
+    null = vt[singular <= RHP_TOLERANCE * max(1.0, float(singular[0]))].T  # n x k, orthonormal
+    if not null.shape[1]:
+        return []
+    # the combinations of the null space without a plant component: the null space of its plant rows
+    _, s_plant, vt_plant = np.linalg.svd(null[plant, :]) if plant else (None, np.zeros(0), np.eye(null.shape[1]))
+    rank = int(np.sum(s_plant > STRUCTURAL_TOLERANCE))
+    directions = null @ vt_plant[rank:].T
+    poles = np.linalg.eigvals(A)
+    nearest = poles[np.argsort(np.abs(poles), kind="stable")]
+    found = []
+    for k in range(directions.shape[1]):
+        state = labels[int(np.argmax(np.abs(directions[:, k])))]
+        found.append((state.removeprefix("controller_"), complex(nearest[k])))
+    return found
+
+
 def rhp_poles(system: ct.StateSpace) -> int:
     """The number of poles of ``system`` in the open right half-plane (see :func:`pole_counts`)."""
     if not system.nstates:

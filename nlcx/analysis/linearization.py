@@ -42,8 +42,9 @@ from nlcx.analysis.linear import (
     plant_system,
     pole_counts,
     poles_table,
+    structural_poles,
 )
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.limits import MAX_POINTS, check_count
 
 if TYPE_CHECKING:
@@ -56,10 +57,20 @@ if TYPE_CHECKING:
     from nlcx.controllers.base import ControllerInstance
     from nlcx.engine import Prepared
 
-__all__ = ["FrozenSweep", "Linearization", "analyse", "linearize", "linearize_along"]
+__all__ = ["FrozenSweep", "Linearization", "MarginalPole", "analyse", "linearize", "linearize_along"]
 
 #: Frozen points of :func:`linearize_along` unless told otherwise.
 POINTS = 51
+
+
+@dataclass(frozen=True)
+class MarginalPole:
+    """A structural closed-loop pole at 0 (:attr:`Linearization.marginal`)."""
+
+    #: The controller state it belongs to (e.g. ``pid_x_integral``: loop x's integrator).
+    name: str
+    #: The pole, 0 within rounding.
+    value: complex
 
 
 @dataclass(frozen=True)
@@ -134,10 +145,20 @@ class Linearization:
         )
 
     @property
+    def marginal(self) -> tuple[MarginalPole, ...]:
+        """The structural poles at 0 (:func:`nlcx.analysis.linear.structural_poles`): modes of
+        the controller's states alone that nothing moves and that move nothing, such as a
+        PID's integrator redundant with another one on the same input (the x pendulum's two
+        loops on F_x). Each is named by the controller state it mostly lies along."""
+        return tuple(MarginalPole(name, value) for name, value in structural_poles(self.closed_loop))
+
+    @property
     def stable(self) -> bool:
-        """Whether every closed-loop pole lies in the open left half-plane (a pole within
-        rounding of the imaginary axis does not, :func:`nlcx.analysis.linear.pole_counts`)."""
-        return pole_counts(self.poles) == (0, 0)
+        """Whether every closed-loop pole but the structural ones at 0 (:attr:`marginal`) lies in
+        the open left half-plane: none in the closed right half-plane (a pole within rounding
+        of the imaginary axis counts as on it, :func:`nlcx.analysis.linear.pole_counts`)."""
+        unstable, on_axis = pole_counts(self.poles)
+        return unstable == 0 and on_axis == len(self.marginal)
 
 
 @dataclass(frozen=True)
@@ -225,7 +246,8 @@ def _chosen(exp: Experiment, controller: str | None) -> PluginSection:
     if controller is not None:
         section = next((c for c in exp.controllers if c.label == controller), None)
         if section is None:
-            raise ConfigError("controller", controller, f"not a controller of {exp.name}; allowed: {', '.join(labels)}")
+            problem = f"not a controller of {exp.name}{did_you_mean(controller, labels)}"
+            raise ConfigError("controller", controller, f"{problem}; allowed: {', '.join(labels)}")
         if not (_is_pid(section) or _is_law(section)):
             raise ConfigError(
                 f"controllers.{controller}.kind", section.kind, "linearize analyses PID controllers (pid) and control "

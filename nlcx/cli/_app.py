@@ -13,15 +13,18 @@ from typing import Annotated, Any, TypeVar
 import typer
 
 from nlcx import compiled_cache, runtime
+from nlcx.cli._help import ReadableGroup
 from nlcx.errors import NlcxError
 from nlcx.limits import MAX_JOBS, check_count
 from nlcx.terminal import echo
 
 app = typer.Typer(
-    add_completion=False,
+    cls=ReadableGroup,
+    add_completion=True,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
-    help="Reproducible experiments on the control of nonlinear systems.",
+    help="Reproducible experiments on the control of nonlinear systems.\n\n"
+    "Shell completion (bash, zsh, fish): nlcx --install-completion, or nlcx --show-completion to print the script.",
 )
 
 

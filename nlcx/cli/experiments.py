@@ -163,7 +163,7 @@ def run(
 def prewarm(
     config: ConfigArg, overrides: OverridesArg = None, allow_env: AllowEnv = False, plugins: PluginsOpt = None
 ) -> None:
-    """Compile what a run of CONFIG needs besides the kernel into numba's cache (``nlcx run``
+    """Compile what a run of CONFIG needs besides the kernel into numba's cache (nlcx run
     starts this beside itself when the cache is empty; see nlcx.engine.prewarm)."""
     from nlcx import config as cfg
     from nlcx import engine

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
 import math
 from pathlib import Path
 from typing import Annotated
@@ -25,7 +24,7 @@ from nlcx.cli.metric_files import (
     signals_of,
     source_of,
 )
-from nlcx.errors import NlcxError
+from nlcx.errors import NlcxError, did_you_mean
 from nlcx.terminal import echo
 
 
@@ -53,17 +52,27 @@ def diff(
             show_default=False,
         ),
     ] = None,
+    cells: Annotated[
+        bool, typer.Option("--cells", help="List the drifted cells (the first of each file), not only their count.")
+    ] = False,
 ) -> None:
-    """Compare the CSV and Parquet tables of NEW against BASE; exit 1 and list the drift if any cell moved.
+    """Compare the CSV and Parquet tables of NEW against BASE; exit 1 if any cell moved.
 
-    A table held as CSV in one and as Parquet in the other (a sweep's metrics.csv and
-    metrics.parquet) is compared as one table."""
-    from nlcx.diff import diff_dirs, parse_tolerances, render, summary
+    First the resolved configs' differences (key: old → new, from each directory's
+    config.yaml), then per file the drifted cells' count and largest |diff| (--cells lists
+    them). A table held as CSV in one and as Parquet in the other (a sweep's metrics.csv and
+    metrics.parquet) is compared as one table; tables of the same bytes are not parsed."""
+    from nlcx.diff import config_changes, diff_dirs, file_summaries, parse_tolerances, render, summary
 
     tol = parse_tolerances(rtol or [], atol or [])
     report = diff_dirs(base, new, tol, only or [])
+    changes = config_changes(base, new)
+    if changes is not None:
+        echo("\n".join(["config:", *(f"  {line}" for line in changes)]) if changes else "config: identical")
     if report.drifted:
-        echo(render(report))
+        echo("\n".join(file_summaries(report)))
+        if details := render(report, cells=cells):  # status changes, cells, notes
+            echo(details)
         echo(summary(report))
         raise typer.Exit(1)
     echo(f"no drift: {report.n_files} file(s) within rtol {tol.rtol} atol {tol.atol}")
@@ -236,7 +245,8 @@ def metrics_command(
     frame = read_frame(file)
     columns = list(frame.columns)
     if time_column not in columns:
-        raise metrics_error("--time", time_column, f"not a column of {file.name}", name_list(columns))
+        problem = f"not a column of {file.name}{did_you_mean(time_column, columns)}"
+        raise metrics_error("--time", time_column, problem, name_list(columns))
     ref = reference_option(reference, frame, file, time_column)
     names = signals_of(frame, file, time_column, signals or [], ref)
     sources = {name: source_of(name, ref, columns) for name in names}
@@ -269,8 +279,7 @@ def _kind(text: str) -> str:
     kind = registry.kind_named(text)
     if kind is None:
         words = [*registry.ALL, *registry.SINGULAR.values()]
-        close = difflib.get_close_matches(text, words, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        hint = did_you_mean(text, words)
         raise NlcxError(f"list error: KIND = {text}: unknown kind{hint}; allowed: {', '.join(registry.ALL)}")
     return kind
 

@@ -16,6 +16,7 @@ import typer
 from typer.core import TyperCommand
 
 from nlcx.cli._app import app
+from nlcx.cli._help import readable
 
 #: command -> (``module:function`` of its function, the one line of help ``nlcx --help`` lists).
 THESIS_COMMANDS: dict[str, tuple[str, str]] = {
@@ -54,7 +55,7 @@ class LazyCommand(TyperCommand):
         single.command(name)(load_entry_point(THESIS_COMMANDS[name][0]))
         command = typer.main.get_command(single)
         assert isinstance(command, TyperCommand), f"{name}: one function makes one command"
-        return command
+        return readable(command)
 
     def make_context(self, info_name: str | None, args: list[str], parent: Any = None, **extra: Any) -> Any:
         """The loaded command's context for ``args``: it parses them (its ``--help`` included),

@@ -10,13 +10,12 @@ allowed (:func:`metrics_error`).
 
 from __future__ import annotations
 
-import difflib
 import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-from nlcx.errors import NlcxError
+from nlcx.errors import NlcxError, did_you_mean
 
 if TYPE_CHECKING:
     import numpy as np
@@ -147,8 +146,7 @@ def reference_option(text: str | None, frame: pd.DataFrame, file: Path, time_col
         return value
     columns = [str(c) for c in frame.columns if c not in (time_column, CONTROLLER)]
     if text not in columns:
-        close = difflib.get_close_matches(text, columns, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        hint = did_you_mean(text, columns)
         raise metrics_error(
             "--reference",
             text,
@@ -180,6 +178,7 @@ def signals_of(frame: pd.DataFrame, file: Path, time_column: str, signals: list[
     for name in names:
         if name not in others:
             problem = "is the --time column" if name == time_column else f"not a column of {file.name}"
+            problem += did_you_mean(name, others) if name != time_column else ""
             raise metrics_error("--signal", name, problem, name_list(others))
     return names
 

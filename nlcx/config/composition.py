@@ -48,7 +48,10 @@ def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any
     file's directory and gathered along the chain, the extended files' first; nothing is
     imported here.
     """
-    path = Path(path).resolve()
+    given = Path(path)
+    path = given.resolve()
+    if not _seen and not path.is_file():
+        raise safe_yaml.not_found(given)
     if path in _seen:
         raise ConfigError("extends", str(path), "circular extends")
     data = read_yaml(path)

@@ -10,11 +10,12 @@ is how a sweep's variants are made from their base.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
 from nlcx import safe_yaml
-from nlcx.errors import MISSING, ConfigError
+from nlcx.errors import MISSING, ConfigError, did_you_mean
 
 #: What an override may look like (Hydra's override grammar).
 OVERRIDE_FORMS = (
@@ -99,10 +100,36 @@ def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]
     return data
 
 
+#: Sections of labelled plugin sections: a plain ``key=value`` under a label they lack, other
+#: than the label's ``kind``, is a typo of a label (a new one starts with its kind, or with ``+``).
+LABELLED = {"controllers": "controller", "reference": "reference"}
+
+
+def _check_label(data: dict[str, Any], override: Override) -> None:
+    """Refuse ``section.label.key=value`` where ``section`` (:data:`LABELLED`) has no ``label``
+    and ``key`` is not ``kind``: one line naming the labels, the closest one suggested."""
+    section, key = override.key[0], override.key
+    if section not in LABELLED or len(key) < 3 or key[2] == "kind":
+        return
+    labels = data.get(section)
+    labels = [str(k) for k in labels] if isinstance(labels, dict) else []
+    if key[1] in labels:
+        return
+    what = LABELLED[section]
+    raise ConfigError(
+        override.dotted,
+        override.value,
+        f"no {what} {key[1]!r}{did_you_mean(key[1], labels)}; allowed: {', '.join(labels) or '(none)'}, or a new "
+        f"{what} started with {section}.{key[1]}.kind=KIND (or +{override.dotted}=...)",
+    )
+
+
 def _apply(data: dict[str, Any], override: Override) -> dict[str, Any]:
     """``data`` with one override applied (the mappings on the key's path copied)."""
+    if override.action == "set":
+        _check_label(data, override)
     if override.action in ("set", "force"):
-        return set_values(data, [(list(override.key), override.value)])
+        return set_values(data, [(list(override.key), override.value)], schema_default)
     found, current = _find(data, override.key)
     if override.action == "add":
         if found:
@@ -111,7 +138,7 @@ def _apply(data: dict[str, Any], override: Override) -> dict[str, Any]:
                 current,
                 "already set; +key=value adds a new key only (key=value or ++key=value sets it)",
             )
-        return set_values(data, [(list(override.key), override.value)])
+        return set_values(data, [(list(override.key), override.value)], schema_default)
     if not found:
         raise ConfigError(override.dotted, MISSING, "not in the config, so ~key cannot delete it")
     if override.value is not MISSING and not _same(current, override.value):
@@ -147,19 +174,82 @@ def _without(data: dict[str, Any], key: tuple[str, ...]) -> dict[str, Any]:
     return out
 
 
-def set_values(raw: dict[str, Any], values: list[tuple[list[str], Any]]) -> dict[str, Any]:
-    """A copy of ``raw`` with each (key path, value) set; only the mappings on the paths are
-    copied, the rest is shared with ``raw`` (treat both as read-only afterwards)."""
+def set_values(
+    raw: dict[str, Any],
+    values: list[tuple[list[str], Any]],
+    defaults: Callable[[list[str]], list[Any] | None] | None = None,
+) -> dict[str, Any]:
+    """A copy of ``raw`` with each (key path, value) set; only the mappings and lists on the
+    paths are copied, the rest is shared with ``raw`` (treat both as read-only afterwards).
+
+    A part of a path that is a number indexes a list, as in OmegaConf's grammar
+    (``metrics.rise_limits.0``): the element must exist. A list the config does not hold is
+    taken from ``defaults`` (the key path -> the schema's default list, or None).
+    """
     data = dict(raw)
     for parts, value in values:
-        node = data
-        for i, part in enumerate(parts[:-1]):
-            child = node.get(part)
+        node: dict[str, Any] | list[Any] = data
+        for i in range(len(parts) - 1):
+            child = _child(node, parts, i)
+            if child is None and parts[i + 1].isdigit() and defaults is not None:
+                child = defaults(parts[: i + 1])
             if child is None:
                 child = {}
-            if not isinstance(child, dict):
+            if isinstance(child, list | tuple):
+                child = list(child)
+            elif not isinstance(child, dict):
                 raise ConfigError(".".join(parts[: i + 1]), child, "is not a mapping, so it has no sub-keys")
-            child = node[part] = dict(child)
+            else:
+                child = dict(child)
+            _put(node, parts, i, child)
             node = child
-        node[parts[-1]] = copy.deepcopy(value)
+        _put(node, parts, len(parts) - 1, copy.deepcopy(value))
     return data
+
+
+def _index(node: list[Any], parts: list[str], i: int) -> int:
+    """The list index ``parts[i]`` names in ``node``; a one-line error where it is none."""
+    part, where = parts[i], ".".join(parts[: i + 1])
+    if not part.isdigit():
+        raise ConfigError(where, part, f"{'.'.join(parts[:i])} is a list: its elements are 0 to {len(node) - 1}")
+    index = int(part)
+    if index >= len(node):
+        raise ConfigError(
+            where,
+            index,
+            f"index {index} is out of range: {'.'.join(parts[:i])} has {len(node)} element(s), "
+            f"allowed: 0 to {len(node) - 1}",
+        )
+    return index
+
+
+def _child(node: dict[str, Any] | list[Any], parts: list[str], i: int) -> Any:
+    """What ``node`` holds at ``parts[i]`` (None where a mapping lacks it)."""
+    if isinstance(node, list):
+        return node[_index(node, parts, i)]
+    return node.get(parts[i])
+
+
+def _put(node: dict[str, Any] | list[Any], parts: list[str], i: int, value: Any) -> None:
+    """Set ``parts[i]`` of ``node`` (a list's element, which must exist, or a mapping's key)."""
+    if isinstance(node, list):
+        node[_index(node, parts, i)] = value
+    else:
+        node[parts[i]] = value
+
+
+def schema_default(parts: list[str]) -> list[Any] | None:
+    """The default list of the section field at ``parts`` (e.g. ``metrics.rise_limits``), or None."""
+    from pydantic import BaseModel
+
+    from nlcx.config.sections import ExperimentSection
+
+    model: Any = ExperimentSection
+    default: Any = None
+    for part in parts:
+        field = model.model_fields.get(part) if isinstance(model, type) and issubclass(model, BaseModel) else None
+        if field is None:
+            return None
+        default = field.get_default(call_default_factory=True)
+        model = type(default)
+    return list(default) if isinstance(default, list | tuple) else None

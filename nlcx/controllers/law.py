@@ -46,7 +46,7 @@ from pydantic import Field, create_model
 from nlcx import registry
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.controllers.law_shape import LawShape, ParamSpec, shape_of
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.kernel.signatures import FloatArray
 from nlcx.plants.base import Plant
 
@@ -200,9 +200,12 @@ class LawController(ControllerModel):
                 codes.append(float(plant.state_names.index(name)))
             else:
                 states = [s for s in plant.state_names if s not in plant.output_names]
-                allowed = f"its outputs and states ({', '.join([*plant.output_names, *states])})"
+                known = [*plant.output_names, *states]
+                allowed = f"its outputs and states ({', '.join(known)})"
                 raise ConfigError(
-                    path, self.shape.name, f"measures {name!r}, which {plant.name} has not; allowed: {allowed}"
+                    path,
+                    self.shape.name,
+                    f"measures {name!r}, which {plant.name} has not{did_you_mean(name, known)}; allowed: {allowed}",
                 )
         return codes
 
@@ -211,12 +214,14 @@ class LawController(ControllerModel):
         for name in self.shape.references:
             signals = [*plant.output_names, *plant.input_names]
             if name not in signals:
-                problem = f"reads the reference {name!r}, which is no signal of {plant.name}"
+                hint = did_you_mean(name, signals)
+                problem = f"reads the reference {name!r}, which is no signal of {plant.name}{hint}"
                 raise ConfigError(path, self.shape.name, f"{problem}; allowed: {', '.join(signals)}")
         indices = []
         for name in self.shape.inputs:
             if name not in plant.input_names:
-                problem = f"drives the input {name!r}, which {plant.name} has not"
+                hint = did_you_mean(name, plant.input_names)
+                problem = f"drives the input {name!r}, which {plant.name} has not{hint}"
                 raise ConfigError(path, self.shape.name, f"{problem}; allowed: {', '.join(plant.input_names)}")
             indices.append(float(plant.input_names.index(name)))
         return indices

@@ -47,7 +47,7 @@ from nlcx.controllers.schedules import (
     schedule_index,
     schedule_slots,
 )
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join
 
@@ -165,7 +165,8 @@ class MultiLoopPID(ControllerModel):
         for name, value in limits.items():
             where = join(path, "saturation", "limits", name)
             if name not in inputs:  # the limit itself is > 0 by its model (pid_config.SaturationConfig)
-                raise ConfigError(where, value, f"unknown input; allowed: {', '.join(inputs)}")
+                hint = did_you_mean(name, inputs)
+                raise ConfigError(where, value, f"unknown input{hint}; allowed: {', '.join(inputs)}")
         return np.concatenate([
             HEAD.pack(
                 n_loops=len(cfg.loops), n_inputs=len(inputs),
@@ -182,7 +183,8 @@ class MultiLoopPID(ControllerModel):
         bias = equilibrium_input(plant) if cfg.feedforward == "equilibrium" else np.zeros(len(inputs))
         for name, value in cfg.bias.items():
             if name not in inputs:
-                raise ConfigError(join(path, "bias", name), value, f"unknown input; allowed: {', '.join(inputs)}")
+                problem = f"unknown input{did_you_mean(name, inputs)}; allowed: {', '.join(inputs)}"
+                raise ConfigError(join(path, "bias", name), value, problem)
             bias[inputs.index(name)] += value
         return bias
 
@@ -222,7 +224,8 @@ class MultiLoopPID(ControllerModel):
             signal = loop.signal or key
             if signal not in outputs:
                 where = join(path, "loops", key, "signal") if loop.signal else join(path, "loops", key)
-                raise ConfigError(where, signal, f"not an output of {plant.name}; allowed: {', '.join(outputs)}")
+                hint = did_you_mean(signal, outputs)
+                raise ConfigError(where, signal, f"not an output of {plant.name}{hint}; allowed: {', '.join(outputs)}")
             input_name = loop.input or plant.features.loop_inputs.get(signal)
             if input_name is None and len(inputs) == 1:
                 input_name = inputs[0]
@@ -230,7 +233,8 @@ class MultiLoopPID(ControllerModel):
                 raise ConfigError(
                     join(path, "loops", key, "input"),
                     loop.input,
-                    f"must name an input of {plant.name}; allowed: {', '.join(inputs)}",
+                    f"must name an input of {plant.name}{did_you_mean(loop.input, inputs)}; "
+                    f"allowed: {', '.join(inputs)}",
                 )
             resolved.append((key, loop, signal, input_name))
         signals = [s for _, _, s, _ in resolved]

@@ -25,7 +25,7 @@ from pydantic import Field
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.controllers.preview_design import PreviewDesign, design_preview, linear_model
 from nlcx.controllers.preview_step import LOG_SIZE, PREVIEW, STATE_HEAD, preview_step
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.plants.base import Plant
 from nlcx.validation import join
 
@@ -95,7 +95,9 @@ class Preview(ControllerModel):
             return 0
         if cfg.signal not in outputs:
             raise ConfigError(
-                join(path, "signal"), cfg.signal, f"not an output of {plant.name}; allowed: {', '.join(outputs)}"
+                join(path, "signal"),
+                cfg.signal,
+                f"not an output of {plant.name}{did_you_mean(cfg.signal, outputs)}; allowed: {', '.join(outputs)}",
             )
         return outputs.index(cfg.signal)
 

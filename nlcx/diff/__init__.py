@@ -91,7 +91,9 @@ __all__ = [
     "Drift",
     "FileDrift",
     "Tolerances",
+    "config_changes",
     "diff_dirs",
+    "file_summaries",
     "is_status_column",
     "parse_tolerances",
     "render",
@@ -230,10 +232,86 @@ def diff_dirs(base: Path, new: Path, tol: Tolerances, only: Sequence[str] = (), 
             continue
         base_table, new_table = open_table(path, verified), open_table(other, verified)
         if same_bytes(base_table, new_table):
-            out.append(FileDrift(rel))
+            out.append(FileDrift(rel, identical=True))
             continue
         out.append(compare_tables(rel, base_table, new_table, tol, keep))
     return DiffReport(out, len(files))
+
+
+def config_changes(base: Path, new: Path) -> list[str] | None:
+    """The resolved configs' differences, ``key: old → new`` (a dotted key; ``(absent)`` for a
+    key one of them lacks), from the config.yaml of each of two output directories, in key
+    order; None unless both hold one. Each config.yaml is checked against its manifest first."""
+    from nlcx import safe_yaml
+    from nlcx.manifest import verify_file
+
+    files = [base / "config.yaml", new / "config.yaml"]
+    if not all(path.is_dir() for path in (base, new)) or not all(f.is_file() for f in files):
+        return None
+    flat = []
+    for file in files:
+        verify_file(file)
+        data = safe_yaml.load_file(file)
+        flat.append(_flattened(data if isinstance(data, dict) else {}))
+    old, now = flat
+    return [
+        f"{key}: {_shown(old.get(key, _ABSENT))} → {_shown(now.get(key, _ABSENT))}"
+        for key in sorted(old.keys() | now.keys())
+        if key not in old or key not in now or old[key] != now[key] or type(old[key]) is not type(now[key])
+    ]
+
+
+_ABSENT = object()
+
+
+def _flattened(data: dict[str, object], prefix: str = "") -> dict[str, object]:
+    """A nested mapping as dotted keys to the values that are not mappings (an empty mapping
+    has none)."""
+    out: dict[str, object] = {}
+    for key, value in data.items():
+        dotted = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(_flattened(value, dotted + "."))
+        else:
+            out[dotted] = value
+    return out
+
+
+def _shown(value: object) -> str:
+    """A config value as YAML writes it inline (``(absent)`` for a missing key)."""
+    import json
+
+    if value is _ABSENT:
+        return "(absent)"
+    if value is None:
+        return "null"
+    if isinstance(value, str):
+        return value
+    try:
+        return json.dumps(value, ensure_ascii=False)
+    except (TypeError, ValueError):
+        return repr(value)
+
+
+def file_summaries(report: DiffReport) -> list[str]:
+    """One line per table that drifted: ``FILE: N cell(s) drifted (COLUMNS), largest |diff| X``,
+    with its status changes, missing and extra rows, and whether its columns differ."""
+    lines = []
+    for f in report.drifted:
+        parts = []
+        if f.tables:
+            parts.append("missing in NEW" if f.first and f.first[0].key == "(file)" else "other columns")
+        if f.cells:
+            largest = "" if math.isnan(f.largest) else f", largest |diff| {_fmt(f.largest)}"
+            parts.append(f"{f.cells} cell(s) drifted ({', '.join(f.columns)}){largest}")
+        if f.status_changes:
+            parts.append(f"{f.status_changes} status change(s)")
+        if f.missing_rows:
+            parts.append(f"{f.missing_rows} row(s) missing in NEW")
+        if f.extra_rows:
+            parts.append(f"{f.extra_rows} row(s) extra in NEW")
+        lines.append(f"{f.file}: {'; '.join(parts)}")
+    return lines
 
 
 def summary(report: DiffReport) -> str:
@@ -246,10 +324,10 @@ def summary(report: DiffReport) -> str:
     return f"drift: {report.total} cell(s) in {len(report.drifted)} of {report.n_files} file(s): {per_file}"
 
 
-def render(report: DiffReport, limit: int = 50, per_file: int = KEEP) -> str:
+def render(report: DiffReport, limit: int = 50, per_file: int = KEEP, cells: bool = True) -> str:
     """A readable account of what changed: each run's changed status on a line of its own
-    (``FILE  RUN  status: ok -> unstable``), then a table of the other drifts, at most
-    ``per_file`` of each file and ``limit`` in all, then a line for each limit reached."""
+    (``FILE  RUN  status: ok -> unstable``), then (``cells``) a table of the other drifts, at
+    most ``per_file`` of each file and ``limit`` in all, then a line for each limit reached."""
     lines = []
     for f in report.drifted:
         lines += [f"{d.file}  {d.key}  {d.column}: {d.base} -> {d.new}" for d in f.statuses]
@@ -257,7 +335,7 @@ def render(report: DiffReport, limit: int = 50, per_file: int = KEEP) -> str:
             lines.append(f"... and {f.status_changes - len(f.statuses)} more status change(s) in {f.file}")
     shown: list[Drift] = []
     left = []
-    for f in report.drifted:
+    for f in report.drifted if cells else ():
         some = f.first[: max(min(per_file, limit - len(shown)), 0)]
         shown += some
         rest = f.total - f.status_changes - len(some)

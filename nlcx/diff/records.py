@@ -93,6 +93,13 @@ class FileDrift:
         The first status changes, in BASE's order of runs (at most :data:`KEEP_STATUS`).
     notes : list of str
         One line for each limit reached (matching stopped, statuses compared row by row).
+    largest : float
+        The largest |new - base| of the numeric cells that drifted (NaN where none did, or
+        where each of them is NaN on one side).
+    identical : bool
+        The two tables are the same bytes: they were not parsed.
+    columns : list of str
+        The columns with a drifted cell, in the table's order.
     """
 
     file: str
@@ -104,6 +111,9 @@ class FileDrift:
     first: list[Drift] = field(default_factory=list)
     statuses: list[Drift] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    largest: float = math.nan
+    identical: bool = False
+    columns: list[str] = field(default_factory=list)
 
     @property
     def total(self) -> int:

@@ -19,6 +19,7 @@ their key text and, for a key the table holds more than once, the row's occurren
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -69,6 +70,10 @@ class _DriftTally:
     missing: int = 0
     extra: int = 0
     kept: list[_Found] = field(default_factory=list)
+    #: The largest |new - base| of a drifting numeric cell (NaN: none yet).
+    largest: float = math.nan
+    #: The columns with a drifting cell.
+    columns: set[str] = field(default_factory=set)
 
     def wants(self, pos: int) -> bool:
         """Whether a drift at row ``pos`` may be among the first ``keep``."""
@@ -298,11 +303,12 @@ class Matcher:
             else:
                 rtol, atol = self.tol.of(column)
             bad = _drifting(base.values[j], new.values[j], rtol, atol)
-            for k in self._count(bad, base):
+            self._note_largest(base.values[j][bad], new.values[j][bad])
+            for k in self._count(bad, base, column):
                 picked.append((k, column, float(base.values[j][k]), float(new.values[j][k])))
         for j, column in enumerate(self.layout.described):
             bad = pc.not_equal(base.texts[j], new.texts[j]).to_numpy(zero_copy_only=False)
-            for k in self._count(bad, base):
+            for k in self._count(bad, base, column):
                 picked.append((k, column, base.texts[j][k].as_py(), new.texts[j][k].as_py()))
         if not picked:
             return
@@ -315,10 +321,23 @@ class Matcher:
             ]
         )
 
-    def _count(self, bad: np.ndarray, rows: Rows) -> list[int]:
+    def _note_largest(self, base: np.ndarray, new: np.ndarray) -> None:
+        """Keep the largest finite |new - base| of drifting cells."""
+        if not base.size:
+            return
+        with np.errstate(invalid="ignore"):
+            diff = np.abs(new - base)
+        diff = diff[np.isfinite(diff)]
+        if diff.size:
+            largest = float(diff.max())
+            self.tally.largest = largest if math.isnan(self.tally.largest) else max(self.tally.largest, largest)
+
+    def _count(self, bad: np.ndarray, rows: Rows, column: str) -> list[int]:
         """Count the drifting cells ``bad`` of a column; those that may be kept (row indices)."""
         count = int(np.count_nonzero(bad))
         self.tally.cells += count
+        if count:
+            self.tally.columns.add(column)
         if not count or not self.tally.wants(int(rows.pos[0])):
             return []
         return [int(k) for k in np.flatnonzero(bad)[: self.tally.keep] if self.tally.wants(int(rows.pos[k]))]
@@ -411,6 +430,8 @@ def _compared(
         out.statuses = runs.drifts(name, layout)
     tally = matcher.tally
     out.cells, out.missing_rows, out.extra_rows = tally.cells, tally.missing, tally.extra
+    out.largest = tally.largest
+    out.columns = sorted(tally.columns, key=layout.order)
     names = [_labels(table, layout, [f for f in tally.kept if f.side == side]) for side, table in ((0, base), (1, new))]
     out.first = [Drift(name, names[f.side][f.pos], f.column, f.base, f.new) for f in tally.kept]
     if (note := matcher.note()) is not None:

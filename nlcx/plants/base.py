@@ -19,7 +19,7 @@ import numpy as np
 from numba.core.errors import NumbaError
 from pydantic import BaseModel, ConfigDict
 
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 
 
 class PlantParams(BaseModel):
@@ -237,7 +237,8 @@ def initial_state(names: list[str], x0: Mapping[str, float], path: str = "plant"
     x_init = np.zeros(len(names))
     for key, value in x0.items():
         if key not in names:
-            raise ConfigError(f"{path}.x0.{key}", value, f"unknown state; allowed: {', '.join(names)}")
+            problem = f"unknown state{did_you_mean(key, names)}; allowed: {', '.join(names)}"
+            raise ConfigError(f"{path}.x0.{key}", value, problem)
         x_init[names.index(key)] = float(value)
     return x_init
 
@@ -247,7 +248,8 @@ def divergence_bounds(names: list[str], bounds: Mapping[str, float]) -> np.ndarr
     bound_vec = np.full(len(names), np.inf)
     for key, value in bounds.items():
         if key not in names:
-            raise ConfigError(f"simulation.bounds.{key}", value, f"unknown state; allowed: {', '.join(names)}")
+            problem = f"unknown state{did_you_mean(key, names)}; allowed: {', '.join(names)}"
+            raise ConfigError(f"simulation.bounds.{key}", value, problem)
         bound_vec[names.index(key)] = float(value)
     return bound_vec
 

@@ -174,6 +174,11 @@ def _check_batched(model: ScalarPlant, declared: _Declared, direct: np.ndarray) 
         raise ConfigError("plant", declared.name, f"the batched right-hand side gave {dx.tolist()}, f gave {direct}")
 
 
+#: The divergence bound |x_i| <= 1e6 of every state of a plant :func:`plant` registers, unless
+#: its ``bounds`` say otherwise.
+DEFAULT_BOUND = 1e6
+
+
 def plant(
     name: str,
     *,
@@ -209,7 +214,9 @@ def plant(
         ``{name: default}``, ``{name: (default, unit)}`` or ``{name: (default, unit, description)}``.
     bounds : mapping, optional
         Default divergence bounds |x_i| <= bound by state name (a config's
-        ``simulation.bounds`` adds to them).
+        ``simulation.bounds`` adds to them); every state not named here is bounded by
+        :data:`DEFAULT_BOUND` (1e6), so that a run that diverges stops there (status
+        ``unstable``) instead of climbing to overflow. ``math.inf`` leaves a state unbounded.
     loop_inputs : mapping, optional
         The input a PID loop on each output drives by default; with one input, that input.
     velocity_states : sequence of str
@@ -264,7 +271,8 @@ def _registrar(
     loops = _loop_inputs(declared, out_names, loop_inputs)
 
     def register(f: Callable[..., Any]) -> Callable[..., Any]:
-        return _register(f, declared, out_names, loops, tuple(velocity_states), dict(bounds or {}), replace)
+        limits = {**dict.fromkeys((s.name for s in declared.states), DEFAULT_BOUND), **(bounds or {})}
+        return _register(f, declared, out_names, loops, tuple(velocity_states), limits, replace)
 
     return register
 

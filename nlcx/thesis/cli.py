@@ -74,7 +74,9 @@ def reproduce(
             counts = summary["claims"].reproduced.value_counts().to_dict()
             echo("claims: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
         wall = time.perf_counter() - start
-        write_reproduction_manifest(stage, chosen, wall, jobs, overrides=set_ or (), started=start)
+        write_reproduction_manifest(
+            stage, chosen, wall, jobs, overrides=set_ or (), started=start, only=keys, chapters=chapter or ()
+        )
         echo(f"done in {wall:.1f} s")
         t0 = time.perf_counter()
         failure = None if no_report else rundir.write_pages(stage, configs)
@@ -140,8 +142,12 @@ def write_reproduction_manifest(
     jobs: int | None,
     overrides: Sequence[str] = (),
     started: float | None = None,
+    only: Sequence[str] = (),
+    chapters: Sequence[int] = (),
 ) -> None:
     """manifest.json of a reproduction: its kind (``nlcx_output``: reproduction), the command,
+    what it was asked for where it was not everything (``only``: ``--only``'s keys,
+    ``chapters``: ``--chapter``'s; the report shows only those figures),
     its ``overrides`` (``--set``), start and duration from the ``time.perf_counter()`` instant
     ``started`` (:func:`nlcx.report.provenance`), the profile, where it ran and the versions and
     commit (:func:`nlcx.report.environment`), the wall time ``wall`` and the workers."""
@@ -159,6 +165,8 @@ def write_reproduction_manifest(
         **report.environment(),
         "wall_s": round(wall, 2),
         "jobs": jobs or os.cpu_count(),
+        **({"only": [k.strip() for k in only]} if only else {}),
+        **({"chapters": list(chapters)} if chapters else {}),
     }
     manifest.write(out, record)
 
@@ -206,8 +214,8 @@ def identify(
     device: DeviceOpt = None,
 ) -> None:
     """Fit loop hypotheses to the train tables, rank them on validation (resumable).
-    A spec with ``chapter: 5`` is chapter 5's study (Table 5.8), ranked by train loss; one with
-    ``kind: consistency`` asks of each printed conventional column whether any loop gives it."""
+    A spec with "chapter: 5" is chapter 5's study (Table 5.8), ranked by train loss; one with
+    "kind: consistency" asks of each printed conventional column whether any loop gives it."""
 
     from nlcx import manifest, rundir
     from nlcx.thesis.consistency import consistency

@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from nlcx import runtime
-from nlcx.errors import ConfigError, NlcxError
+from nlcx.errors import ConfigError, NlcxError, did_you_mean
 from nlcx.thesis import catalog, cstr, profiles, tables
 from nlcx.thesis.catalog import FigureSpec, TableSpec
 
@@ -118,7 +118,11 @@ def select(
     known = {f.key for f in figs} | {t.key for t in tabs}
     unknown = only - known
     if unknown:
-        raise NlcxError(f"--only: unknown {', '.join(sorted(unknown))}; use keys like fig-2.4, table-2.3")
+        first = sorted(unknown)[0]
+        raise NlcxError(
+            f"--only: unknown {', '.join(sorted(unknown))}{did_you_mean(first, sorted(known))}; "
+            "use keys like fig-2.4, table-2.3"
+        )
     if chapters:
         figs = [f for f in figs if f.chapter in chapters]
         tabs = [t for t in tabs if t.chapter in chapters]

@@ -18,7 +18,7 @@ import numpy as np
 from pydantic import Field
 
 from nlcx._numba_compat import hot_njit
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.layout import Layout
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
@@ -82,7 +82,8 @@ class ActuatorLag(UncertaintyModel):
         alpha = np.zeros(len(names))
         for i, name in enumerate(cfg.inputs if cfg.inputs is not None else names):
             if name not in names:
-                raise ConfigError(join(path, "inputs", i), name, f"not an input; allowed: {', '.join(names)}")
+                problem = f"not an input{did_you_mean(name, names)}; allowed: {', '.join(names)}"
+                raise ConfigError(join(path, "inputs", i), name, problem)
             alpha[names.index(name)] = -math.expm1(-dt / cfg.tau)
         params = np.concatenate([LAG.pack(alpha=a) for a in alpha])
         hooks.add_element(

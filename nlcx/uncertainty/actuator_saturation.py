@@ -18,7 +18,7 @@ import numpy as np
 from pydantic import Field
 
 from nlcx._numba_compat import hot_njit
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.layout import Layout
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
@@ -63,7 +63,8 @@ class ActuatorSaturation(UncertaintyModel):
         limits = np.full(len(names), np.inf)
         for i, name in enumerate(cfg.inputs if cfg.inputs is not None else names):
             if name not in names:
-                raise ConfigError(join(path, "inputs", i), name, f"not an input; allowed: {', '.join(names)}")
+                problem = f"not an input{did_you_mean(name, names)}; allowed: {', '.join(names)}"
+                raise ConfigError(join(path, "inputs", i), name, problem)
             limits[names.index(name)] = cfg.limit
         params = np.concatenate([LIMIT.pack(u_max=u) for u in limits])
         hooks.add_element(Element("actuator", saturate_inputs, params, np.zeros(0), None, "saturation"))

@@ -18,7 +18,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
 
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.uncertainty.noise import add_samples
 from nlcx.validation import join
@@ -120,7 +120,8 @@ class Disturbance(UncertaintyModel):
         column = np.zeros(len(names))
         for i, name in enumerate(targets):
             if name not in names:
-                raise ConfigError(join(path, "states", i), name, f"unknown state; allowed: {', '.join(names)}")
+                problem = f"unknown state{did_you_mean(name, names)}; allowed: {', '.join(names)}"
+                raise ConfigError(join(path, "states", i), name, problem)
             column[names.index(name)] = 1.0
         hooks.add_disturbance(column, disturbance_values(cfg, hooks.stage_times))
 
@@ -134,7 +135,9 @@ class Disturbance(UncertaintyModel):
         for i, name in enumerate(cfg.inputs if cfg.inputs is not None else names):
             if name not in names:
                 raise ConfigError(
-                    join(path, "inputs", i), name, f"not an input of {plant.name}; allowed: {', '.join(names)}"
+                    join(path, "inputs", i),
+                    name,
+                    f"not an input of {plant.name}{did_you_mean(name, names)}; allowed: {', '.join(names)}",
                 )
             values[:, names.index(name)] = d
         hooks.add_element(Element(hook="actuator", function=add_samples, data=values, name="disturbance at the inputs"))

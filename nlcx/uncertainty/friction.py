@@ -19,7 +19,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.kernel.friction import FRICTION_AXIS, FRICTION_EXPONENTIAL, FRICTION_SIMPLE
 from nlcx.uncertainty.base import Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
@@ -103,6 +103,7 @@ class Friction(UncertaintyModel):
                 raise ConfigError(
                     join(path, "axes", i),
                     name,
+                    f"not an input with an axis{did_you_mean(name, plant.features.input_axes)}; "
                     f"allowed: {', '.join(plant.features.input_axes)} (inputs with an axis)",
                 )
             normal = f_n

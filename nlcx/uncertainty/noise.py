@@ -16,7 +16,7 @@ import numpy as np
 from pydantic import Field
 
 from nlcx._numba_compat import hot_njit
-from nlcx.errors import ConfigError
+from nlcx.errors import ConfigError, did_you_mean
 from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
@@ -77,7 +77,7 @@ class Noise(UncertaintyModel):
                 raise ConfigError(
                     join(path, "signals", i),
                     name,
-                    f"not an {kind} of {plant.name}; allowed: {', '.join(names)}",
+                    f"not an {kind} of {plant.name}{did_you_mean(name, names)}; allowed: {', '.join(names)}",
                 )
             values[:, names.index(name)] += held[:, i]
         add_sequence(hooks, "sensor" if measured else "actuator", values)

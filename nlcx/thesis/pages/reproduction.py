@@ -53,8 +53,16 @@ class GalleryItem:
     generated: bool
 
 
-def gallery(directory: Path, root: Path) -> list[GalleryItem]:
-    """Every result figure of the thesis with its caption and whether nlcx drew it."""
+def asked(spec: Any, manifest: dict[str, Any]) -> bool:
+    """Whether the reproduction asked for a figure: its key among ``--only``'s and its chapter
+    among ``--chapter``'s, as the manifest records them (every figure where it records none)."""
+    only, chapters = manifest.get("only") or [], manifest.get("chapters") or []
+    return (not only or spec.key in only) and (not chapters or spec.chapter in chapters)
+
+
+def gallery(directory: Path, root: Path, manifest: dict[str, Any] | None = None) -> list[GalleryItem]:
+    """Every result figure of the thesis that the reproduction asked for (:func:`asked`, from
+    its ``manifest``), with its caption and whether nlcx drew it."""
     return [
         GalleryItem(
             spec.figure,
@@ -65,6 +73,7 @@ def gallery(directory: Path, root: Path) -> list[GalleryItem]:
             (directory / "figures" / spec.filename).is_file(),
         )
         for spec in catalog.figures(root)
+        if asked(spec, manifest or {})
     ]
 
 
@@ -137,8 +146,8 @@ def context(directory: Path, configs: Path, repo: Path | None) -> dict[str, Any]
     tolerances: ReproductionTolerances = load_tolerances(configs / "tolerances.yaml")
     tables: list[TableComparison] = compare(directory, tolerances)
     claim_rows = claims(directory)
-    figures = gallery(directory, configs)
     manifest = json.loads((directory / "manifest.json").read_text()) if (directory / "manifest.json").is_file() else {}
+    figures = gallery(directory, configs, manifest)
     return {
         "kind": "reproduction",
         "title": "nlcx reproduction of the thesis",
