@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from nlcx import engine
+    from nlcx.comparison_frame import Comparison
 
 __all__ = ["METRIC_COLUMNS", "Result", "SweepResult", "load_run", "read_output_table"]
 
@@ -120,12 +121,9 @@ class Result:
             )
         return controller
 
-    def compare(self, metrics: Sequence[str] | None = None) -> pd.DataFrame:
-        """Controllers side by side: per (signal, metric), one column per controller and the
-        improvement % of each controller over the first.
-
-        The improvement is the thesis's formula, (first - other) / other x 100: positive when
-        the other controller has the smaller value (:func:`nlcx.comparison.improvement`).
+    def compare(self, metrics: Sequence[str] | None = None) -> Comparison:
+        """Controllers side by side: per (signal, metric), one column per controller, the change
+        % of each controller against the first (the baseline) and which one is better.
 
         Parameters
         ----------
@@ -135,17 +133,22 @@ class Result:
 
         Returns
         -------
-        pandas.DataFrame
-            Indexed by (signal, metric), with columns ``unit``, one per controller and
-            ``improvement_<controller>_pct`` per controller after the first.
+        nlcx.Comparison
+            A pandas DataFrame indexed by (signal, metric), with columns ``unit``, one per
+            controller, ``change_<controller>_pct`` = 100 (controller - baseline) / |baseline|
+            per controller after the first, and ``better`` (the controller with the better
+            value by the metric's direction, ``tie``, or "" for a metric without one;
+            :data:`nlcx.comparison.DIRECTIONS`). Printed, a block per signal within 80 columns.
 
         Examples
         --------
         >>> import nlcx
         >>> result = nlcx.run("configs/x_error_ags.yaml", ["simulation.t_end=10"])
         >>> row = result.compare(["overshoot"]).loc[("x", "overshoot")]
-        >>> expected = (row.conventional - row.proposed) / row.proposed * 100
-        >>> bool(abs(row.improvement_proposed_pct - expected) < 1e-9)
+        >>> expected = 100 * (row.proposed - row.conventional) / abs(row.conventional)
+        >>> bool(abs(row.change_proposed_pct - expected) < 1e-9)
+        True
+        >>> row.better == ("proposed" if row.proposed < row.conventional else "conventional")
         True
         """
         from nlcx.comparison import compare
@@ -328,7 +331,9 @@ class Result:
         """In a notebook: the comparison table under the experiment's name (escaped by pandas)."""
         import html
 
-        return f"<p><b>{html.escape(self.name)}</b>: {html.escape(repr(self))}</p>" + self.compare().to_html()
+        return f"<p><b>{html.escape(self.name)}</b>: {html.escape(repr(self))}</p>" + (
+            self.compare()._repr_html_() or ""
+        )
 
 
 def _frame(columns: Mapping[str, np.ndarray]) -> pd.DataFrame:
