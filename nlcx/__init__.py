@@ -8,7 +8,7 @@ warning filters, matplotlib's backend) or of numba's cache is changed
 >>> import nlcx
 >>> result = nlcx.run("configs/x_error_ags.yaml", ["simulation.t_end=10"])
 >>> result.compare(["overshoot"]).columns.tolist()
-['unit', 'conventional', 'proposed', 'improvement_proposed_pct']
+['unit', 'conventional', 'proposed', 'change_proposed_pct', 'better']
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ _HOMES = {
     "run": "nlcx.api",
     "sweep": "nlcx.api",
     "compare": "nlcx.comparison",
-    "improvement": "nlcx.comparison",
+    "thesis_improvement": "nlcx.comparison",
+    "Comparison": "nlcx.comparison_frame",
     "ConfigError": "nlcx.errors",
     "NlcxError": "nlcx.errors",
     "step_info": "nlcx.metrics",

@@ -8,7 +8,8 @@ from nlcx.api import experiment as experiment
 from nlcx.api import run as run
 from nlcx.api import sweep as sweep
 from nlcx.comparison import compare as compare
-from nlcx.comparison import improvement as improvement
+from nlcx.comparison import thesis_improvement as thesis_improvement
+from nlcx.comparison_frame import Comparison as Comparison
 from nlcx.controllers.law import controller as controller
 from nlcx.errors import ConfigError as ConfigError
 from nlcx.errors import NlcxError as NlcxError
@@ -19,6 +20,7 @@ from nlcx.results import SweepResult as SweepResult
 from nlcx.results import load_run as load_run
 
 __all__ = [
+    "Comparison",
     "ConfigError",
     "NlcxError",
     "Result",
@@ -27,11 +29,11 @@ __all__ = [
     "compare",
     "controller",
     "experiment",
-    "improvement",
     "linearize",
     "load_run",
     "plant",
     "run",
     "step_info",
     "sweep",
+    "thesis_improvement",
 ]

@@ -141,7 +141,7 @@ def run(
     ['conventional', 'proposed']
     >>> table = result.compare(["overshoot", "rise_time"])
     >>> list(table.columns)
-    ['unit', 'conventional', 'proposed', 'improvement_proposed_pct']
+    ['unit', 'conventional', 'proposed', 'change_proposed_pct', 'better']
     """
     exp = experiment(config, overrides, allow_env=allow_env)  # checks numba's cache before anything compiled is loaded
     from nlcx import engine

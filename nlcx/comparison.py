@@ -1,18 +1,22 @@
-"""Controllers side by side: each controller's metrics per signal and the improvement % of each
-later controller over the first, by the thesis's formula.
+"""Controllers side by side: each controller's metrics per signal, the change % of each later
+controller against the first (the baseline), and which controller is better on each metric.
 
-The thesis compares a conventional controller with a proposed one by
-``(conventional - proposed) / proposed x 100``: a positive % means the proposed controller has
-the smaller value (e.g. a shorter rise time, a smaller ISE). :func:`compare` applies it to a
-long-form metrics frame (``metrics.csv``) with the first controller in the role of the
-conventional one; :func:`comparison` is the same table without pandas (the report of a run
-uses it, so that ``nlcx run`` never imports pandas).
+The change % of a controller is ``100 (other - baseline) / |baseline|`` (:func:`change`):
+negative where the other controller has the smaller value. Which value is better follows the
+metric's direction (:data:`DIRECTIONS`: smaller is better for the times, the overshoot, the
+errors and the control effort). :func:`compare` gives the table as a
+:class:`~nlcx.comparison_frame.Comparison` (a pandas DataFrame); :func:`comparison` is the
+same table without pandas (the report of a run uses it, so that ``nlcx run`` never imports
+pandas).
+
+The thesis's tables compare by another formula, ``(conventional - proposed) / proposed x 100``
+(:func:`thesis_improvement`); only the reproduction of those tables uses it.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, cast
 
@@ -20,6 +24,8 @@ from nlcx.errors import NlcxError, did_you_mean
 
 if TYPE_CHECKING:
     import pandas as pd
+
+    from nlcx.comparison_frame import Comparison
 
 #: The metrics the thesis's tables compare: step characteristics (a signal regulated to 0 has
 #: its peak deviation instead of overshoot and peak) and the error integrals.
@@ -36,9 +42,85 @@ THESIS_METRICS: tuple[str, ...] = (
 #: The columns a metrics frame must have (``unit``, ``status`` and ``note`` are optional).
 REQUIRED = ("controller", "signal", "metric", "value")
 
+#: A direction: the smaller value is the better one.
+SMALLER = "smaller"
+#: A direction: the value nearer 0 (the smaller magnitude) is the better one.
+NEARER_ZERO = "nearer 0"
 
-def improvement(first: float, other: float) -> float:
-    """The thesis's improvement % of ``other`` over ``first``: ``(first - other) / other x 100``.
+#: Which value of a metric is the better one, from its definition (docs/metrics.md): smaller
+#: for the times to rise and to settle, the overshoot and undershoot, the peak deviation of a
+#: regulated signal, every error metric (:data:`nlcx.metrics.names.ERROR_METRICS`) and every
+#: metric of the control input (:data:`nlcx.metrics.names.INPUT_METRICS`: effort, peak, total
+#: variation); nearer 0 for the signed steady-state error. A metric not named here has no
+#: better value (:data:`UNDIRECTED`) and gets no ``better`` marker. (The names are written out
+#: so that comparing imports none of :mod:`nlcx.metrics`' compiled code; tests/test_compare_frame.py
+#: holds them to :data:`nlcx.metrics.names.METRIC_UNITS`.)
+DIRECTIONS: dict[str, str] = {
+    # step_response_metrics, regulation_metrics
+    "rise_time": SMALLER,
+    "settling_time": SMALLER,
+    "overshoot": SMALLER,
+    "undershoot": SMALLER,
+    "peak_deviation": SMALLER,
+    "steady_state_error": NEARER_ZERO,
+    # error_integrals
+    "ise": SMALLER,
+    "iae": SMALLER,
+    "itae": SMALLER,
+    "max_abs_error": SMALLER,
+    "rms_error": SMALLER,
+    # input_metrics
+    "control_effort": SMALLER,
+    "peak_input": SMALLER,
+    "total_variation": SMALLER,
+}
+#: The metrics that have no better value: ``peak`` (a value of the signal, which a step up and
+#: a step down reach from opposite sides), ``peak_time`` (a response without overshoot peaks
+#: at the end of its record, which is no worse than an early peak), the final value and the
+#: extremes after the rise of :func:`nlcx.metrics.step_info`, and ``t_fail`` (the time a run
+#: stopped: a run that stopped is not compared at all).
+UNDIRECTED: tuple[str, ...] = ("peak", "peak_time", "steady_state_value", "settling_min", "settling_max", "t_fail")
+
+#: The ``better`` marker where several controllers share the best value.
+TIE = "tie"
+
+
+def change(baseline: float, other: float) -> float:
+    """The change % of ``other`` against ``baseline``: ``100 (other - baseline) / |baseline|``.
+
+    Parameters
+    ----------
+    baseline
+        The value of the first controller of a comparison.
+    other
+        The value of the controller compared with it.
+
+    Returns
+    -------
+    float
+        Negative where ``other`` is the smaller value, positive where it is the larger; NaN
+        where the formula is undefined (``baseline`` is 0, or either value is NaN).
+
+    Examples
+    --------
+    An overshoot of 25 % against a baseline of 40 %: 37.5 % less.
+
+    >>> from nlcx.comparison import change
+    >>> change(40.0, 25.0)
+    -37.5
+    >>> change(-2.0, -1.0)  # a steady-state error of -1 against -2: 50 % larger (nearer 0)
+    50.0
+    >>> change(0.0, 1.0)
+    nan
+    """
+    if math.isnan(baseline) or math.isnan(other) or baseline == 0:
+        return math.nan
+    return float(100.0 * (other - baseline) / abs(baseline))
+
+
+def thesis_improvement(first: float, other: float) -> float:
+    """The thesis's improvement % of ``other`` over ``first``: ``(first - other) / other x 100``,
+    as the thesis's tables print it (docs/metrics.md: its denominator is ``other``).
 
     Parameters
     ----------
@@ -57,10 +139,10 @@ def improvement(first: float, other: float) -> float:
     --------
     An overshoot of 40 % against one of 25 %: the second is 60 % better by the thesis's measure.
 
-    >>> from nlcx import improvement
-    >>> improvement(40.0, 25.0)
+    >>> from nlcx import thesis_improvement
+    >>> thesis_improvement(40.0, 25.0)
     60.0
-    >>> improvement(1.0, 0.0)
+    >>> thesis_improvement(1.0, 0.0)
     nan
     """
     if math.isnan(other) or other == 0 or math.isnan(first):
@@ -68,24 +150,80 @@ def improvement(first: float, other: float) -> float:
     return float((first - other) / other * 100.0)
 
 
+#: The metrics that are the time of an event (docs/metrics.md): undefined (NaN) on a run that
+#: went on to its end, the event did not happen within the record, which is worse than any
+#: time it did happen at.
+EVENT_TIMES: tuple[str, ...] = ("rise_time", "settling_time")
+
+
+def better(metric: str, values: Mapping[str, float], stopped: Collection[str] = ()) -> str:
+    """Which controller has the better value of ``metric`` (:data:`DIRECTIONS`).
+
+    Parameters
+    ----------
+    metric
+        The metric's name.
+    values
+        Controller -> its value (NaN: undefined, or its run stopped).
+    stopped
+        The controllers whose run stopped (status not ``ok``): not compared.
+
+    Returns
+    -------
+    str
+        The controller with the better value; :data:`TIE` where several share it; ``""`` where
+        the metric has no direction or fewer than two controllers are compared. A controller
+        is compared where it has a value, and for a time of an event (:data:`EVENT_TIMES`)
+        also where its run went on but the event never happened: such a NaN ranks last.
+
+    Examples
+    --------
+    >>> import math
+    >>> from nlcx.comparison import better
+    >>> better("overshoot", {"conventional": 28.3, "proposed": 12.1})
+    'proposed'
+    >>> better("steady_state_error", {"a": -0.02, "b": 0.01})
+    'b'
+    >>> better("settling_time", {"a": math.nan, "b": 9.9})  # a never settled
+    'b'
+    >>> better("settling_time", {"a": math.nan, "b": 9.9}, stopped={"a"})  # a's run stopped
+    ''
+    >>> better("peak", {"a": 1.2, "b": 1.1})
+    ''
+    """
+    direction = DIRECTIONS.get(metric)
+    ran = {c: v for c, v in values.items() if c not in stopped}
+    measured = {c: v for c, v in ran.items() if not math.isnan(v)}
+    compared = ran if metric in EVENT_TIMES and measured else measured
+    if direction is None or len(compared) < 2:
+        return ""
+    score = {c: math.inf if math.isnan(v) else abs(v) if direction == NEARER_ZERO else v for c, v in compared.items()}
+    best = min(score.values())
+    winners = [c for c, v in score.items() if v == best]
+    return winners[0] if len(winners) == 1 else TIE
+
+
 @dataclass(frozen=True)
 class Row:
-    """One (signal, metric) of a comparison: each controller's value and the improvements."""
+    """One (signal, metric) of a comparison: each controller's value, the change % of each
+    later one against the first and the better controller."""
 
     signal: str
     metric: str
     unit: str
     #: One value per controller, in the comparison's controller order (NaN: not measured).
     values: tuple[float, ...]
+    #: The controller with the better value, :data:`TIE`, or "" (:func:`better`).
+    better: str = ""
 
     @property
-    def improvements(self) -> tuple[float, ...]:
-        """The improvement % of each controller after the first over the first."""
-        return tuple(improvement(self.values[0], v) for v in self.values[1:])
+    def changes(self) -> tuple[float, ...]:
+        """The change % of each controller after the first against the first (:func:`change`)."""
+        return tuple(change(self.values[0], v) for v in self.values[1:])
 
 
 @dataclass(frozen=True)
-class Comparison:
+class SideBySide:
     """Controllers side by side: their order, each one's run status and the compared rows."""
 
     controllers: tuple[str, ...]
@@ -98,6 +236,67 @@ class Comparison:
     def signals(self) -> list[str]:
         """The compared signals, in the order of the rows."""
         return list(dict.fromkeys(r.signal for r in self.rows))
+
+    def verdicts(self) -> list[str]:
+        """One line per signal: which controller is better on how many of its metrics
+        (:func:`verdict`); none for fewer than two controllers."""
+        if len(self.controllers) < 2:
+            return []
+        stopped = {c: s for c, s in self.status.items() if s != "ok"}
+        return [
+            verdict(s, self.controllers, [r.better for r in self.rows if r.signal == s], stopped)
+            for s in self.signals()
+        ]
+
+
+def verdict(
+    signal: str, controllers: Sequence[str], markers: Sequence[str], stopped: Mapping[str, str] | None = None
+) -> str:
+    """One signal's line: how many of its metrics each controller is better on.
+
+    Parameters
+    ----------
+    signal
+        The signal's name.
+    controllers
+        Every controller compared, in order.
+    markers
+        The ``better`` marker of each of the signal's metrics (a controller, :data:`TIE` or "").
+    stopped
+        Controller -> its run's status, for the controllers whose run stopped (not compared).
+
+    Returns
+    -------
+    str
+        The controllers that ran from the most metrics to the fewest (ties in their order),
+        counted over the metrics that have a marker; the ties, if any; the controllers whose
+        run stopped, with their status, last.
+
+    Examples
+    --------
+    >>> from nlcx.comparison import verdict
+    >>> verdict("x", ["conventional", "proposed"], ["proposed"] * 5 + ["conventional"] * 2 + [""])
+    'x: proposed better on 5 of 7 metrics, conventional on 2'
+    >>> verdict("x", ["a", "b", "c"], ["b", "b", "a"], {"c": "unstable"})
+    'x: b better on 2 of 3 metrics, a on 1, c unstable'
+    >>> verdict("theta", ["a", "b"], ["", ""], {"a": "unstable"})
+    'theta: no metric compared, a unstable'
+    """
+    stopped = dict(stopped or {})
+    last = "".join(f", {c} {s}" for c, s in stopped.items())
+    marked = [m for m in markers if m]
+    if not marked:
+        why = last or " (none has a direction and a value of two controllers)"
+        return f"{signal}: no metric compared{why}"
+    counts = {c: marked.count(c) for c in controllers if c not in stopped}
+    ordered = sorted(counts, key=lambda c: -counts[c])
+    first, rest = ordered[0], ordered[1:]
+    noun = "metric" if len(marked) == 1 else "metrics"
+    parts = [f"{first} better on {counts[first]} of {len(marked)} {noun}", *(f"{c} on {counts[c]}" for c in rest)]
+    ties = marked.count(TIE)
+    if ties:
+        parts.append(f"tied on {ties}")
+    return f"{signal}: " + ", ".join(parts) + last
 
 
 def _text(value: Any) -> str:
@@ -138,7 +337,7 @@ def _check_columns(columns: Iterable[str]) -> None:
         )
 
 
-def comparison(records: Iterable[Mapping[str, Any]], names: Sequence[str] | str | None = None) -> Comparison:
+def comparison(records: Iterable[Mapping[str, Any]], names: Sequence[str] | str | None = None) -> SideBySide:
     """The comparison of long-form metric records (the rows of ``metrics.csv`` as mappings).
 
     Parameters
@@ -151,7 +350,7 @@ def comparison(records: Iterable[Mapping[str, Any]], names: Sequence[str] | str 
 
     Returns
     -------
-    Comparison
+    SideBySide
         Controllers in order of first appearance; rows grouped by signal (signals in order of
         first appearance), each signal's metrics in order of first appearance. A value is NaN
         where the controller has no row for it or its row's status is not ``ok`` (a run that
@@ -190,16 +389,17 @@ def comparison(records: Iterable[Mapping[str, Any]], names: Sequence[str] | str 
         units[(signal, metric)] = units[(signal, metric)] or _text(r.get("unit"))
     signals = list(dict.fromkeys(s for s, _ in units))
     order = [(s, m) for s in signals for (s2, m) in units if s2 == s]
-    return Comparison(
-        controllers,
-        status,
-        reasons,
-        tuple(Row(s, m, units[(s, m)], tuple(values.get((c, s, m), math.nan) for c in controllers)) for s, m in order),
-    )
+    compared = []
+    for s, m in order:
+        row_values = {c: values.get((c, s, m), math.nan) for c in controllers}
+        marker = better(m, row_values, stopped=[c for c in controllers if status[c] != "ok"])
+        compared.append(Row(s, m, units[(s, m)], tuple(row_values.values()), marker))
+    return SideBySide(controllers, status, reasons, tuple(compared))
 
 
-def compare(metrics: pd.DataFrame, names: Sequence[str] | None = None) -> pd.DataFrame:
-    """Controllers side by side, per signal and metric, with the thesis's improvement %.
+def compare(metrics: pd.DataFrame, names: Sequence[str] | None = None) -> Comparison:
+    """Controllers side by side, per signal and metric, with the change % of each later
+    controller against the first and the better controller of each metric.
 
     Parameters
     ----------
@@ -212,13 +412,16 @@ def compare(metrics: pd.DataFrame, names: Sequence[str] | None = None) -> pd.Dat
 
     Returns
     -------
-    pandas.DataFrame
-        Indexed by (signal, metric): signals in order of first appearance, each signal's
-        metrics in order of first appearance. Columns: ``unit``; one float column per
-        controller (in order of first appearance; NaN where it has no value or its run's
-        status is not ``ok``); ``improvement_<controller>_pct`` for each controller after the
-        first: ``(first - controller) / controller x 100``, positive where that controller has
-        the smaller value.
+    Comparison
+        A pandas DataFrame indexed by (signal, metric): signals in order of first appearance,
+        each signal's metrics in order of first appearance. Columns: ``unit``; one float
+        column per controller (in order of first appearance; NaN where it has no value or its
+        run's status is not ``ok``); ``change_<controller>_pct`` for each controller after the
+        first (the baseline): ``100 (controller - baseline) / |baseline|`` (:func:`change`),
+        negative where that controller has the smaller value; ``better``: the controller with
+        the better value (:func:`better`), ``tie``, or "" for a metric without a direction.
+        Printed, it is a block per signal that fits 80 columns
+        (:class:`~nlcx.comparison_frame.Comparison`).
 
     Raises
     ------
@@ -234,33 +437,29 @@ def compare(metrics: pd.DataFrame, names: Sequence[str] | None = None) -> pd.Dat
     ...     "controller": ["conventional", "conventional", "proposed", "proposed"],
     ...     "signal": ["x", "x", "x", "x"],
     ...     "metric": ["rise_time", "ise", "rise_time", "ise"],
-    ...     "value": [2.0, 0.5, 1.6, 0.4],
+    ...     "value": [2.0, 0.5, 1.6, 0.6],
     ...     "unit": ["s", "m^2*s", "s", "m^2*s"],
     ...     "status": ["ok"] * 4,
     ...     "note": [""] * 4,
     ... })
     >>> table = compare(metrics)
-    >>> table[["unit", "conventional", "proposed"]]  # doctest: +NORMALIZE_WHITESPACE
-                       unit  conventional  proposed
-    signal metric
-    x      rise_time      s           2.0       1.6
-           ise        m^2*s           0.5       0.4
+    >>> print(table)  # doctest: +NORMALIZE_WHITESPACE
+    Baseline conventional; change % = 100 (other - baseline) / |baseline|
+    <BLANKLINE>
+    x: conventional better on 1 of 2 metrics, proposed on 1
+      metric     unit   conventional  proposed  change %  better
+      rise_time  s                 2       1.6     -20.0  proposed
+      ise        m^2*s           0.5       0.6     +20.0  conventional
 
-    The proposed controller rises in 1.6 s instead of 2.0 s: (2.0 - 1.6) / 1.6 x 100 = 25 %.
+    The proposed controller rises in 1.6 s instead of 2.0 s: 100 (1.6 - 2.0) / 2.0 = -20 %.
 
-    >>> table["improvement_proposed_pct"].round(6).tolist()
-    [25.0, 25.0]
+    >>> table["change_proposed_pct"].round(6).tolist()
+    [-20.0, 20.0]
+    >>> table.better.tolist()
+    ['proposed', 'conventional']
     """
-    import pandas as pd
+    from nlcx.comparison_frame import frame_of
 
     _check_columns(metrics.columns)
     records = cast("list[dict[str, Any]]", metrics.to_dict("records"))  # its columns are named by strings
-    table = comparison(records, names)
-    index = pd.MultiIndex.from_tuples([(r.signal, r.metric) for r in table.rows], names=["signal", "metric"])
-    columns: dict[str, list[Any]] = {"unit": [r.unit for r in table.rows]}
-    for k, controller in enumerate(table.controllers):
-        columns[controller] = [r.values[k] for r in table.rows]
-    for k, controller in enumerate(table.controllers[1:]):
-        columns[f"improvement_{controller}_pct"] = [r.improvements[k] for r in table.rows]
-    frame = pd.DataFrame(columns, index=index)
-    return frame.astype({c: float for c in columns if c != "unit"})
+    return frame_of(comparison(records, names))

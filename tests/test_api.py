@@ -83,14 +83,14 @@ def test_load_run_refuses_what_is_not_a_run_directory(tmp_path: Path) -> None:
         nlcx.load_run(tmp_path / "nothing")
 
 
-def test_compare_is_the_thesis_formula_on_the_metrics(result: nlcx.Result) -> None:
+def test_compare_is_the_change_against_the_first_controller_on_the_metrics(result: nlcx.Result) -> None:
     table = result.compare()
     long = result.metrics.set_index(["controller", "signal", "metric"]).value
     for (signal, metric), row in table.iterrows():
         conventional, proposed = long[("conventional", signal, metric)], long[("proposed", signal, metric)]
         assert row.conventional == conventional or (math.isnan(row.conventional) and math.isnan(conventional))
-        expected = (conventional - proposed) / proposed * 100 if proposed != 0 else math.nan
-        assert row.improvement_proposed_pct == pytest.approx(expected, nan_ok=True, rel=1e-12)
+        expected = 100 * (proposed - conventional) / abs(conventional) if conventional != 0 else math.nan
+        assert row.change_proposed_pct == pytest.approx(expected, nan_ok=True, rel=1e-12)
     assert ("x", "overshoot") in table.index and ("theta", "peak_deviation") in table.index
     assert ("theta", "overshoot") not in table.index  # a regulated signal has no step metrics
 

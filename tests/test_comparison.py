@@ -1,5 +1,5 @@
-"""nlcx.comparison: the thesis's improvement % and the controllers-side-by-side table, checked
-against numbers worked out by hand."""
+"""nlcx.comparison: the change %, the thesis's improvement % and the controllers-side-by-side
+table, checked against numbers worked out by hand."""
 
 from __future__ import annotations
 
@@ -10,18 +10,26 @@ import pandas as pd
 import pytest
 
 from nlcx import comparison
-from nlcx.comparison import THESIS_METRICS, compare, improvement
+from nlcx.comparison import THESIS_METRICS, change, compare, thesis_improvement
 from nlcx.errors import NlcxError
 from nlcx.thesis import tables
 
 
-def test_improvement_is_the_thesis_formula_and_nan_where_undefined() -> None:
-    assert improvement(2.0, 1.6) == pytest.approx(25.0)  # (2 - 1.6) / 1.6 = 0.25
-    assert improvement(1.0, 2.0) == pytest.approx(-50.0)  # the later controller is worse
-    assert improvement(3.0, 3.0) == 0.0
-    assert math.isnan(improvement(1.0, 0.0)) and math.isnan(improvement(1.0, math.nan))
-    assert math.isnan(improvement(math.nan, 2.0))
-    assert tables.improvement is improvement  # one home for the formula
+def test_thesis_improvement_is_the_thesis_formula_and_nan_where_undefined() -> None:
+    assert thesis_improvement(2.0, 1.6) == pytest.approx(25.0)  # (2 - 1.6) / 1.6 = 0.25
+    assert thesis_improvement(1.0, 2.0) == pytest.approx(-50.0)  # the later controller is worse
+    assert thesis_improvement(3.0, 3.0) == 0.0
+    assert math.isnan(thesis_improvement(1.0, 0.0)) and math.isnan(thesis_improvement(1.0, math.nan))
+    assert math.isnan(thesis_improvement(math.nan, 2.0))
+    assert tables.thesis_improvement is thesis_improvement  # one home for the formula
+
+
+def test_change_is_against_the_baseline_s_magnitude_and_nan_where_undefined() -> None:
+    assert change(2.0, 1.6) == pytest.approx(-20.0)  # (1.6 - 2) / 2
+    assert change(1.0, 2.0) == pytest.approx(100.0)
+    assert change(-2.0, -1.0) == pytest.approx(50.0)  # (-1 - -2) / |-2|
+    assert change(3.0, 3.0) == 0.0
+    assert math.isnan(change(0.0, 1.0)) and math.isnan(change(1.0, math.nan)) and math.isnan(change(math.nan, 1.0))
 
 
 def frame(rows: list[tuple[str, str, str, float, str, str]]) -> pd.DataFrame:
@@ -43,28 +51,30 @@ METRICS = frame(
 )  # fmt: skip
 
 
-def test_compare_sets_the_controllers_side_by_side_with_the_improvement_of_each_later_one() -> None:
+def test_compare_sets_the_controllers_side_by_side_with_the_change_of_each_later_one() -> None:
     table = compare(METRICS)
     assert table.index.names == ["signal", "metric"]
     assert list(table.index) == [("x", "rise_time"), ("x", "overshoot"), ("x", "ise"), ("x", "settling_time"),
                                  ("theta", "peak_deviation"), ("theta", "settling_time")]  # fmt: skip
-    assert list(table.columns) == ["unit", "a", "b", "c", "improvement_b_pct", "improvement_c_pct"]
+    assert list(table.columns) == ["unit", "a", "b", "c", "change_b_pct", "change_c_pct", "better"]
     assert table.unit.tolist() == ["s", "%", "m^2*s", "s", "rad", "s"]
     np.testing.assert_array_equal(table.a, [2.0, 30.0, 0.6, np.nan, 0.1, np.nan])
     np.testing.assert_array_equal(table.b, [2.5, 20.0, 0.0, np.nan, 0.05, 4.0])
     np.testing.assert_array_equal(table.c, [np.nan] * 6)  # stopped: nothing to compare
-    # (a - b) / b x 100 by hand: (2 - 2.5) / 2.5 = -20 %, (30 - 20) / 20 = 50 %, b's ISE 0: undefined,
-    # x's settling time only c (stopped) has, (0.1 - 0.05) / 0.05 = 100 %, a never settled: undefined.
-    np.testing.assert_allclose(table.improvement_b_pct, [-20.0, 50.0, np.nan, np.nan, 100.0, np.nan], rtol=1e-12)
-    assert table.improvement_c_pct.isna().all()
-    assert all(table[c].dtype == float for c in table.columns if c != "unit")
+    # 100 (b - a) / |a| by hand: (2.5 - 2) / 2 = 25 %, (20 - 30) / 30 = -33.3 %, (0 - 0.6) / 0.6 = -100 %,
+    # x's settling time only c (stopped) has, (0.05 - 0.1) / 0.1 = -50 %, a never settled: undefined.
+    np.testing.assert_allclose(table.change_b_pct, [25.0, -100 / 3, -100.0, np.nan, -50.0, np.nan], rtol=1e-12)
+    assert table.change_c_pct.isna().all()
+    # smaller is better; c stopped is not compared; a never settled, b did: b is better
+    assert table.better.tolist() == ["a", "b", "b", "", "b", "b"]
+    assert all(table[c].dtype == float for c in table.columns if c not in ("unit", "better"))
 
 
 def test_compare_takes_exactly_the_metrics_named_and_says_which_names_are_unknown() -> None:
     table = compare(METRICS, ["undershoot", "t_fail"])
     assert list(table.index) == [("x", "undershoot"), ("all", "t_fail")]
     np.testing.assert_array_equal(table.a, [1.0, np.nan])
-    assert table.improvement_b_pct.iloc[0] == pytest.approx(-50.0)  # (1 - 2) / 2
+    assert table.change_b_pct.iloc[0] == pytest.approx(100.0)  # (2 - 1) / 1
     with pytest.raises(NlcxError) as error:
         compare(METRICS, ["ise", "overshot", "itae"])
     message = str(error.value)
@@ -95,5 +105,6 @@ def test_the_pages_comparison_is_compares_table() -> None:
     assert [(r.signal, r.metric) for r in side_by_side.rows] == list(table.index)
     np.testing.assert_array_equal([r.values for r in side_by_side.rows], table[["a", "b", "c"]].to_numpy())
     np.testing.assert_array_equal(
-        [r.improvements for r in side_by_side.rows], table[["improvement_b_pct", "improvement_c_pct"]].to_numpy()
+        [r.changes for r in side_by_side.rows], table[["change_b_pct", "change_c_pct"]].to_numpy()
     )
+    assert [r.better for r in side_by_side.rows] == table.better.tolist()

@@ -16,6 +16,7 @@ MODULES = (
     "nlcx.api",
     "nlcx.results",
     "nlcx.comparison",
+    "nlcx.comparison_frame",
     "nlcx.metrics.step",
     "nlcx.plants.scalar",
     "nlcx.plants.lti",

@@ -64,13 +64,14 @@ def test_a_runs_page_leads_with_the_comparison_then_the_figure_then_the_long_tab
     assert {(s, m) for s, m, _, _ in rows} >= {("x", "overshoot"), ("x", "peak"), ("theta", "peak_deviation")}
     shown = [float(v) for v in re.findall(r'data-compare="([^"]*)"', html)]
     np.testing.assert_array_equal(shown, [v for _, _, c, p in rows for v in (c, p)])
-    improvements = [float(v) for v in re.findall(r'data-improvement="([^"]*)"', html)]
-    by_hand = [(c - p) / p * 100 for _, _, c, p in rows]  # the thesis's (conventional - proposed) / proposed
-    np.testing.assert_allclose(improvements, by_hand, rtol=1e-12)
+    changes = [float(v) for v in re.findall(r'data-change="([^"]*)"', html)]
+    by_hand = [100 * (p - c) / abs(c) for _, _, c, p in rows]  # 100 (proposed - conventional) / |conventional|
+    np.testing.assert_allclose(changes, by_hand, rtol=1e-12)
     for text in (unescape(re.sub(r"<[^>]+>", "", html)), md):
-        assert "(first − other) / other × 100" in text and "positive where the other controller" in text
+        assert "100 (other − baseline) / |baseline|" in text and "negative where the other controller" in text
     _, _, c, p = rows[0]
-    assert f"| rise_time | s | {c:.4g} | {p:.4g} | {(c - p) / p * 100:.3g} |" in md
+    better = "proposed" if p < c else "conventional"  # rise time: smaller is better
+    assert f"| rise_time | s | {c:.4g} | {p:.4g} | {100 * (p - c) / abs(c):.3g} | {better} |" in md
 
 
 def test_a_controller_whose_run_stopped_shows_its_status_in_the_comparison(tmp_path: Path) -> None:
@@ -90,7 +91,8 @@ def test_a_controller_whose_run_stopped_shows_its_status_in_the_comparison(tmp_p
     html = (out / "report.html").read_text()
     proposed = metrics[(metrics.controller == "proposed") & metrics.metric.isin(THESIS_METRICS)]
     assert html.count('<td class="status">unstable</td>') == len(proposed)
-    assert re.findall(r'data-improvement="([^"]*)"', html) == ["nan"] * len(proposed)
+    assert re.findall(r'data-change="([^"]*)"', html) == ["nan"] * len(proposed)
+    assert re.findall(r'data-better="([^"]*)"', html) == [""] * len(proposed)  # nothing to compare with
     assert "conventional</b>: diverged at t = 1.5 s: |theta| &gt; 1.5708" in html
     shown = [float(v) for v in re.findall(r'data-compare="([^"]*)"', html)]
     np.testing.assert_array_equal(np.sort(shown), np.sort(proposed.value.to_numpy()))  # only the proposed's

@@ -1,7 +1,8 @@
-"""What the report of a run directory (``nlcx run``) shows, in this order: the comparison of its
-controllers (each one's thesis metrics per signal and the improvement % of each later one over
-the first, :mod:`nlcx.comparison`), its figures, the long metrics table, the resolved config and
-the manifest (versions, commit, seed, timings) in readable form. Reads the files with the
+"""What the report of a run directory (``nlcx run``) shows, in this order: one line per signal
+saying which controller is better on how many metrics, the comparison of its controllers (each
+one's thesis metrics per signal, the change % of each later one against the first and the
+better one, :mod:`nlcx.comparison`), its figures, the long metrics table, the resolved config
+and the manifest (versions, commit, seed, timings) in readable form. Reads the files with the
 standard library only: ``nlcx run`` writes its page without importing pandas."""
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from nlcx import safe_yaml
-from nlcx.comparison import Comparison, Row, comparison
+from nlcx.comparison import Row, SideBySide, comparison
 from nlcx.pages.kinds import ReportPage
 from nlcx.pages.render import TEMPLATES
 
@@ -24,7 +25,7 @@ def metric_records(path: Path) -> list[dict[str, Any]]:
         return [{**row, "value": float(row["value"]) if row["value"] else math.nan} for row in csv.DictReader(file)]
 
 
-def by_signal(table: Comparison) -> list[dict[str, Any]]:
+def by_signal(table: SideBySide) -> list[dict[str, Any]]:
     """The comparison's rows grouped by signal: ``{"signal": s, "rows": [Row, ...]}`` in order."""
     groups: dict[str, list[Row]] = {}
     for row in table.rows:
@@ -51,6 +52,7 @@ def context(directory: Path) -> dict[str, Any]:
         "title": f"nlcx run: {raw.get('name', directory.name)}",
         "caption": str(raw.get("title") or ""),
         "comparison": table,
+        "verdicts": table.verdicts(),
         "signals": by_signal(table),
         "metrics": metrics,
         "figures": sorted(p.name for p in directory.glob("*.png")),

@@ -1,6 +1,9 @@
 """What the report of a sweep directory shows: the aggregates people otherwise script.
 
-Per controller, signal and metric over the variants: median, interquartile range, min, max,
+First the answer: how many variants each controller was unstable in (:func:`robustness`,
+from :func:`stability`), and per metric the controllers side by side, each one's median and
+interquartile range (:func:`side_by_side`). Then, per controller, signal and metric over the
+variants: median, interquartile range, min, max,
 and how many variants measured it, were unstable (the run stopped) or failed (the variant
 did not run); ``summary.csv`` holds the same table. Charts (:mod:`nlcx.pages.sweep_charts`,
 SVG drawn from aggregates, so their cost does not grow with the variants): each metric's
@@ -57,6 +60,57 @@ def summary(metrics: pd.DataFrame, index: pd.DataFrame) -> pd.DataFrame:
 #: The columns of the summary table (summary.csv), in order.
 SUMMARY_COLUMNS = ("controller", "signal", "metric", "unit", "n", "median", "q25", "q75", "iqr", "min", "max",
                    "undefined", "unstable", "failed")  # fmt: skip
+
+
+#: The columns of the stability table (:func:`stability`), in order.
+STABILITY_COLUMNS = ("ok", "unstable", "failed", "variants", "stable_share")
+
+
+def stability(metrics: pd.DataFrame, index: pd.DataFrame) -> pd.DataFrame:
+    """Per controller (the index, in the order the controllers first appear), how many of the
+    variants its run was ``ok`` in, ``unstable`` in (the variant ran and this controller's run
+    stopped: a row of it is not ok, or the metrics kept have no row of it) and ``failed`` in
+    (the variant did not run: its status in the table sweep); ``variants``, their sum; and
+    ``stable_share`` = ok / variants (NaN for no variant)."""
+    variants = len(index)
+    failed = int((index.status == "failed").sum()) if "status" in index else 0
+    if metrics.empty or not {"controller", "variant", "status"} <= set(metrics.columns):
+        return pd.DataFrame(columns=list(STABILITY_COLUMNS), index=pd.Index([], name="controller"))
+    groups, labels = sweep_charts.first_seen([metrics.controller])
+    not_ok = (metrics.status != "ok").to_numpy()
+    variant = metrics.variant.to_numpy(dtype=np.int64)
+    rows = []
+    for g, (controller,) in enumerate(labels):
+        members = groups == g
+        measured = np.unique(variant[members])
+        stopped = np.unique(variant[members & not_ok])
+        ok = int(measured.size - stopped.size)
+        rows.append({"controller": controller, "ok": ok, "unstable": variants - failed - ok, "failed": failed,
+                     "variants": variants, "stable_share": ok / variants if variants else np.nan})  # fmt: skip
+    return pd.DataFrame(rows).set_index("controller")[list(STABILITY_COLUMNS)]
+
+
+def robustness(table: pd.DataFrame) -> str:
+    """The stability table (:func:`stability`) in one line: ``unstable: conventional 4 of 20,
+    proposed 14 of 20`` (and the failed variants, when any)."""
+    if table.empty:
+        return "unstable: no controller ran"
+    line = "unstable: " + ", ".join(f"{c} {int(r.unstable)} of {int(r.variants)}" for c, r in table.iterrows())
+    failed = int(table.failed.iloc[0])
+    return line + (f"; failed (did not run): {failed} of {int(table.variants.iloc[0])}" if failed else "")
+
+
+def side_by_side(table: pd.DataFrame) -> dict[str, Any]:
+    """The summary (:func:`summary`) with the controllers side by side: ``controllers`` in
+    order, and ``rows``, one per (signal, metric) in order, each with its ``unit`` and, per
+    controller, its ``median``, ``q25``, ``q75`` and ``n`` (None where it has none)."""
+    controllers = [str(c) for c in dict.fromkeys(table.controller)] if len(table) else []
+    rows: dict[tuple[str, str], dict[str, Any]] = {}
+    for r in table.to_dict("records"):
+        key = (str(r["signal"]), str(r["metric"]))
+        row = rows.setdefault(key, {"signal": key[0], "metric": key[1], "unit": r["unit"], "by": {}})
+        row["by"][str(r["controller"])] = {k: r[k] for k in ("median", "q25", "q75", "n")}
+    return {"controllers": controllers, "rows": list(rows.values())}
 
 
 def varied(index: pd.DataFrame) -> list[str]:
@@ -145,6 +199,7 @@ def context(directory: Path) -> dict[str, Any]:
     the page then says so first."""
     metrics, index = read_tables(directory)
     table = summary(metrics, index)
+    stable = stability(metrics, index)
     report.write_csv(directory / "summary.csv", table)
     files = directory / FILES
     usable = bool(table["n"].sum()) if len(table) else False
@@ -176,6 +231,9 @@ def context(directory: Path) -> dict[str, Any]:
         "title": f"nlcx sweep: {raw.get('name', directory.name)}",
         "caption": str(raw.get("title") or ""),
         "summary": table.to_dict("records"),
+        "robustness": robustness(stable),
+        "stability": {str(c): r for c, r in stable.to_dict("index").items()},
+        "side_by_side": side_by_side(table),
         "usable": usable,
         "variants": len(index),
         "profile_stride": stride,

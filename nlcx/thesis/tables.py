@@ -15,7 +15,7 @@ from typing import Any
 
 import pandas as pd
 
-from nlcx.comparison import improvement  # the thesis's formula, importable from here too
+from nlcx.comparison import thesis_improvement  # the thesis's formula, importable from here too
 from nlcx.thesis import ags, catalog
 
 ANGLES = ("theta", "phi")
@@ -80,7 +80,7 @@ def _improvements(table: pd.DataFrame, column: str) -> list[float]:
         if row.controller != "proposed" or "conventional" not in pair.index or row.metric == "ess":
             out.append(math.nan)
             continue
-        out.append(improvement(pair.loc["conventional", column], pair.loc["proposed", column]))
+        out.append(thesis_improvement(pair.loc["conventional", column], pair.loc["proposed", column]))
     return out
 
 
