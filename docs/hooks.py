@@ -1,9 +1,11 @@
 """MkDocs hook: the reference pages generated at build time from nlcx's own code.
 
 - ``reference/configuration.md``: every key of an experiment config (:class:`nlcx.config.ExperimentSection`
-  and its nested sections) and of every registered plugin's ``Params``/``Config`` model, with type,
-  default, unit and description, read from the pydantic models (``model_fields``; the unit from
-  ``json_schema_extra={"unit": ...}``).
+  and its nested sections), of a sweep (:class:`nlcx.sweeps.SweepSection`), the keys that compose
+  files (``extends``, ``vars``) and every registered plugin's ``Params``/``Config`` model, each under
+  its full dotted name with type, default, unit and description, read from the pydantic models
+  (``model_fields``; the unit from ``json_schema_extra={"unit": ...}``), as definition lists, one
+  heading per section.
 - ``reference/cli.md``: every command of the ``nlcx`` Typer application with its usage, arguments and
   options.
 
@@ -25,16 +27,37 @@ from pydantic import BaseModel
 from pydantic.fields import FieldInfo
 from pydantic_core import PydanticUndefined
 
-#: Registry key -> (heading, the model attribute that validates a section of that kind).
+#: Registry key -> (heading, the model attribute that validates a section of that kind, the dotted
+#: prefix of its keys).
 PLUGIN_KINDS = {
-    "plants": ("Plants (`plant.name`, keys under `plant.params`)", "Params"),
-    "controllers": ("Controllers (`controllers.<label>.kind`)", "Config"),
-    "schedules": ("Gain schedules (`controllers.<label>.loops.<loop>.schedule.kind`)", "Config"),
-    "uncertainties": ("Uncertainties and loop elements (`uncertainty.<label>.kind`)", "Config"),
-    "references": ("References (`reference.<signal>.kind`)", "Config"),
-    "tuners": ("Tuners (`controllers.<label>.tune[i].kind`)", "Config"),
+    "plants": ("Plants (`plant.name`, keys under `plant.params`)", "Params", "plant.params."),
+    "controllers": ("Controllers (`controllers.<label>.kind`)", "Config", "controllers.<label>."),
+    "schedules": (
+        "Gain schedules (`controllers.<label>.loops.<loop>.schedule.kind`)",
+        "Config",
+        "controllers.<label>.loops.<loop>.schedule.",
+    ),
+    "uncertainties": ("Uncertainties and loop elements (`uncertainty.<label>.kind`)", "Config", "uncertainty.<label>."),
+    "references": ("References (`reference.<signal>.kind`)", "Config", "reference.<signal>."),
+    "tuners": ("Tuners (`controllers.<label>.tune[i].kind`)", "Config", "controllers.<label>.tune[i]."),
 }
 
+#: The keys that hold a kind's plugin sections: (key, type, description), listed under the kind's heading.
+SECTION_KEYS = {
+    "plants": [("plant.params", "mapping", "The parameters of the plant `plant.name` names, listed below.")],
+    "controllers": [
+        ("controllers.<label>", "mapping", "One controller; its `kind` names the model that validates it."),
+        (
+            "controllers.<label>.tune",
+            "mapping | list[mapping]",
+            "Tuners applied to the controller before it is built, in order ([tuners](#tuners)).",
+        ),
+    ],
+    "uncertainties": [
+        ("uncertainty.<label>", "mapping", "One uncertainty or loop element; `kind` defaults to the label.")
+    ],
+    "references": [("reference.<signal>", "mapping", "The reference of one output signal.")],
+}
 
 # --------------------------------------------------------------------------- configuration
 
@@ -105,43 +128,59 @@ def cell(text: str) -> str:
     return html.escape(" ".join(text.split()), quote=False).replace("|", "\\|")
 
 
-def nested_models(annotation: Any) -> Iterator[tuple[str, type[BaseModel]]]:
+def nested_models(annotation: Any, label: str = "name") -> Iterator[tuple[str, type[BaseModel]]]:
     """Pydantic models inside a field's type, with the key suffix they sit under
-    (``""`` for the field itself, ``".<name>"`` for a mapping's values, ``"[i]"`` for a list's)."""
+    (``""`` for the field itself, ``".<label>"`` for a mapping's values, ``"[i]"`` for a list's)."""
     origin = typing.get_origin(annotation)
     args = typing.get_args(annotation)
     if inspect.isclass(annotation) and issubclass(annotation, BaseModel):
         yield "", annotation
     elif origin in (typing.Union, types.UnionType):
         for arg in args:
-            yield from nested_models(arg)
+            yield from nested_models(arg, label)
     elif origin is dict and len(args) == 2:
-        for suffix, model in nested_models(args[1]):
-            yield ".<name>" + suffix, model
+        for suffix, model in nested_models(args[1], label):
+            yield f".<{label}>" + suffix, model
     elif origin in (list, tuple) and args:
-        for suffix, model in nested_models(args[0]):
+        for suffix, model in nested_models(args[0], label):
             yield "[i]" + suffix, model
 
 
-def field_rows(model: type[BaseModel], prefix: str = "") -> Iterator[str]:
-    """One table row per key of ``model``, nested models' keys after their parent's."""
+def key_entry(key: str, info: FieldInfo) -> str:
+    """One key as a definition: its full dotted name, then its type, default and unit, then what it is."""
+    facts = [type_name(info.annotation).replace("\\|", "|")]
+    default = default_text(info)
+    if default == "`(section)`":
+        facts.append("optional")
+    elif default:
+        facts.append(default if default == "required" else f"default {default}")
+    if unit_of(info):
+        facts.append(f"unit {html.escape(unit_of(info), quote=False)}")
+    description = html.escape(" ".join((info.description or "").split()), quote=False)
+    return f"`{key}`\n:   {' · '.join(facts)}" + (f"\n\n    {description}" if description else "") + "\n"
+
+
+def key_list(entries: list[str]) -> str:
+    """Definitions of keys, in the block the stylesheet lays out (``docs/stylesheets/reference.css``)."""
+    return '<div class="config-keys" markdown>\n\n' + "\n".join(entries) + "\n</div>\n"
+
+
+def model_sections(model: type[BaseModel], prefix: str = "", level: int = 3) -> list[str]:
+    """The keys of ``model`` under ``prefix``, then each section nested in it under a heading of its
+    own (at ``level``) that names its full dotted key, recursively."""
+    entries: list[str] = []
+    nested: dict[str, type[BaseModel]] = {}
     for name, info in model.model_fields.items():
         key = f"{prefix}{info.alias or name}"
-        yield (
-            f"| `{key}` | {type_name(info.annotation)} | {default_text(info)} | {cell(unit_of(info))} "
-            f"| {cell(info.description or '')} |"
-        )
-        seen: set[type[BaseModel]] = set()
-        for suffix, nested in nested_models(info.annotation):
-            if nested not in seen:
-                seen.add(nested)
-                yield from field_rows(nested, f"{key}{suffix}.")
-
-
-def model_table(model: type[BaseModel], prefix: str = "") -> str:
-    """The keys of ``model`` (and of the models nested in it) as a Markdown table."""
-    rows = "\n".join(field_rows(model, prefix))
-    return f"| key | type | default | unit | description |\n|---|---|---|---|---|\n{rows}\n"
+        entries.append(key_entry(key, info))
+        label = name[:-1] if name.endswith("s") else "name"  # loops: <loop>
+        for suffix, sub in nested_models(info.annotation, label):
+            nested.setdefault(f"{key}{suffix}", sub)
+    parts = [key_list(entries)] if entries else ["No keys.\n"]
+    for key, sub in nested.items():
+        parts.append(f"{'#' * level} `{key}`\n")
+        parts += model_sections(sub, f"{key}.", level)
+    return parts
 
 
 def summary(obj: Any) -> str:
@@ -150,24 +189,58 @@ def summary(obj: Any) -> str:
     return doc.split("\n\n")[0].replace("\n", " ")
 
 
+def file_keys() -> str:
+    """``extends`` and ``vars``: what a config file may hold besides the experiment, resolved before
+    the experiment is validated (their descriptions are the JSON schema's, :mod:`nlcx.schema`)."""
+    from nlcx.schema import experiment_schema
+
+    properties = experiment_schema()["properties"]
+    entries = []
+    for key, kind in (("extends", "str | list[str]"), ("vars", "mapping")):
+        description = html.escape(properties[key]["description"], quote=False)
+        entries.append(f"`{key}`\n:   {kind} · optional\n\n    {description}\n")
+    return key_list(entries)
+
+
 def configuration_page() -> str:
-    """The configuration reference: the experiment's sections, then every registered plugin."""
+    """The configuration reference: the experiment's sections, the sweep, the keys that compose a file,
+    then every registered plugin, each key under its full dotted name."""
     from nlcx import registry
     from nlcx.config import ExperimentSection
+    from nlcx.sweeps import SweepSection
 
     parts = [
         "# Configuration reference\n",
         "Generated from the pydantic models when the site is built, so it lists exactly the keys nlcx "
-        "accepts. A key a model does not declare is refused with a one-line error naming it. Units are "
-        "SI unless a row says otherwise; angles are in rad.\n",
+        "accepts, each under its full dotted name (the name an override such as `simulation.t_end=5` "
+        "uses; `<label>` stands for a name you choose, `[i]` for a position in a list). A key a model "
+        "does not declare is refused with a one-line error naming it. Units are SI unless a key says "
+        "otherwise; angles are in rad.\n",
         "## Experiment\n",
         "The top level of an experiment YAML (`nlcx.config.ExperimentSection`). `controllers`, "
         "`uncertainty` and `reference` map labels to plugin sections, validated by the plugin their "
-        "`kind` names (below); `plant.params` is validated by the plant's parameter model.\n",
-        model_table(ExperimentSection),
+        "`kind` names ([below](#plugins)); `plant.params` is validated by the plant's parameter model.\n",
+        *model_sections(ExperimentSection),
+        "## Sweep\n",
+        "The `sweep:` section of a sweep config (`nlcx sweep`; [the guide](../guide/sweeps.md)): the "
+        "variants are the product grid × zip × random.\n",
+        key_list(["`sweep`\n:   mapping · optional\n\n    The variants of a sweep (`nlcx sweep`); the keys below.\n"]),
+        *model_sections(SweepSection, "sweep."),
+        "## Composing files\n",
+        "Resolved when the file is read, before the experiment is validated (`nlcx.config.read_config`); "
+        'any value may also be a `"${dotted.key}"` string, replaced by a copy of that key\'s value.\n',
+        file_keys(),
+        "## Plugins\n",
+        "The sections `controllers`, `uncertainty`, `reference` and `plant.params` hold, and the gain "
+        "schedules and tuners inside a controller, by the registered plugin that validates them "
+        "(`nlcx list KIND` lists them).\n",
     ]
-    for kind, (heading, attribute) in PLUGIN_KINDS.items():
-        parts.append(f"## {heading}\n")
+    for kind, (heading, attribute, prefix) in PLUGIN_KINDS.items():
+        parts.append(f"## {heading} {{ #{kind} }}\n")
+        if kind in SECTION_KEYS:
+            parts.append(
+                key_list([f"`{k}`\n:   {kind_} · optional\n\n    {d}\n" for k, kind_, d in SECTION_KEYS[kind]])
+            )
         for name in registry.ALL[kind].names():
             plugin = registry.ALL[kind].get(name)
             model = getattr(plugin, attribute, None)
@@ -176,7 +249,7 @@ def configuration_page() -> str:
             if text:
                 parts.append(text + "\n")
             if isinstance(model, type) and issubclass(model, BaseModel) and model.model_fields:
-                parts.append(model_table(model))
+                parts += model_sections(model, prefix, level=4)
             else:
                 parts.append("No keys.\n")
     return "\n".join(parts)

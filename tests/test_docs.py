@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import html
 import os
 import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -80,3 +82,94 @@ def test_every_tutorial_and_guide_page_is_built(site: Path) -> None:
         relative = page.relative_to(ROOT / "docs").with_suffix("")
         built = site / relative / "index.html" if relative.name != "index" else site / relative.parent / "index.html"
         assert built.is_file(), f"{page.relative_to(ROOT)} was not built"
+
+
+#: A Sphinx role left as it is in the built HTML: ``:func:`x``` or ``:func:<code>x</code>``.
+RAW_ROLE = re.compile(r":(func|class|mod|meth|attr|data|obj|exc):(`|<code>)")
+
+
+def _schema_keys(node: Any, defs: dict[str, Any], prefix: str, seen: frozenset[str] = frozenset()) -> set[str]:
+    """Every dotted key the JSON schema node accepts under ``prefix``: a mapping's values under
+    ``<*>`` (and the labels it names, ``uncertainty``'s registered names, too), a list's items
+    under the same key as a single item."""
+    if not isinstance(node, dict):
+        return set()
+    keys: set[str] = set()
+    ref = node.get("$ref")
+    if isinstance(ref, str):
+        name = ref.rsplit("/", 1)[1]
+        if name not in seen:
+            keys |= _schema_keys(defs[name], defs, prefix, seen | {name})
+    for combinator in ("anyOf", "oneOf", "allOf"):
+        for option in node.get(combinator, []):
+            keys |= _schema_keys(option, defs, prefix, seen)
+    for branch in ("then", "else"):
+        keys |= _schema_keys(node.get(branch), defs, prefix, seen)
+    mapping = isinstance(node.get("additionalProperties"), dict)
+    for key, value in node.get("properties", {}).items():
+        full = f"{prefix}{'<*>' if mapping else key}"
+        keys.add(full)
+        keys |= _schema_keys(value, defs, full + ".", seen)
+    if mapping:
+        keys |= _schema_keys(node["additionalProperties"], defs, f"{prefix}<*>.", seen)
+    keys |= _schema_keys(node.get("items"), defs, prefix, seen)
+    return keys
+
+
+def config_keys() -> set[str]:
+    """Every key of an experiment or sweep config file, from nlcx's JSON schema (``nlcx schema``)."""
+    from nlcx.schema import experiment_schema
+
+    schema = experiment_schema()
+    return _schema_keys(schema, schema["$defs"], "")
+
+
+def _reference_key(key: str) -> str:
+    """A key as the test compares it: each ``<label>`` as ``<*>``, a list's ``[i]`` dropped."""
+    return re.sub(r"<[^<>]*>", "<*>", key).replace("[i]", "")
+
+
+@pytest.mark.slow
+def test_no_page_shows_a_raw_sphinx_role(site: Path) -> None:
+    found = {
+        str(page.relative_to(site)): len(RAW_ROLE.findall(page.read_text(encoding="utf-8")))
+        for page in site.rglob("*.html")
+    }
+    assert not {page: n for page, n in found.items() if n}, "raw Sphinx roles in the built site"
+    api = (site / "reference" / "python" / "index.html").read_text(encoding="utf-8")
+    assert 'href="../api/#nlcx.results.load_run"' in api  # a role became a link to its object
+
+
+def test_the_role_and_doctest_rewriting(tmp_path: Path) -> None:
+    import griffe
+
+    sys.path.insert(0, str(ROOT / "docs"))
+    try:
+        import roles
+    finally:
+        sys.path.remove(str(ROOT / "docs"))
+    (tmp_path / "demo").mkdir()
+    (tmp_path / "demo" / "__init__.py").write_text(
+        '"""Top.\n\n>>> 1 + 1\n2\n\n'
+        'See :func:`helper`, :class:`~demo.Thing`, :mod:`filelock`, :func:`demo.gone`.\n"""\n'
+        "class Thing:\n    pass\n\ndef helper():\n    pass\n"
+    )
+    extensions = griffe.load_extensions(roles.SphinxRoles(package="demo"))
+    text = griffe.GriffeLoader(extensions=extensions, search_paths=[str(tmp_path)]).load("demo").docstring.value
+    assert "```pycon\n>>> 1 + 1\n2\n```" in text
+    assert '<autoref identifier="demo.helper" optional><code>helper</code></autoref>' in text
+    assert '<autoref identifier="demo.Thing" optional><code>Thing</code></autoref>' in text
+    assert "<code>filelock</code>" in text and "filelock</autoref>" not in text
+    assert '<autoref identifier="demo.gone"><code>demo.gone</code></autoref>' in text  # required: --strict fails
+    assert not RAW_ROLE.search(text)
+
+
+@pytest.mark.slow
+def test_the_configuration_reference_holds_every_key_of_the_schema(site: Path) -> None:
+    page = (site / "reference" / "configuration" / "index.html").read_text(encoding="utf-8")
+    shown = {_reference_key(html.unescape(k)) for k in re.findall(r"<dt><code>([^<]+)</code></dt>", page)}
+    keys = {_reference_key(k) for k in config_keys()}
+    for key in ("sweep.random.n", "sweep.random.params.<*>.dist", "extends", "vars", "imports", "simulation.t_end"):
+        assert key in keys, f"the schema walk missed {key}"
+    missing = sorted(keys - shown)
+    assert not missing, f"{len(missing)} config keys are not in the configuration reference: {missing[:20]}"

@@ -27,7 +27,7 @@ structures by different processes (a sweep's or a study's workers) and saved to 
 cache, can carry the same symbol; a process that then loads two of them runs one structure's
 code for the other (seen as a fuzzy-PID loop that diverged or never moved). With the
 structure in the name, different structures never share a symbol, and each has its own cache
-files. :func:`nlcx.compiled_cache.serialize_cache_access` keeps the processes that save at
+files. :func:`nlcx._numba_compat.serialize_cache_access` keeps the processes that save at
 once from overwriting each other's files.
 """
 

@@ -33,14 +33,20 @@ class Distribution(BaseModel):
     """A random parameter: uniform [low, high] or +-relative x base, normal, log-uniform, choice."""
 
     model_config = ConfigDict(extra="forbid")
-    dist: Literal["uniform", "normal", "loguniform", "choice"]
-    low: float | None = None
-    high: float | None = None
-    #: For uniform: draw from [base (1 - relative), base (1 + relative)] around the config's value.
-    relative: float | None = Field(None, gt=0)
-    mean: float | None = None
-    std: float | None = Field(None, gt=0)
-    values: list[Any] | None = None
+    dist: Literal["uniform", "normal", "loguniform", "choice"] = Field(
+        description="The distribution: uniform (low and high, or relative), normal (mean and std), "
+        "loguniform (0 < low < high) or choice (values)."
+    )
+    low: float | None = Field(None, description="Lower end of a uniform or loguniform range.")
+    high: float | None = Field(None, description="Upper end of a uniform or loguniform range.")
+    relative: float | None = Field(
+        None,
+        gt=0,
+        description="For uniform: draw from [base (1 - relative), base (1 + relative)] around the config's value.",
+    )
+    mean: float | None = Field(None, description="Mean of a normal distribution.")
+    std: float | None = Field(None, gt=0, description="Standard deviation of a normal distribution.")
+    values: list[Any] | None = Field(None, description="For choice: the values drawn from, each equally likely.")
 
     @model_validator(mode="after")
     def _complete(self) -> Distribution:
@@ -63,26 +69,41 @@ class Distribution(BaseModel):
 
 class RandomSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    n: int = Field(ge=1)
-    params: dict[str, Distribution] = Field(min_length=1)
+    n: int = Field(ge=1, description="Number of seeded draws (variants of the random part).")
+    params: dict[str, Distribution] = Field(
+        min_length=1, description="The distribution of each varied key, by dotted key (e.g. plant.params.l)."
+    )
 
 
 class SweepSection(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    seed: int = Field(0, ge=0)
-    grid: dict[str, list[Any]] = Field(default_factory=dict)
-    zip: dict[str, list[Any]] = Field(default_factory=dict)
-    random: RandomSpec | None = None
-    batch_size: int = Field(64, ge=1)
-    timeseries: bool = False
-    #: The metrics the metrics table keeps (names of :data:`nlcx.metrics.names.METRIC_UNITS`); None: all.
-    metrics: list[str] | None = Field(None, min_length=1)
-    #: The format of the tables sweep and metrics: Parquet datasets (sweep.parquet/,
-    #: metrics.parquet/) or CSV files (sweep.csv, metrics.csv).
-    format: Literal["parquet", "csv"] = "parquet"
-    #: true: variants that differ only in numbers packed as themselves are run from columns
-    #: (:mod:`nlcx.sweeps.columnar`), others config by config; false: always config by config.
-    columnar: bool = True
+    seed: int = Field(
+        0, ge=0, description="Root of numpy.random.SeedSequence from which each variant's seed is spawned."
+    )
+    grid: dict[str, list[Any]] = Field(
+        default_factory=dict, description="Values of each dotted key, combined as a cartesian product."
+    )
+    zip: dict[str, list[Any]] = Field(
+        default_factory=dict, description="Lists of values of equal length, taken together position by position."
+    )
+    random: RandomSpec | None = Field(None, description="Seeded random draws of some keys.")
+    batch_size: int = Field(64, ge=1, description="Variants per kernel call and per result file.")
+    timeseries: bool = Field(False, description="Write every variant's time series (timeseries/variant_NNNNNN.csv).")
+    metrics: list[str] | None = Field(
+        None,
+        min_length=1,
+        description="The metrics the metrics table keeps by name (see the metrics reference); null: all.",
+    )
+    format: Literal["parquet", "csv"] = Field(
+        "parquet",
+        description="The tables sweep and metrics as Parquet datasets (sweep.parquet/, metrics.parquet/) or CSV "
+        "files (sweep.csv, metrics.csv).",
+    )
+    columnar: bool = Field(
+        True,
+        description="true: variants that differ only in numbers are run from columns, the others config by "
+        "config; false: always config by config.",
+    )
 
     @model_validator(mode="after")
     def _zip_lengths(self) -> SweepSection:

@@ -1,6 +1,6 @@
 """A GA population's table cells from columnar ensembles: each table prepared once per hypothesis.
 
-The identification's objective (:class:`nlcx.thesis.identify.Objective`) measures every
+The identification's objective (:class:`nlcx.thesis.fitting.Objective`) measures every
 candidate of a generation on the train tables. Built candidate by candidate, each of those
 experiments is a config to compose, validate and prepare, which costs more than simulating it.
 The candidates of one hypothesis differ only in the free values (the conventional gains, a
