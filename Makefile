@@ -5,11 +5,12 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.nlcx-installed
 DEV_STAMP := $(VENV)/.nlcx-dev-installed
+TUNING_STAMP := $(VENV)/.nlcx-tuning-installed
 JOBS ?= 2
 
 BASELINE_TABLES := table-2.3,table-2.5,table-3.2,table-3.7,table-4.2,table-4.4,table-5.1,table-5.8
 
-.PHONY: install dev-install run test lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
+.PHONY: install tuning-install dev-install run test lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
 	baseline baseline-diff baselines sweep-demo bench bench-gpu docs clean typecheck
 
 $(STAMP): pyproject.toml
@@ -24,14 +25,22 @@ $(STAMP): pyproject.toml
 	$(BIN)/nlcx run configs/xyz_error_ags.yaml simulation.t_end=0.1 --out $(VENV)/warm-up --no-report -q
 	touch $(STAMP)
 
-# the test tools (pytest, ruff, sympy, scikit-fuzzy, Playwright) and the dask extra, for
+# the tuning extra (pymoo: the genetic algorithm), for the targets that tune, calibrate or identify
+# with it (the thesis's GA-tuned results among them); make run does not wait for it
+$(TUNING_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[tuning]"
+	touch $(TUNING_STAMP)
+
+# the test tools (pytest, ruff, sympy, scikit-fuzzy, Playwright) and the dask and tuning extras, for
 # make test and the developer targets; make run does not wait for them
 $(DEV_STAMP): $(STAMP)
-	$(BIN)/python -m pip install --quiet -e ".[test,docs,dask]"
-	touch $(DEV_STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,docs,dask,tuning]"
+	touch $(DEV_STAMP) $(TUNING_STAMP)
 
 ## install: create .venv and install nlcx (make dev-install adds the test tools)
 install: $(STAMP)
+
+tuning-install: $(TUNING_STAMP)
 
 dev-install: $(DEV_STAMP)
 
@@ -56,15 +65,15 @@ typecheck: dev-install
 	$(BIN)/python -m mypy nlcx
 
 ## reproduce-pendulums: every figure and table of chapters 2-4, and claims.csv, in results/thesis/
-reproduce-pendulums: install
+reproduce-pendulums: tuning-install
 	$(BIN)/nlcx reproduce --chapter 2 --chapter 3 --chapter 4 --jobs $(JOBS)
 
 ## reproduce-cstr: chapter 5 (the CSTR): figures, Table 5.8, tables 5.1-5.7, ZN variants, claims
-reproduce-cstr: install
+reproduce-cstr: tuning-install
 	$(BIN)/nlcx reproduce --chapter 5 --jobs $(JOBS) --out results/thesis
 
 ## reproduce: every figure and table of chapters 2-5 and all claims
-reproduce: install
+reproduce: tuning-install
 	$(BIN)/nlcx reproduce --jobs $(JOBS)
 
 ## screenshots: docs/img/report_*.png from results/thesis/report.html (after make reproduce; needs chromium)
@@ -75,12 +84,12 @@ screenshots: dev-install
 tables figures: reproduce
 
 ## baseline: deliberately refresh the committed baseline tables (results/baseline/) after a reviewed change
-baseline: install
+baseline: tuning-install
 	$(BIN)/nlcx reproduce --only $(BASELINE_TABLES) --profile literal --jobs $(JOBS) --out results/ci
 	rm -rf results/baseline/tables && mkdir -p results/baseline && cp -r results/ci/tables results/baseline/
 
 ## baseline-diff: regenerate the baseline subset and diff it against results/baseline/ (also a test)
-baseline-diff: install
+baseline-diff: tuning-install
 	$(BIN)/nlcx reproduce --only $(BASELINE_TABLES) --profile literal --jobs $(JOBS) --out results/ci
 	$(BIN)/nlcx diff results/baseline/tables results/ci/tables
 
@@ -102,7 +111,7 @@ bench-gpu: install
 ## identify: the identification studies and docs/fidelity.md (every number on it): fit every loop hypothesis on
 ## the train tables, reproduce under the literal and selected profiles, ask of each printed conventional column
 ## whether any loop gives it (each study resumes where it stopped; its wall time is in results/identify/*/study.json)
-identify: install
+identify: tuning-install
 	$(BIN)/nlcx identify configs/identify/pendulum_all.yaml --jobs $(JOBS) --out results/identify/pendulum_all
 	$(BIN)/nlcx identify configs/identify/cstr.yaml --jobs $(JOBS) --out results/identify/cstr
 	$(BIN)/python scripts/fidelity_report.py profile results/identify > results/identify/selected.yaml
@@ -124,7 +133,7 @@ baselines: install
 	$(BIN)/nlcx baselines --jobs $(JOBS) --out results/baselines
 
 ## calibrate: refit the unprinted conventional gains (writes configs/thesis/gains/conventional.yaml)
-calibrate: install
+calibrate: tuning-install
 	$(BIN)/nlcx calibrate configs/thesis/calibration/x_conventional.yaml --jobs $(JOBS) --write
 	$(BIN)/nlcx calibrate configs/thesis/calibration/xz_z.yaml --jobs $(JOBS) --write
 

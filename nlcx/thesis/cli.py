@@ -185,8 +185,10 @@ def calibrate(
     from nlcx import rundir
     from nlcx.thesis.calibrate import calibrate as run_calibration
     from nlcx.thesis.calibrate import load_spec, write_back
+    from nlcx.tuning.optimise import require_pymoo
 
     checked_jobs(jobs)
+    require_pymoo("nlcx calibrate")
     runtime.imports_done()
 
     name = load_spec(spec, overrides or []).name
@@ -221,8 +223,10 @@ def identify(
     from nlcx.thesis.consistency import consistency
     from nlcx.thesis.identify import identify as run_identify
     from nlcx.thesis.identify_cstr import identify_cstr
+    from nlcx.tuning.optimise import require_pymoo
 
     checked_jobs(jobs)
+    require_pymoo("nlcx identify")  # every study fits with the GA
     runtime.imports_done()
     raw = safe_yaml.load_file(spec)
     if not isinstance(raw, dict) or not isinstance(raw.get("name"), str):

@@ -152,11 +152,14 @@ def _check_configs(configs: list[Path], overrides: tuple[str, ...], profile: pro
     missing = [str(c) for c in configs if not c.is_file()]
     if missing:
         raise NlcxError(f"missing experiment config(s): {', '.join(missing[:3])}")
+    from nlcx.tuning.ga import require_tuning_extra
+
     for config in configs:
         try:
-            profiles.experiment(config, list(overrides), profile)
+            experiment = profiles.experiment(config, list(overrides), profile)
         except ConfigError as exc:
             raise NlcxError(f"{config}: {exc}") from None
+        require_tuning_extra(experiment.controllers, f"{config}: ")  # GA-tuned: needs pymoo
 
 
 def _run_all(

@@ -16,7 +16,7 @@ from pydantic import Field, field_validator
 
 from nlcx import runtime
 from nlcx.tuning.base import Simulate, TuneContext, TunerConfig, TunerModel, single_loop
-from nlcx.tuning.optimise import GASettings, evolve
+from nlcx.tuning.optimise import GASettings, evolve, require_pymoo
 
 PENALTY = 1e6
 
@@ -90,6 +90,7 @@ class GATuner(TunerModel):
     Config = GATunerConfig
 
     def tune(self, controller: dict[str, Any], cfg: GATunerConfig, ctx: TuneContext) -> dict[str, Any]:
+        require_pymoo(f"{ctx.path}.tune.kind = ga")
         key, loop = single_loop(controller, ctx, "ga")
         objective = ISEObjective(ctx.simulate, key, controller)
         lower = np.array([cfg.bounds[g][0] for g in ("kp", "ki", "kd")])
@@ -109,3 +110,13 @@ class GATuner(TunerModel):
             ctx.record("ga", f"bounds.{gain}", f"[{lo}, {hi}]")
         schedule = {"kind": "constant", "kp": kp, "ki": ki, "kd": kd}
         return {**controller, "loops": {key: {**loop, "schedule": schedule}}}
+
+
+def require_tuning_extra(controllers: Any, where: str = "") -> None:
+    """Fail before any run, in one line, where one of ``controllers`` (an experiment's controller
+    sections, with their tuners) is GA-tuned and pymoo is not installed; ``where`` (a config's
+    path) prefixes the message."""
+    for c in controllers:
+        for tuner in c.tuners:
+            if tuner.kind == "ga":
+                require_pymoo(f"{where}controllers.{c.label}.tune.kind = ga")

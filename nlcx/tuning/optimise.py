@@ -4,6 +4,9 @@ The objective is evaluated a whole population at a time (``objective(X) -> f`` w
 shape (P, n)), which lets the batched kernel simulate every candidate in one call. With
 ``jobs > 1`` the population is split across a process pool; the result is the same as the
 serial one because each candidate's loss depends only on the candidate.
+
+pymoo comes with the optional extra ``tuning`` (``pip install 'nlcx[tuning]'``) and is imported
+when a GA runs; what needs it and finds it missing says so in one line (:func:`require_pymoo`).
 """
 
 from __future__ import annotations
@@ -16,7 +19,27 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from nlcx.errors import NlcxError
+
 Objective = Callable[[np.ndarray], np.ndarray]
+#: The command that installs pymoo with nlcx.
+TUNING_EXTRA = "pip install 'nlcx[tuning]'"
+
+
+def require_pymoo(what: str) -> None:
+    """Raise :class:`~nlcx.errors.NlcxError` (one line: ``WHAT: needs the optional extra: pip
+    install 'nlcx[tuning]'``) where pymoo, the genetic algorithm's library, cannot be imported.
+
+    Parameters
+    ----------
+    what : str
+        What needs the genetic algorithm, as the user named it: a config key and its value
+        (``controllers.ga.tune.kind = ga``) or a command (``nlcx identify``).
+    """
+    try:
+        import pymoo  # noqa: F401
+    except ImportError:
+        raise NlcxError(f"{what}: needs the optional extra: {TUNING_EXTRA}") from None
 
 
 class GASettings(BaseModel):
@@ -101,6 +124,7 @@ def evolution(
     row), and returns the :class:`OptimResult`. Several GAs may be stepped side by side, their
     populations evaluated together; each draws from its own seeded random state, so the result
     is that of :func:`evolve` with the same settings."""
+    require_pymoo("the genetic algorithm (pymoo)")
     from pymoo.algorithms.soo.nonconvex.ga import GA
     from pymoo.core.problem import Problem
     from pymoo.operators.crossover.sbx import SBX
