@@ -26,7 +26,7 @@ import hashlib
 import os
 import subprocess
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from nlcx._numba_compat import check_version
@@ -86,20 +86,33 @@ def ready() -> None:
     ensure_consistent()
 
 
+#: What ``nlcx run`` prints on stderr when it finds numba's cache empty or stale (:class:`CompileHelper`).
+COMPILING = (
+    "compiling nlcx's simulation kernel and this run's functions into numba's disk cache: once per install "
+    "(and after nlcx's source changes), about 30-60 s on 2 cores; later runs load them in under a second"
+)
+
+
 class CompileHelper:
     """A command run in a second process, started only if a step of this one takes longer than
     ``after`` seconds: ``nlcx run`` watches loading the kernel, which is quick from numba's
     cache and takes seconds when it compiles, and then starts ``nlcx prewarm`` with the run's config
     (:func:`nlcx.engine.prewarm`). Both processes write numba's cache, one function's files at a
-    time (:func:`nlcx._numba_compat.serialize_cache_access`), so either may finish first."""
+    time (:func:`nlcx._numba_compat.serialize_cache_access`), so either may finish first.
 
-    def __init__(self, command: list[str], after: float = 1.0) -> None:
+    ``notice``, if given, is called when the command starts (the moment this process knows
+    that it compiles): ``nlcx run`` says there in one line what the wait is (:data:`COMPILING`)."""
+
+    def __init__(self, command: list[str], after: float = 1.0, notice: Callable[[], None] | None = None) -> None:
         self.command = command
+        self.notice = notice
         self.process: subprocess.Popen[bytes] | None = None
         self._timer = threading.Timer(after, self._start)
         self._timer.daemon = True
 
     def _start(self) -> None:
+        if self.notice is not None:
+            self.notice()
         self.process = subprocess.Popen(
             self.command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
         )

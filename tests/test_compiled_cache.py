@@ -189,6 +189,24 @@ def test_the_helper_starts_only_when_the_watched_step_is_slow(tmp_path: Path) ->
     assert slow.process is not None and slow.process.returncode == 0
 
 
+def test_the_compiling_notice_is_given_once_when_the_helper_starts_and_never_on_a_quick_load(tmp_path: Path) -> None:
+    marker = tmp_path / "started"
+    command = [sys.executable, "-c", f"open({str(marker)!r}, 'w').close()"]
+    notices: list[str] = []
+    quick = compiled_cache.CompileHelper(command, after=600.0, notice=lambda: notices.append("quick"))
+    with quick.watching():
+        pass
+    quick.close()
+    assert notices == []
+    slow = compiled_cache.CompileHelper(command, after=0.05, notice=lambda: notices.append("slow"))
+    with slow.watching():
+        _wait_for(marker.exists)
+    slow.close()
+    assert notices == ["slow"]
+    line = compiled_cache.COMPILING
+    assert "\n" not in line and "numba" in line and "once per install" in line and " s " in line
+
+
 def _wait_for(condition: Any, timeout: float = 120.0) -> None:
     """Poll ``condition()`` until it holds; fail after ``timeout`` seconds (a hung process)."""
     deadline = time.monotonic() + timeout

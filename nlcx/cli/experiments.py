@@ -22,7 +22,7 @@ from nlcx.cli._app import (
     load_plugins,
     one_line_errors,
 )
-from nlcx.compiled_cache import CompileHelper
+from nlcx.compiled_cache import COMPILING, CompileHelper
 from nlcx.errors import NlcxError
 from nlcx.plugins import load_config_imports
 from nlcx.terminal import echo
@@ -120,7 +120,9 @@ def run(
     painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
     flags = ["--allow-env"] if allow_env else []
     flags += [item for file in plugins or [] for item in ("--plugins", str(file.resolve()))]
-    helper = CompileHelper([sys.executable, "-m", "nlcx.cli", "prewarm", str(config), *flags, *(overrides or [])])
+    command = [sys.executable, "-m", "nlcx.cli", "prewarm", str(config), *flags, *(overrides or [])]
+    # a kernel that takes over a second to load is being compiled: said in one line on stderr (not with -q)
+    helper = CompileHelper(command, notice=None if quiet else lambda: echo(COMPILING, err=True))
     try:
         from nlcx import engine, rundir
 
