@@ -22,7 +22,7 @@ from nlcx._version import __version__ as __version__
 #: checkers and editors the same names, so this module imports none of them, even for typing).
 _HOMES = {
     "Result": "nlcx.results",
-    "SweepResult": "nlcx.results",
+    "SweepResult": "nlcx.sweep_results",
     "experiment": "nlcx.api",
     "load_run": "nlcx.results",
     "run": "nlcx.api",

@@ -16,8 +16,8 @@ from nlcx.errors import NlcxError as NlcxError
 from nlcx.metrics import step_info as step_info
 from nlcx.plants.scalar import plant as plant
 from nlcx.results import Result as Result
-from nlcx.results import SweepResult as SweepResult
 from nlcx.results import load_run as load_run
+from nlcx.sweep_results import SweepResult as SweepResult
 
 __all__ = [
     "Comparison",

@@ -3,7 +3,7 @@
 :func:`run` simulates every controller of a config on its plant and returns a
 :class:`~nlcx.results.Result` (metrics, comparison, trajectories, figure) without writing
 anything unless asked; :func:`sweep` runs a config's ``sweep:`` section and returns a
-:class:`~nlcx.results.SweepResult`; :func:`nlcx.results.load_run` reads a run directory back into
+:class:`~nlcx.sweep_results.SweepResult`; :func:`nlcx.results.load_run` reads a run directory back into
 a ``Result``. The command line (``nlcx run``, ``nlcx sweep``) runs the same code.
 """
 
@@ -21,7 +21,8 @@ from nlcx._numba_compat import quiet_first_class_functions
 from nlcx.errors import ConfigError
 from nlcx.limits import MAX_JOBS, check_count
 from nlcx.plugins import load_config_imports
-from nlcx.results import Result, SweepResult, load_run, read_output_table
+from nlcx.results import Result, load_run, read_output_table
+from nlcx.sweep_results import SweepResult
 
 if TYPE_CHECKING:
     from nlcx.config import Experiment

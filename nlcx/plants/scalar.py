@@ -213,17 +213,15 @@ def plant(
     params : mapping, optional
         ``{name: default}``, ``{name: (default, unit)}`` or ``{name: (default, unit, description)}``.
     bounds : mapping, optional
-        Default divergence bounds |x_i| <= bound by state name (a config's
-        ``simulation.bounds`` adds to them); every state not named here is bounded by
-        :data:`DEFAULT_BOUND` (1e6), so that a run that diverges stops there (status
-        ``unstable``) instead of climbing to overflow. ``math.inf`` leaves a state unbounded.
+        Divergence bounds |x_i| <= bound by state name (``simulation.bounds`` adds to them);
+        other states get :data:`DEFAULT_BOUND` (1e6), so a diverging run stops there (status
+        ``unstable``) instead of overflowing. ``math.inf`` leaves a state unbounded.
     loop_inputs : mapping, optional
         The input a PID loop on each output drives by default; with one input, that input.
     velocity_states : sequence of str
         States whose derivative is an acceleration (where a disturbance enters by default).
     replace : bool
-        Replace a plant registered under ``name`` before (a notebook cell run again). A
-        built-in plant is never replaced.
+        Replace a plant registered under ``name`` before (a notebook cell run again), never a built-in.
 
     Returns
     -------

@@ -21,7 +21,8 @@ from nlcx.errors import ConfigError, NlcxError
 if TYPE_CHECKING:
     import pandas as pd
 
-    from nlcx.results import Result, SweepResult
+    from nlcx.results import Result
+    from nlcx.sweep_results import SweepResult
     from nlcx.sweeps.planning import Variant
 
 
