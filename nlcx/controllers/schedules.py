@@ -27,6 +27,7 @@ from nlcx import registry
 from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
 from nlcx.kernel.abi import CALLBACK_SIG, CALLBACK_SLOTS, callback_slots, no_callback
+from nlcx.kernel.signatures import FloatArray
 from nlcx.layout import Layout
 
 #: Conventional PID: the three constant gains.
@@ -122,7 +123,7 @@ class ErrorAGSConfig(AGSConfig):
 
 
 @njit(cache=True, error_model="numpy")
-def _decays(k_p, k_i, k_d, s):  # pragma: no cover - compiled
+def _decays(k_p: float, k_i: float, k_d: float, s: float) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """(exp(-k_p s), exp(-k_i s), exp(-k_d s)), each exponential evaluated once per distinct
     rate (the thesis's schedules share k between k_p and k_i)."""
     a_p = math.exp(-k_p * s)
@@ -137,13 +138,17 @@ def _decays(k_p, k_i, k_d, s):  # pragma: no cover - compiled
 
 
 @hot_njit(CALLBACK_SIG, cache=True, error_model="numpy")
-def constant_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+def constant_gains(
+    t: float, e: float, edot: float, p: FloatArray, row: int, o: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Conventional PID: fixed gains, a :data:`CONSTANT` block at p[row, o]."""
     return p[row, o + CG.kp], p[row, o + CG.ki], p[row, o + CG.kd]
 
 
 @hot_njit(CALLBACK_SIG, cache=True, error_model="numpy")
-def time_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+def time_ags_gains(
+    t: float, e: float, edot: float, p: FloatArray, row: int, o: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Eqs. 2.17-2.19 from a :data:`TIME_AGS` block at p[row, o].
 
     k_p(t) = kp_min + (kp_max - kp_min) exp(-k t)     (2.17)
@@ -165,7 +170,9 @@ def time_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
 
 
 @hot_njit(CALLBACK_SIG, cache=True, error_model="numpy")
-def error_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+def error_ags_gains(
+    t: float, e: float, edot: float, p: FloatArray, row: int, o: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Eqs. 2.20-2.22 on s = |c e| (``on_abs_error`` = 1) or s = c e (0), c = ``error_scale``
     (1 as the loop sees e; 1/step size, or 180/pi for an angle in degrees), an
     :data:`ERROR_AGS` block at p[row, o].

@@ -54,6 +54,7 @@ from typing import Any
 from numba import cfunc, njit, types
 
 from nlcx._numba_compat import register_typeof
+from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.layout import Layout
 
 F64 = types.float64
@@ -142,11 +143,25 @@ def _padding(module: str, name: str) -> Padding:
     return getattr(importlib.import_module(module), name)
 
 
-def _no_callback(t, e, edot, p, row, offset):  # pragma: no cover - compiled
+def _no_callback(
+    t: float, e: float, edot: float, p: FloatArray, row: int, offset: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     return 0.0, 0.0, 0.0
 
 
-def _no_element(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
+def _no_element(
+    t: float,
+    dt: float,
+    k: int,
+    signal: FloatArray,
+    vid: IntArray,
+    ep: FloatArray,
+    es: FloatArray,
+    data: FloatArray,
+    p_off: int,
+    s_off: int,
+    d_off: int,
+) -> None:  # pragma: no cover - compiled
     return
 
 
