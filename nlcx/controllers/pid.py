@@ -21,8 +21,8 @@ from nlcx import registry
 from nlcx.controllers.base import ControllerInstance, ControllerModel
 from nlcx.controllers.pid_config import LoopConfig, PIDConfig, normalize, schedule_of
 from nlcx.controllers.pid_step import (
-    _DIRECT,
     ANTI_WINDUP,
+    DIRECT,
     DIRECT_CONSTANT,
     DIRECT_ERROR_AGS,
     DIRECT_TIME_AGS,
@@ -206,7 +206,7 @@ class MultiLoopPID(ControllerModel):
             schedule_offset=offset,
             schedule_length=length,
             setpoint_weight=cfg.setpoint_weight,
-            direct_schedule=_DIRECT.get(registry.schedules.get(kind).gains, VIA_SLOT),
+            direct_schedule=DIRECT.get(registry.schedules.get(kind).gains, VIA_SLOT),
             form=FORMS[cfg.form],
             scale=loop.scale,
             integral_limit=math.inf if loop.integral_limit is None else loop.integral_limit,
@@ -246,7 +246,7 @@ class MultiLoopPID(ControllerModel):
 
 def _via_slot(loop: LoopConfig) -> bool:
     """Whether the PID calls the loop's schedule through its callback slot (not a built-in)."""
-    return registry.schedules.get(schedule_of(loop).kind).gains not in _DIRECT
+    return registry.schedules.get(schedule_of(loop).kind).gains not in DIRECT
 
 
 def input_blocks(cp: np.ndarray) -> list[dict[str, float]]:

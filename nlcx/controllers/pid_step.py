@@ -75,7 +75,8 @@ L = LOOP.at
 #: slot table cannot be inlined, a sizeable share of a sweep's time); any other schedule,
 #: including a third party's or a replaced built-in, goes through its slot.
 VIA_SLOT, DIRECT_CONSTANT, DIRECT_TIME_AGS, DIRECT_ERROR_AGS = 0, 1, 2, 3
-_DIRECT = {constant_gains: DIRECT_CONSTANT, time_ags_gains: DIRECT_TIME_AGS, error_ags_gains: DIRECT_ERROR_AGS}
+#: The built-in schedules' compiled functions and the way the step calls each directly.
+DIRECT = {constant_gains: DIRECT_CONSTANT, time_ags_gains: DIRECT_TIME_AGS, error_ags_gains: DIRECT_ERROR_AGS}
 #: One loop's controller state: integral, previous error, filtered derivative, previous y,
 #: started, the integral's increment of the last sample (undone by clamping anti-windup), the
 #: period of this step's update (dt, T_s, or 0 while a discrete PID holds its output), the
