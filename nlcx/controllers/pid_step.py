@@ -36,14 +36,14 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from nlcx._numba_compat import hot_njit
 from nlcx.controllers.schedules import constant_gains, error_ags_gains, time_ags_gains
 from nlcx.kernel.abi import CONTROLLER_SIG
-from nlcx.kernel.signatures import Callbacks, FloatArray
+from nlcx.kernel.signatures import Callbacks, ControllerStep, FloatArray
 from nlcx.layout import Layout
 from nlcx.uncertainty.actuator_saturation import saturate
 
@@ -393,7 +393,7 @@ _FLAGS = ("filtered", "on_measurement", "gain_inside")
 
 
 @functools.cache
-def step_for(structure: Structure | None) -> Any:
+def step_for(structure: Structure | None) -> ControllerStep:
     """The PID step for rows of one :class:`Structure`: :func:`_pid_rows` with the structure
     compiled in as constants, the same operations on the same values as :func:`pid_step`, so
     the same bits, with the branches and index arithmetic on the structure gone

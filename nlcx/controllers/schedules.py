@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from functools import cache
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
 from numba import njit
@@ -26,7 +26,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from nlcx import registry
 from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
-from nlcx.kernel.abi import CALLBACK_SIG, CALLBACK_SLOTS, callback_slots, no_callback
+from nlcx.kernel.abi import CALLBACK_SIG, CALLBACK_SLOTS, FunctionTable, callback_slots, no_callback
 from nlcx.kernel.signatures import FloatArray
 from nlcx.layout import Layout
 
@@ -218,7 +218,18 @@ class Constant(ScheduleModel):
         return CONSTANT.pack(kp=cfg.kp, ki=cfg.ki, kd=cfg.kd)
 
 
-def gain_ranges(cfg: Any) -> list[float]:
+class GainRanges(Protocol):
+    """A schedule's configuration with the range of each gain (:class:`AGSConfig`, the fuzzy PID's)."""
+
+    @property
+    def kp(self) -> GainRange: ...
+    @property
+    def ki(self) -> GainRange: ...
+    @property
+    def kd(self) -> GainRange: ...
+
+
+def gain_ranges(cfg: GainRanges) -> list[float]:
     """(kp_min, kp_max, ki_min, ki_max, kd_min, kd_max) of a schedule with kp/ki/kd ranges."""
     return [cfg.kp.min, cfg.kp.max, cfg.ki.min, cfg.ki.max, cfg.kd.min, cfg.kd.max]
 
@@ -250,13 +261,13 @@ class ErrorAGS(ScheduleModel):
 
 
 @cache
-def _slots(names: tuple[str, ...], used: frozenset[str] | None) -> tuple[Any, ...]:
+def _slots(names: tuple[str, ...], used: frozenset[str] | None) -> FunctionTable:
     return callback_slots(tuple(
         registry.schedules.get(name).gains if used is None or name in used else no_callback for name in names
     ))  # fmt: skip
 
 
-def schedule_slots(used: Iterable[str] | None = None) -> tuple[Any, ...]:
+def schedule_slots(used: Iterable[str] | None = None) -> FunctionTable:
     """The PID's callback table: the compiled function of each registered schedule in ``used``
     (default: every one) in its slot, registry order, the others padded. A schedule is compiled
     when its slot first reaches the kernel, so a table holding only the schedules a controller
