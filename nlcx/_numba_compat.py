@@ -32,11 +32,10 @@ if TYPE_CHECKING:
     # numba's classes of a compiled function and of its signature, named by nlcx.kernel.signatures
     from numba.core.caching import IndexDataCacheFile
     from numba.core.dispatcher import Dispatcher as Dispatcher
+    from numba.core.types import Type
     from numba.core.typing.templates import Signature as Signature
-    from numba.cuda.dispatcher import _Kernel
+    from numba.cuda.dispatcher import CUDADispatcher, _Kernel
     from numba.cuda.target import CUDATargetContext
-
-    from nlcx.kernel.signatures import DeviceFunction, NumbaFunction, NumbaType
 
 T = TypeVar("T")
 
@@ -78,7 +77,7 @@ def hot_njit(*args: object, **kwargs: object) -> Any:
     return private(*args, _nrt=False, **kwargs)
 
 
-def is_numba_function(value: object) -> TypeGuard[NumbaFunction]:
+def is_numba_function(value: object) -> TypeGuard[Dispatcher]:
     """Whether ``value`` is a function numba compiled or will compile (a dispatcher, whose
     ``py_func`` is its Python source; numba's ``numba.core.dispatcher.Dispatcher``)."""
     from numba.core.dispatcher import Dispatcher as Dispatcher
@@ -86,7 +85,7 @@ def is_numba_function(value: object) -> TypeGuard[NumbaFunction]:
     return isinstance(value, Dispatcher)
 
 
-def register_typeof(cls: type[T], typer: Callable[[T, object], NumbaType]) -> None:
+def register_typeof(cls: type[T], typer: Callable[[T, object], Type]) -> None:
     """Type instances of ``cls`` with ``typer(value, context)`` when a compiled function is called
     (numba's private ``typeof_impl``)."""
     from numba.core.typing.typeof import typeof_impl
@@ -205,7 +204,7 @@ def load_nvvm() -> None:
     NVVM()
 
 
-def keep_compiled_kernels(dispatcher: DeviceFunction, directory: Path, key: str) -> None:
+def keep_compiled_kernels(dispatcher: CUDADispatcher, directory: Path, key: str) -> None:
     """Keep the kernels ``dispatcher`` (a numba-cuda kernel) compiles in files of ``directory``
     named by ``key`` and the signature, and load them from there in later processes.
 
