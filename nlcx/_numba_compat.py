@@ -25,7 +25,19 @@ import functools
 import re
 import warnings
 from collections.abc import Callable, Iterator
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeGuard, TypeVar
+
+if TYPE_CHECKING:
+    # numba's classes of a compiled function and of its signature, named by nlcx.kernel.signatures
+    from numba.core.caching import IndexDataCacheFile
+    from numba.core.dispatcher import Dispatcher as Dispatcher
+    from numba.core.types import Type
+    from numba.core.typing.templates import Signature as Signature
+    from numba.cuda.dispatcher import CUDADispatcher, _Kernel
+    from numba.cuda.target import CUDATargetContext
+
+T = TypeVar("T")
 
 #: numba versions (major, minor) this module is tested with; pyproject pins the same range.
 TESTED: tuple[tuple[int, int], ...] = tuple((0, minor) for minor in range(59, 69))
@@ -54,7 +66,7 @@ class UntestedNumbaWarning(UserWarning):
     """The installed numba is not one of the versions in :data:`TESTED`."""
 
 
-def hot_njit(*args: Any, **kwargs: Any) -> Any:
+def hot_njit(*args: object, **kwargs: object) -> Any:
     """``numba.njit`` without reference counting (numba's private ``_nrt=False``): for functions
     of the kernel's hot loop that allocate nothing (:mod:`nlcx.kernel.abi`, the hot-loop rule).
 
@@ -65,15 +77,15 @@ def hot_njit(*args: Any, **kwargs: Any) -> Any:
     return private(*args, _nrt=False, **kwargs)
 
 
-def is_numba_function(value: Any) -> bool:
+def is_numba_function(value: object) -> TypeGuard[Dispatcher]:
     """Whether ``value`` is a function numba compiled or will compile (a dispatcher, whose
     ``py_func`` is its Python source; numba's ``numba.core.dispatcher.Dispatcher``)."""
-    from numba.core.dispatcher import Dispatcher
+    from numba.core.dispatcher import Dispatcher as Dispatcher
 
     return isinstance(value, Dispatcher)
 
 
-def register_typeof(cls: type, typer: Callable[[Any, Any], Any]) -> None:
+def register_typeof(cls: type[T], typer: Callable[[T, object], Type]) -> None:
     """Type instances of ``cls`` with ``typer(value, context)`` when a compiled function is called
     (numba's private ``typeof_impl``)."""
     from numba.core.typing.typeof import typeof_impl
@@ -143,12 +155,12 @@ def restore_cache_access(wrapped: tuple[str, ...]) -> None:
         setattr(IndexDataCacheFile, name, getattr(IndexDataCacheFile, name).__wrapped__)
 
 
-def _locked(operation: Callable[..., Any]) -> Callable[..., Any]:
+def _locked(operation: Callable[..., object]) -> Callable[..., object]:
     """``operation`` of an ``IndexDataCacheFile`` run under the lock of the file's index."""
     from filelock import FileLock
 
     @functools.wraps(operation)
-    def run(cache_file: Any, *args: Any) -> Any:
+    def run(cache_file: IndexDataCacheFile, *args: object) -> object:
         try:
             lock = FileLock(f"{cache_file._index_path}.lock")
             lock.acquire()
@@ -175,7 +187,7 @@ def cuda_without_fma() -> None:
         return
 
     @functools.wraps(compile_ir)
-    def strict(llvmir: Any, **options: Any) -> Any:
+    def strict(llvmir: object, **options: object) -> object:
         if not options.get("fastmath", False):
             options.setdefault("fma", False)
         return compile_ir(llvmir, **options)
@@ -192,7 +204,7 @@ def load_nvvm() -> None:
     NVVM()
 
 
-def keep_compiled_kernels(dispatcher: Any, directory: Any, key: str) -> None:
+def keep_compiled_kernels(dispatcher: CUDADispatcher, directory: Path, key: str) -> None:
     """Keep the kernels ``dispatcher`` (a numba-cuda kernel) compiles in files of ``directory``
     named by ``key`` and the signature, and load them from there in later processes.
 
@@ -203,22 +215,22 @@ def keep_compiled_kernels(dispatcher: Any, directory: Any, key: str) -> None:
     store with numba-cuda's ``load_overload``/``save_overload``, whose files hold what numba-cuda's
     cache holds (``_Kernel._reduce_states()``: the PTX and cubin); numba-cuda 0.30. A file that
     is missing or unreadable means a compilation; one that cannot be written is skipped."""
-    dispatcher._cache = _KernelFiles(directory, key)
+    dispatcher._cache = _KernelFiles(directory, key)  # type: ignore[assignment]  # numba-cuda calls its cache by its methods only
 
 
 class _KernelFiles:
     """numba-cuda's cache interface over one file per kernel signature (:func:`keep_compiled_kernels`)."""
 
-    def __init__(self, directory: Any, key: str) -> None:
+    def __init__(self, directory: Path, key: str) -> None:
         self.directory, self.key = directory, key
 
-    def _path(self, sig: Any) -> Any:
+    def _path(self, sig: object) -> Path:
         import hashlib
 
         name = hashlib.sha256(f"{self.key}|{sig}".encode()).hexdigest()[:32]
         return self.directory / f"{name}.kernel"
 
-    def load_overload(self, sig: Any, target_context: Any) -> Any:
+    def load_overload(self, sig: object, target_context: CUDATargetContext) -> _Kernel | None:
         import pickle
 
         from numba.cuda.dispatcher import _Kernel
@@ -230,7 +242,7 @@ class _KernelFiles:
         target_context.refresh()
         return _Kernel._rebuild(**payload)
 
-    def save_overload(self, sig: Any, kernel: Any) -> None:
+    def save_overload(self, sig: object, kernel: _Kernel) -> None:
         import os
 
         from numba.cuda.serialize import dumps

@@ -25,7 +25,7 @@ from nlcx import manifest as manifests
 from nlcx import plugins
 from nlcx._version import __version__
 from nlcx.drawing import FigurePlan, Line, Painter, Panel, atomic_write, draw, draw_all
-from nlcx.engine import METRIC_COLUMNS, Result, Run
+from nlcx.engine import METRIC_COLUMNS, ExperimentResult, Run
 
 if TYPE_CHECKING:  # matplotlib is imported by the commands that draw, not by sweeps and diffs
     import pandas as pd  # nlcx run writes its CSV files from columns, without pandas
@@ -136,7 +136,7 @@ def write_timeseries(stem: Path, columns: Mapping[str, np.ndarray | Sequence[str
     return path
 
 
-def metric_columns(result: Result) -> dict[str, np.ndarray | list[str]]:
+def metric_columns(result: ExperimentResult) -> dict[str, np.ndarray | list[str]]:
     """The columns of ``result.metrics`` (:data:`~nlcx.engine.METRIC_COLUMNS`), from its rows."""
     rows = result.metric_rows
     columns: dict[str, np.ndarray | list[str]] = {}
@@ -162,7 +162,7 @@ def _run_columns(run: Run, plant: Plant) -> dict[str, np.ndarray]:
     return cols
 
 
-def timeseries_columns(result: Result) -> dict[str, np.ndarray]:
+def timeseries_columns(result: ExperimentResult) -> dict[str, np.ndarray]:
     """Every sample of every run (a result has at least one), runs one after another: t,
     controller, states, inputs, references, loop logs. A column a run lacks (another
     controller's log) is NaN in its rows."""
@@ -205,7 +205,7 @@ def _style(i: int) -> tuple[str, str]:
     return LINE_STYLES[i % len(LINE_STYLES)]
 
 
-def _run_label(run: Run, result: Result | None = None) -> str:
+def _run_label(run: Run, result: ExperimentResult | None = None) -> str:
     """The legend entry: the controller, its status if not ok, and the requested metrics."""
     if run.status != "ok":
         return f"{run.label} ({run.status})"
@@ -232,7 +232,7 @@ def _lines(run_values: list[tuple[Run, np.ndarray | None, str]], lw: float) -> t
     return tuple(out)
 
 
-def output_plan(result: Result, title: str | None = None) -> FigurePlan:
+def output_plan(result: ExperimentResult, title: str | None = None) -> FigurePlan:
     """One panel per regulated output, every controller overlaid, reference dotted (thesis
     layout); then, with ``outputs.figure_inputs``, one panel per input."""
     plant = result.prepared.plant
@@ -264,12 +264,12 @@ def _time_panel(lines: tuple[Line, ...], k: int, sig: Any) -> Panel:
     )  # fmt: skip
 
 
-def output_figure(result: Result, title: str | None = None) -> Figure:
+def output_figure(result: ExperimentResult, title: str | None = None) -> Figure:
     """The figure of :func:`output_plan`."""
     return draw(output_plan(result, title))
 
 
-def gains_plan(result: Result) -> FigurePlan:
+def gains_plan(result: ExperimentResult) -> FigurePlan:
     """Plant inputs and every logged controller quantity (gains, loop outputs) against time."""
     plant = result.prepared.plant
     names: list[str] = list(plant.input_names)
@@ -362,7 +362,7 @@ def provenance(overrides: Sequence[str] = (), started: float | None = None) -> d
 
 
 def manifest(
-    result: Result,
+    result: ExperimentResult,
     timings: dict[str, float],
     overrides: Sequence[str] = (),
     started: float | None = None,
@@ -407,7 +407,7 @@ def manifest(
 
 
 def write_run(
-    result: Result,
+    result: ExperimentResult,
     out_dir: Path,
     timings: dict[str, float],
     started: float | None = None,

@@ -40,7 +40,7 @@ def load_yaml(name: str) -> dict[str, Any]:
     return yaml.safe_load((CONFIGS / name).read_text())
 
 
-def run_raw(raw: dict[str, Any]) -> engine.Result:
+def run_raw(raw: dict[str, Any]) -> engine.ExperimentResult:
     return engine.run_experiment(config.build(copy.deepcopy(raw)))
 
 

@@ -100,7 +100,7 @@ def third_party(tmp_path: Path) -> Iterator[None]:
         sys.modules.pop("loopparts", None)
 
 
-def _run(raw: dict, uncertainty: dict) -> engine.Result:
+def _run(raw: dict, uncertainty: dict) -> engine.ExperimentResult:
     raw = copy.deepcopy(raw)
     raw["uncertainty"] = uncertainty
     raw["simulation"]["t_end"] = 5.0

@@ -60,7 +60,7 @@ def hinf_norm(A: np.ndarray, B: np.ndarray, C: np.ndarray, n_freq: int = 2000) -
     return max(float(values[k]), max(sigma(th) for th in fine))
 
 
-def run_preview(controllers: dict, t_end: float = 15.0, dt: float = 0.01, **extra) -> engine.Result:
+def run_preview(controllers: dict, t_end: float = 15.0, dt: float = 0.01, **extra) -> engine.ExperimentResult:
     raw = {
         "name": "preview_test",
         "plant": {"name": "transfer_function", "params": CSTR},

@@ -37,7 +37,7 @@ def tf_raw(controllers: dict[str, Any], reference: dict[str, Any], t_end: float,
     }
 
 
-def metric_table(result: engine.Result) -> dict[tuple[str, str, str], float]:
+def metric_table(result: engine.ExperimentResult) -> dict[tuple[str, str, str], float]:
     """(controller, signal, metric) -> value."""
     return {(c, s, name): v for c, s, name, v, *_ in result.metric_rows}
 
@@ -45,7 +45,7 @@ def metric_table(result: engine.Result) -> dict[tuple[str, str, str], float]:
 # ------------------------------------------------------------------------------ time_origin
 
 
-def _pi_step_at_one_second() -> engine.Result:
+def _pi_step_at_one_second() -> engine.ExperimentResult:
     """A PI loop on 1 / (s + 1), reference step 0 -> 1 at t = 1 s: an underdamped second-order
     response (s^2 + 2 s + 4, zeta = 0.5), which overshoots and settles within the run."""
     pi = {"kind": "pid", "loops": {"y": {"schedule": {"kind": "constant", "kp": 1.0, "ki": 4.0, "kd": 0.0}}}}

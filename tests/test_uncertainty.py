@@ -77,7 +77,7 @@ def sensor_noise(prepared: engine.Prepared) -> np.ndarray:
     return element.data
 
 
-def noise_runs(seed: int) -> engine.Result:
+def noise_runs(seed: int) -> engine.ExperimentResult:
     exp = config.load(CONFIGS / "thesis" / "ch2" / "fig_2_07.yaml", [f"seed={seed}", "simulation.t_end=2"])
     return engine.run_experiment(exp)
 

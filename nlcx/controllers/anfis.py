@@ -22,10 +22,11 @@ clipped to the models' ranges (the data they were trained on). The compiled sche
 from __future__ import annotations
 
 import math
-from typing import Any, Literal, TypeAlias
+from typing import Literal, TypeAlias
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nlcx._numba_compat import hot_njit
@@ -204,7 +205,9 @@ class ANFIS(ScheduleModel):
         return np.concatenate([ANFIS_HEAD.pack(head), *vectors])
 
 
-def anfis_surface(cfg: ANFISConfig | dict[str, Any], e: Any, edot: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def anfis_surface(
+    cfg: ANFISConfig | dict[str, object], e: ArrayLike, edot: ArrayLike
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(k_p, k_i, k_d) at every (e, de/dt) (broadcast arrays), by :meth:`AnfisModel.predict`."""
     cfg = cfg if isinstance(cfg, ANFISConfig) else ANFISConfig.model_validate({"kind": "anfis", **cfg})
     e, edot = np.broadcast_arrays(np.asarray(e, dtype=float), np.asarray(edot, dtype=float))

@@ -9,6 +9,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict
 
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import ControllerStep
 from nlcx.plants.base import Plant
 from nlcx.validation import join
 
@@ -26,7 +27,7 @@ class ControllerInstance:
 
     label: str
     kind: str
-    step: Any
+    step: ControllerStep
     cp: np.ndarray
     cs0: np.ndarray
     #: Names of the reference channels the step function reads, in order.
@@ -40,16 +41,16 @@ class ControllerInstance:
     config: dict[str, Any] = field(default_factory=dict)
     #: Values the controller's own design produced or uses (e.g. H-infinity gamma and gains,
     #: learning settings), recorded in tuning.csv.
-    records: dict[str, Any] = field(default_factory=dict)
+    records: dict[str, object] = field(default_factory=dict)
     #: Logged values whose final value is a result (e.g. learned weights), recorded in tuning.csv.
     final_logs: tuple[str, ...] = ()
     #: The controller's own compiled callbacks (:data:`nlcx.kernel.abi.CALLBACK_SIG`), which
     #: the kernel hands its step function untouched: the PID's gain schedules.
-    callbacks: tuple[Any, ...] = ()
+    callbacks: tuple[object, ...] = ()
     #: Where ``step`` is compiled for this controller's structure (the PID's, ``pid.step_for``):
     #: the step of the same arithmetic for rows of any structure of its kind, which the engine
     #: runs when controllers of several structures share a kernel call of few rows.
-    general_step: Any = None
+    general_step: ControllerStep | None = None
     #: The law a controller written as one runs (:class:`~nlcx.controllers.law.LawController`:
     #: its compiled law, shape and parameters' type), which ``nlcx linearize`` differentiates.
     law: Any = None

@@ -43,6 +43,7 @@ from nlcx import registry
 from nlcx.controllers.base import ControllerConfig, ControllerInstance
 from nlcx.controllers.law import LawController, LawShape, law_model
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import ControllerStep
 from nlcx.plants.base import Plant, equilibrium_input
 from nlcx.validation import join
 
@@ -108,7 +109,7 @@ def feedback_law_source(n_x: int, n_r: int, n_u: int, n_z: int) -> str:
 @functools.cache
 def _compiled_law(n_x: int, n_r: int, n_u: int, n_z: int) -> LawController:
     """The law of eq. 1 for this shape, compiled once per process (:func:`nlcx.controllers.law.law_model`)."""
-    namespace: dict[str, Any] = {}
+    namespace: dict[str, Any] = {}  # exec fills it: the generated law
     exec(compile(feedback_law_source(n_x, n_r, n_u, n_z), f"<nlcx feedback {n_x}x{n_u}>", "exec"), namespace)
     n_p = n_u + 2 * n_x + 2 * n_z + n_u * n_x + n_u * n_z
     shape = LawShape(
@@ -139,7 +140,7 @@ class _Feedback(LawController):
     """Eq. 1 with a K from :meth:`gains`; the law of the plant's shape (:func:`_compiled_law`)."""
 
     @property
-    def step(self) -> Any:
+    def step(self) -> ControllerStep:
         """The step of eq. 1 for one state, reference, input and integrator: every shape's step is
         generated from the same source (a built controller carries its plant's)."""
         return _compiled_law(1, 1, 1, 1).step
@@ -148,7 +149,9 @@ class _Feedback(LawController):
         """K = [K, K_i] of the augmented model (eq. 2), n_u rows."""
         raise NotImplementedError
 
-    def build(self, label: str, cfg: Any, plant: Plant, path: str, dt: float | None = None) -> ControllerInstance:
+    def build(
+        self, label: str, cfg: FeedbackConfig, plant: Plant, path: str, dt: float | None = None
+    ) -> ControllerInstance:
         from nlcx.analysis.linear import plant_system
 
         states, outputs, inputs = plant.state_names, plant.output_names, plant.input_names
@@ -195,11 +198,11 @@ class _Feedback(LawController):
     @staticmethod
     def design_records(
         K: np.ndarray, states: list[str], inputs: list[str], integral: list[str], poles: np.ndarray, model: Plant
-    ) -> dict[str, Any]:
+    ) -> dict[str, object]:
         """tuning.csv's rows: every entry of K by input and state (or integrator), the poles of
         the design's closed loop (eq. 2) and the design model's parameters."""
         columns = [*states, *(f"z_{o}" for o in integral)]
-        rows: dict[str, Any] = {
+        rows: dict[str, object] = {
             f"K[{u},{c}]": float(K[i, j]) for i, u in enumerate(inputs) for j, c in enumerate(columns)
         }
         order = np.argsort(-poles.real, kind="stable")
@@ -219,7 +222,7 @@ class StateFeedback(_Feedback):
 
     Config = StateFeedbackConfig
 
-    def gains(self, cfg: Any, A: np.ndarray, B: np.ndarray, path: str) -> np.ndarray:
+    def gains(self, cfg: StateFeedbackConfig, A: np.ndarray, B: np.ndarray, path: str) -> np.ndarray:
         return np.array(cfg.gain, dtype=float)
 
 
@@ -228,7 +231,7 @@ class LQR(_Feedback):
 
     Config = LQRConfig
 
-    def gains(self, cfg: Any, A: np.ndarray, B: np.ndarray, path: str) -> np.ndarray:
+    def gains(self, cfg: LQRConfig, A: np.ndarray, B: np.ndarray, path: str) -> np.ndarray:
         import control as ct
 
         n, m = A.shape[0], B.shape[1]
@@ -248,7 +251,7 @@ class PolePlacement(_Feedback):
 
     Config = PolePlacementConfig
 
-    def gains(self, cfg: Any, A: np.ndarray, B: np.ndarray, path: str) -> np.ndarray:
+    def gains(self, cfg: PolePlacementConfig, A: np.ndarray, B: np.ndarray, path: str) -> np.ndarray:
         import control as ct
 
         try:

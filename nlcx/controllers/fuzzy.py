@@ -14,9 +14,8 @@ schedule reads (:meth:`Fuzzy.pack`), and the same inference vectorised with nump
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+from numpy.typing import ArrayLike
 
 from nlcx.controllers.fuzzy_config import OUTPUT_UNIVERSE, OUTPUTS, SET_NAMES, FuzzyConfig, as_config, membership
 from nlcx.controllers.fuzzy_step import FUZZY_HEAD, N_OUTPUTS, N_SETS, OUTPUT_GRID, RANGE, fuzzy_gains
@@ -57,7 +56,9 @@ class Fuzzy(ScheduleModel):
 # ------------------------------------------------------------------ vectorised (numpy) surface
 
 
-def fuzzy_surface(cfg: FuzzyConfig | dict[str, Any], e: Any, edot: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def fuzzy_surface(
+    cfg: FuzzyConfig | dict[str, object], e: ArrayLike, edot: ArrayLike
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(k_p, k_i, k_d) at every (e, de/dt) (broadcast arrays), for control-surface plots and tests."""
     cfg = as_config(cfg)
     e, edot = np.broadcast_arrays(np.asarray(e, dtype=float), np.asarray(edot, dtype=float))

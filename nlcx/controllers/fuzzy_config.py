@@ -276,7 +276,7 @@ def _uncovered(ranges: list[tuple[float, float]], umin: float, umax: float) -> f
     return None
 
 
-def as_config(cfg: FuzzyConfig | dict[str, Any]) -> FuzzyConfig:
+def as_config(cfg: FuzzyConfig | dict[str, object]) -> FuzzyConfig:
     """``cfg`` itself, or the dict validated as a :class:`FuzzyConfig`."""
     return cfg if isinstance(cfg, FuzzyConfig) else FuzzyConfig.model_validate({"kind": "fuzzy", **cfg})
 
@@ -301,7 +301,7 @@ def _mf_np(x: np.ndarray, lower: float, upper: float, position: int, umin: float
         return np.where((x <= lower) | (x >= upper), 0.0, inner)
 
 
-def universe(cfg: FuzzyConfig | dict[str, Any], variable: str) -> tuple[float, float]:
+def universe(cfg: FuzzyConfig | dict[str, object], variable: str) -> tuple[float, float]:
     """(min, max) of the universe of discourse of ``variable``."""
     cfg = as_config(cfg)
     if variable in INPUTS:
@@ -311,7 +311,7 @@ def universe(cfg: FuzzyConfig | dict[str, Any], variable: str) -> tuple[float, f
     raise ValueError(f"unknown fuzzy variable {variable!r}; allowed: {', '.join(VARIABLES)}")
 
 
-def membership(cfg: FuzzyConfig | dict[str, Any], variable: str, x: Any) -> dict[str, np.ndarray]:
+def membership(cfg: FuzzyConfig | dict[str, object], variable: str, x: np.ndarray) -> dict[str, np.ndarray]:
     """Membership of ``x`` (not clipped) in each set of ``variable``: {"NB": mu, ..., "PB": mu}."""
     cfg = as_config(cfg)
     umin, umax = universe(cfg, variable)

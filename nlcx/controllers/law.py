@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, ClassVar, Literal, NamedTuple
+from typing import Any, ClassVar, Literal, NamedTuple, TypeVar
 
 import numpy as np
 from pydantic import Field, create_model
@@ -47,10 +47,13 @@ from nlcx import registry
 from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel, check_sample_time
 from nlcx.controllers.law_shape import LawShape, ParamSpec, shape_of
 from nlcx.errors import ConfigError, did_you_mean
-from nlcx.kernel.signatures import FloatArray
+from nlcx.kernel.signatures import ControlLaw, ControllerStep, FloatArray, NumbaFunction
 from nlcx.plants.base import Plant
 
 __all__ = ["LawController", "LawShape", "controller", "law_model", "step_source"]
+
+#: A law as its author wrote it (:func:`controller` returns it unchanged).
+LawT = TypeVar("LawT", bound=ControlLaw)
 
 
 def step_source(shape: LawShape) -> str:
@@ -90,7 +93,7 @@ def step(t, dt, x, y, r, cp, cs, u, log, callbacks):
 """
 
 
-def _measure_function() -> Any:
+def _measure_function() -> NumbaFunction:
     """The compiled helper the step reads a measure with: state ``code`` of x, or output
     ``-code - 1`` of y."""
     from numba import njit
@@ -102,7 +105,7 @@ def _measure_function() -> Any:
     return njit(inline="always", error_model="numpy")(measure)
 
 
-def compile_law(f: Callable[..., Any], shape: LawShape) -> tuple[Any, type | None]:
+def compile_law(f: ControlLaw, shape: LawShape) -> tuple[ControlLaw, type | None]:
     """(``f`` compiled by numba, the named tuple type of its parameters, or None when ``p`` is a
     plain tuple)."""
     from numba import njit
@@ -114,17 +117,17 @@ def compile_law(f: Callable[..., Any], shape: LawShape) -> tuple[Any, type | Non
     return law, params_type
 
 
-def batched_step(law: Any, params_type: type | None, shape: LawShape) -> Any:
+def batched_step(law: ControlLaw, params_type: type | None, shape: LawShape) -> ControllerStep:
     """The step with the kernel's batched signature that calls ``law`` on every row (:func:`step_source`)."""
     from nlcx._numba_compat import hot_njit
     from nlcx.kernel.abi import CONTROLLER_SIG
 
-    namespace: dict[str, Any] = {"law": law, "Params": params_type, "measure": _measure_function()}
+    namespace: dict[str, object] = {"law": law, "Params": params_type, "measure": _measure_function()}
     exec(compile(step_source(shape), f"<nlcx controller {shape.name}>", "exec"), namespace)
     return hot_njit(CONTROLLER_SIG, error_model="numpy")(namespace["step"])
 
 
-def _defaults(shape: LawShape, params_type: type | None) -> Any:
+def _defaults(shape: LawShape, params_type: type | None) -> tuple[float, ...]:
     """The parameters' defaults as the law receives them."""
     values = [default for _, default, *_ in shape.params]
     return params_type(*values) if params_type is not None else tuple(values)
@@ -142,14 +145,15 @@ def _failure(name: str, exc: Exception) -> ConfigError:
     return ConfigError("controller", name, f"its law cannot be compiled or called as law(t, dt, y, r, s, p): {first}")
 
 
-def _parts(out: Any) -> list[Any] | None:
+def _parts(out: object) -> list[tuple[Any, ...]] | None:
     """What a law returned as a list of 2 or 3 tuples, or None when it is not that."""
     if not isinstance(out, tuple) or len(out) not in (2, 3):
         return None
-    return list(out) if all(isinstance(part, tuple) for part in out) else None
+    parts = [part for part in out if isinstance(part, tuple)]
+    return parts if len(parts) == len(out) else None
 
 
-def check_law(law: Any, params_type: type | None, shape: LawShape) -> tuple[Any, ...]:
+def check_law(law: ControlLaw, params_type: type | None, shape: LawShape) -> tuple[tuple[float, ...], ...]:
     """A checker at registration: ``law(0, T, zeros, zeros, initial states, defaults)`` runs
     and returns (inputs, next states[, signals]) of the declared sizes, every value finite;
     a wrong arity, return shape or value is one line naming the controller. What it returned."""
@@ -179,11 +183,11 @@ class LawController(ControllerModel):
     #: What the law reads and writes.
     shape: ClassVar[LawShape]
     #: The law as compiled, called by the step and by the linearisation.
-    law: ClassVar[Any] = None
+    law: ClassVar[ControlLaw | None] = None
     #: The named tuple of its parameters (None: a plain tuple).
     params_type: ClassVar[type | None] = None
     #: The user's function, as written (for ``nlcx list``).
-    function: ClassVar[Callable[..., Any] | None] = None
+    function: ClassVar[ControlLaw | None] = None
 
     def parameters(self, cfg: Any, plant: Plant, path: str) -> np.ndarray:
         """The law's parameter values, in the order of :attr:`shape`'s ``params``."""
@@ -253,17 +257,17 @@ class LawController(ControllerModel):
         """The controller whose compiled law, shape and parameters' type the step runs (this one)."""
         return self
 
-    def records(self, cfg: Any, plant: Plant, cp: np.ndarray) -> dict[str, Any]:
+    def records(self, cfg: Any, plant: Plant, cp: np.ndarray) -> dict[str, object]:
         """Values the controller's design produced, for tuning.csv (none for a law as written)."""
         return {}
 
 
 def law_config(
-    shape: LawShape, base: type[ControllerConfig] = ControllerConfig, **extra: Any
+    shape: LawShape, base: type[ControllerConfig] = ControllerConfig, **extra: object
 ) -> type[ControllerConfig]:
     """The pydantic model of the law's config section: ``kind``, each parameter (its default,
     unit and description) and ``sample_time`` (its period; None: every integration step)."""
-    fields: dict[str, Any] = {
+    fields: dict[str, Any] = {  # pydantic.create_model takes its field definitions untyped
         "kind": (Literal[shape.name], Field(shape.name, description="registered name of this controller")),
         **{
             name: (float, Field(default, description=text or None, json_schema_extra={"unit": unit}))
@@ -285,7 +289,7 @@ def law_config(
 
 
 def law_model(
-    f: Callable[..., Any],
+    f: ControlLaw,
     shape: LawShape,
     base: type[LawController] = LawController,
     config: type[ControllerConfig] | None = None,
@@ -327,7 +331,7 @@ def controller(
     signals: Sequence[str] = (),
     sample_time: float | None = None,
     replace: bool = True,
-) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+) -> Callable[[LawT], LawT]:
     """Register a control law written for one variant, ``law(t, dt, y, r, s, p) -> (u, s_next)``.
 
     ``y``, ``r`` and ``s`` are tuples of floats in the declared orders of ``measures``, ``references``
@@ -388,11 +392,11 @@ def controller(
     return _registrar(name, shape_of(name, measures, references, inputs, states, params, signals, sample_time), replace)
 
 
-def _registrar(name: str, shape: LawShape, replace: bool) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+def _registrar(name: str, shape: LawShape, replace: bool) -> Callable[[LawT], LawT]:
     """The decorator of :func:`controller`: registers a law of ``shape`` under ``name`` (replacing
     a law registered before only if ``replace``) and returns the law."""
 
-    def register(f: Callable[..., Any]) -> Callable[..., Any]:
+    def register(f: LawT) -> LawT:
         existing = registry.controllers.get(name) if name in registry.controllers else None
         if existing is not None and not (replace and isinstance(existing, LawController)):
             allowed = "a new name" + ("" if replace else ", or replace=True")

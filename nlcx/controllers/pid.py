@@ -13,7 +13,6 @@ from __future__ import annotations
 import itertools
 import math
 from collections import OrderedDict
-from typing import Any
 
 import numpy as np
 
@@ -21,8 +20,8 @@ from nlcx import registry
 from nlcx.controllers.base import ControllerInstance, ControllerModel
 from nlcx.controllers.pid_config import LoopConfig, PIDConfig, normalize, schedule_of
 from nlcx.controllers.pid_step import (
-    _DIRECT,
     ANTI_WINDUP,
+    DIRECT,
     DIRECT_CONSTANT,
     DIRECT_ERROR_AGS,
     DIRECT_TIME_AGS,
@@ -71,15 +70,17 @@ class BuiltControllers:
 
     def __init__(self, size: int = 256) -> None:
         self.size = size
-        self._entries: OrderedDict[tuple[Any, ...], tuple[PIDConfig, ControllerInstance]] = OrderedDict()
+        self._entries: OrderedDict[tuple[object, ...], tuple[PIDConfig, ControllerInstance]] = OrderedDict()
 
     @staticmethod
-    def key(label: str, cfg: PIDConfig, plant: Plant, path: str, dt: float | None, bias: np.ndarray) -> tuple[Any, ...]:
+    def key(
+        label: str, cfg: PIDConfig, plant: Plant, path: str, dt: float | None, bias: np.ndarray
+    ) -> tuple[object, ...]:
         """The entry's key (see the class docstring)."""
         return (id(cfg), label, path, dt, plant.name, tuple(plant.output_names), tuple(plant.input_names),
                 bias.tobytes())  # fmt: skip
 
-    def get(self, key: tuple[Any, ...]) -> ControllerInstance | None:
+    def get(self, key: tuple[object, ...]) -> ControllerInstance | None:
         """The controller built for ``key``, or None."""
         entry = self._entries.get(key)
         if entry is None:
@@ -87,7 +88,7 @@ class BuiltControllers:
         self._entries.move_to_end(key)
         return entry[1]
 
-    def put(self, key: tuple[Any, ...], cfg: PIDConfig, controller: ControllerInstance) -> ControllerInstance:
+    def put(self, key: tuple[object, ...], cfg: PIDConfig, controller: ControllerInstance) -> ControllerInstance:
         """Keep ``controller``, built from ``cfg`` for ``key``; returns it."""
         self._entries[key] = (cfg, controller)
         if len(self._entries) > self.size:
@@ -208,7 +209,7 @@ class MultiLoopPID(ControllerModel):
             schedule_offset=offset,
             schedule_length=length,
             setpoint_weight=cfg.setpoint_weight,
-            direct_schedule=_DIRECT.get(registry.schedules.get(kind).gains, VIA_SLOT),
+            direct_schedule=DIRECT.get(registry.schedules.get(kind).gains, VIA_SLOT),
             form=FORMS[cfg.form],
             scale=loop.scale,
             integral_limit=math.inf if loop.integral_limit is None else loop.integral_limit,
@@ -250,7 +251,7 @@ class MultiLoopPID(ControllerModel):
 
 def _via_slot(loop: LoopConfig) -> bool:
     """Whether the PID calls the loop's schedule through its callback slot (not a built-in)."""
-    return registry.schedules.get(schedule_of(loop).kind).gains not in _DIRECT
+    return registry.schedules.get(schedule_of(loop).kind).gains not in DIRECT
 
 
 def input_blocks(cp: np.ndarray) -> list[dict[str, float]]:

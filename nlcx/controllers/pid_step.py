@@ -36,14 +36,14 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from nlcx._numba_compat import hot_njit
 from nlcx.controllers.schedules import constant_gains, error_ags_gains, time_ags_gains
 from nlcx.kernel.abi import CONTROLLER_SIG
-from nlcx.kernel.signatures import Callbacks, FloatArray
+from nlcx.kernel.signatures import Callbacks, ControllerStep, FloatArray
 from nlcx.layout import Layout
 from nlcx.uncertainty.actuator_saturation import saturate
 
@@ -75,7 +75,8 @@ L = LOOP.at
 #: slot table cannot be inlined, a sizeable share of a sweep's time); any other schedule,
 #: including a third party's or a replaced built-in, goes through its slot.
 VIA_SLOT, DIRECT_CONSTANT, DIRECT_TIME_AGS, DIRECT_ERROR_AGS = 0, 1, 2, 3
-_DIRECT = {constant_gains: DIRECT_CONSTANT, time_ags_gains: DIRECT_TIME_AGS, error_ags_gains: DIRECT_ERROR_AGS}
+#: The built-in schedules' compiled functions and the way the step calls each directly.
+DIRECT = {constant_gains: DIRECT_CONSTANT, time_ags_gains: DIRECT_TIME_AGS, error_ags_gains: DIRECT_ERROR_AGS}
 #: One loop's controller state: integral, previous error, filtered derivative, previous y,
 #: started, the integral's increment of the last sample (undone by clamping anti-windup), the
 #: period of this step's update (dt, T_s, or 0 while a discrete PID holds its output), the
@@ -392,7 +393,7 @@ _FLAGS = ("filtered", "on_measurement", "gain_inside")
 
 
 @functools.cache
-def step_for(structure: Structure | None) -> Any:
+def step_for(structure: Structure | None) -> ControllerStep:
     """The PID step for rows of one :class:`Structure`: :func:`_pid_rows` with the structure
     compiled in as constants, the same operations on the same values as :func:`pid_step`, so
     the same bits, with the branches and index arithmetic on the structure gone

@@ -17,7 +17,7 @@ which designs the gains for a plant and packs them into the step's parameter row
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
@@ -154,7 +154,7 @@ class Preview(ControllerModel):
         log_names.append("integral")
         log_units.append(f"{unit_y}*s" if unit_y else "s")
         config = cfg.model_dump()
-        records: dict[str, Any] = {"design": cfg.design, "preview": h, "sample_time": cfg.sample_time}
+        records: dict[str, object] = {"design": cfg.design, "preview": h, "sample_time": cfg.sample_time}
         if cfg.design == "hinf":
             records.update(gamma=d.gamma, gamma_min=d.gamma_min)
         records.update({f"Kx[{i}]": float(v) for i, v in enumerate(np.ravel(d.Kx))})

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from functools import cache
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
 from numba import njit
@@ -26,7 +26,8 @@ from pydantic import BaseModel, ConfigDict, Field
 from nlcx import registry
 from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
-from nlcx.kernel.abi import CALLBACK_SIG, CALLBACK_SLOTS, callback_slots, no_callback
+from nlcx.kernel.abi import CALLBACK_SIG, CALLBACK_SLOTS, FunctionTable, callback_slots, no_callback
+from nlcx.kernel.signatures import FloatArray
 from nlcx.layout import Layout
 
 #: Conventional PID: the three constant gains.
@@ -122,7 +123,7 @@ class ErrorAGSConfig(AGSConfig):
 
 
 @njit(cache=True, error_model="numpy")
-def _decays(k_p, k_i, k_d, s):  # pragma: no cover - compiled
+def _decays(k_p: float, k_i: float, k_d: float, s: float) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """(exp(-k_p s), exp(-k_i s), exp(-k_d s)), each exponential evaluated once per distinct
     rate (the thesis's schedules share k between k_p and k_i)."""
     a_p = math.exp(-k_p * s)
@@ -137,13 +138,17 @@ def _decays(k_p, k_i, k_d, s):  # pragma: no cover - compiled
 
 
 @hot_njit(CALLBACK_SIG, cache=True, error_model="numpy")
-def constant_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+def constant_gains(
+    t: float, e: float, edot: float, p: FloatArray, row: int, o: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Conventional PID: fixed gains, a :data:`CONSTANT` block at p[row, o]."""
     return p[row, o + CG.kp], p[row, o + CG.ki], p[row, o + CG.kd]
 
 
 @hot_njit(CALLBACK_SIG, cache=True, error_model="numpy")
-def time_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+def time_ags_gains(
+    t: float, e: float, edot: float, p: FloatArray, row: int, o: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Eqs. 2.17-2.19 from a :data:`TIME_AGS` block at p[row, o].
 
     k_p(t) = kp_min + (kp_max - kp_min) exp(-k t)     (2.17)
@@ -165,7 +170,9 @@ def time_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
 
 
 @hot_njit(CALLBACK_SIG, cache=True, error_model="numpy")
-def error_ags_gains(t, e, edot, p, row, o):  # pragma: no cover - compiled
+def error_ags_gains(
+    t: float, e: float, edot: float, p: FloatArray, row: int, o: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Eqs. 2.20-2.22 on s = |c e| (``on_abs_error`` = 1) or s = c e (0), c = ``error_scale``
     (1 as the loop sees e; 1/step size, or 180/pi for an angle in degrees), an
     :data:`ERROR_AGS` block at p[row, o].
@@ -211,7 +218,18 @@ class Constant(ScheduleModel):
         return CONSTANT.pack(kp=cfg.kp, ki=cfg.ki, kd=cfg.kd)
 
 
-def gain_ranges(cfg: Any) -> list[float]:
+class GainRanges(Protocol):
+    """A schedule's configuration with the range of each gain (:class:`AGSConfig`, the fuzzy PID's)."""
+
+    @property
+    def kp(self) -> GainRange: ...
+    @property
+    def ki(self) -> GainRange: ...
+    @property
+    def kd(self) -> GainRange: ...
+
+
+def gain_ranges(cfg: GainRanges) -> list[float]:
     """(kp_min, kp_max, ki_min, ki_max, kd_min, kd_max) of a schedule with kp/ki/kd ranges."""
     return [cfg.kp.min, cfg.kp.max, cfg.ki.min, cfg.ki.max, cfg.kd.min, cfg.kd.max]
 
@@ -243,13 +261,13 @@ class ErrorAGS(ScheduleModel):
 
 
 @cache
-def _slots(names: tuple[str, ...], used: frozenset[str] | None) -> tuple[Any, ...]:
+def _slots(names: tuple[str, ...], used: frozenset[str] | None) -> FunctionTable:
     return callback_slots(tuple(
         registry.schedules.get(name).gains if used is None or name in used else no_callback for name in names
     ))  # fmt: skip
 
 
-def schedule_slots(used: Iterable[str] | None = None) -> tuple[Any, ...]:
+def schedule_slots(used: Iterable[str] | None = None) -> FunctionTable:
     """The PID's callback table: the compiled function of each registered schedule in ``used``
     (default: every one) in its slot, registry order, the others padded. A schedule is compiled
     when its slot first reaches the kernel, so a table holding only the schedules a controller

@@ -38,10 +38,12 @@ import math
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from nlcx.controllers.base import ControllerInstance
 from nlcx.controllers.law import LawController, LawShape, law_config, law_model
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import ControllerStep
 from nlcx.plants.base import Plant
 
 __all__ = ["SHAPE", "SlidingMode", "sliding_mode_law", "surface_for_poles"]
@@ -94,7 +96,7 @@ class SlidingMode(LawController):
     shape = SHAPE
 
     @property
-    def step(self) -> Any:  # compiled on first use, not when listed
+    def step(self) -> ControllerStep:  # compiled on first use, not when listed
         return _compiled().step
 
     def compiled(self) -> LawController:
@@ -117,7 +119,7 @@ def _compiled() -> LawController:
     return law_model(sliding_mode_law, SHAPE, doc=SlidingMode.__doc__)
 
 
-def surface_for_poles(A: np.ndarray, B: np.ndarray, poles: Any) -> dict[str, float]:
+def surface_for_poles(A: np.ndarray, B: np.ndarray, poles: ArrayLike) -> dict[str, float]:
     """(c1, c2, alpha) of eq. 1 for which the motion on S = 0 of the linear model dx/dt = A x +
     B u (states x - r, x_dot, theta, theta_dot; one input) has the three ``poles``: Ackermann's
     formula for sliding surfaces, sᵀ = e_nᵀ W_c⁻¹ P(A), P the monic polynomial of the poles and

@@ -17,7 +17,7 @@ The package by job; this module names what the rest of nlcx uses:
 - :mod:`nlcx.engine.simulate`: the kernel's arguments, its calls, their runs;
 - :mod:`nlcx.engine.measure`: the metric rows of the runs;
 - :mod:`nlcx.engine.prewarm`: the kernel loaded on demand, the rest compiled ahead;
-- :mod:`nlcx.engine.results`: :class:`Run`, :class:`Result` and the metric tables.
+- :mod:`nlcx.engine.results`: :class:`Run`, :class:`ExperimentResult` and the metric tables.
 """
 
 from __future__ import annotations
@@ -38,12 +38,16 @@ from nlcx.engine.prepared import (
     time_grid,
 )
 from nlcx.engine.prewarm import load_kernel, prewarm
-from nlcx.engine.results import METRIC_COLUMNS, MetricBlock, MetricTable, Result, Run, shared_metrics
+from nlcx.engine.results import METRIC_COLUMNS, ExperimentResult, MetricBlock, MetricTable, Run, shared_metrics
 from nlcx.engine.simulate import simulate_items
+
+#: The former name of :class:`ExperimentResult`: :mod:`nlcx.results` still annotates with it.
+Result = ExperimentResult
 
 __all__ = [
     "METRIC_COLUMNS",
     "TABLEAUS",
+    "ExperimentResult",
     "Item",
     "LoopSimulator",
     "MetricBlock",
@@ -51,7 +55,6 @@ __all__ = [
     "Prepared",
     "Reference",
     "ReferenceCache",
-    "Result",
     "Run",
     "Tableau",
     "TimeGrid",

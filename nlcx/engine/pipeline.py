@@ -21,7 +21,7 @@ from nlcx import preflight
 from nlcx.config import Experiment, MetricsSection, build, controller_section
 from nlcx.engine.measure import controller_records, measure_experiments
 from nlcx.engine.prepared import Prepared, check_memory, perturbations, reference_models, time_grid
-from nlcx.engine.results import MetricBlock, Result, Run
+from nlcx.engine.results import ExperimentResult, MetricBlock, Run
 from nlcx.engine.simulate import simulate_experiments
 from nlcx.plants.base import Plant
 from nlcx.tuning.base import TuneContext
@@ -31,7 +31,7 @@ def evaluate(
     experiments: Sequence[Experiment | Prepared],
     record_logs: bool = True,
     measure: bool = True,
-) -> list[Result]:
+) -> list[ExperimentResult]:
     """The pipeline: experiments (or prepared ones) to trajectories and metrics, batched.
 
     Every closed loop of every experiment on the same time grid goes through the kernel
@@ -56,10 +56,12 @@ def evaluate(
     return [_result(p, rs, block, timing) for p, rs, block, timing in zip(prepared, runs, blocks, timings, strict=True)]
 
 
-def _result(prepared: Prepared, runs: list[Run], block: MetricBlock | None, timings: dict[str, float]) -> Result:
+def _result(
+    prepared: Prepared, runs: list[Run], block: MetricBlock | None, timings: dict[str, float]
+) -> ExperimentResult:
     """An experiment's result; its tuning rows gain what its controllers report themselves."""
     prepared.tuning = [*prepared.tuning, *(row for run in runs for row in controller_records(run))]
-    return Result(prepared=prepared, runs=runs, rows=block, timings=timings)
+    return ExperimentResult(prepared=prepared, runs=runs, rows=block, timings=timings)
 
 
 def prepare(exp: Experiment) -> Prepared:
@@ -108,7 +110,7 @@ def _tuned_section(exp: Experiment, c: Any, plant: Plant, rows: list[dict[str, A
     return controller_section(c.label, data, path)
 
 
-def remeasure(results: Sequence[Result], metrics: Mapping[str, Any]) -> list[Result]:
+def remeasure(results: Sequence[ExperimentResult], metrics: Mapping[str, Any]) -> list[ExperimentResult]:
     """The runs of ``results`` (one :func:`evaluate` call) measured again under other metric
     definitions, without simulating them again: ``metrics`` updates the metrics section of
     every experiment (e.g. ``{"rise_limits": [0, 1], "settling_band": 0.05}``)."""
@@ -122,7 +124,7 @@ def remeasure(results: Sequence[Result], metrics: Mapping[str, Any]) -> list[Res
     return [dataclasses.replace(r, prepared=p, rows=b) for r, p, b in zip(results, prepared, blocks, strict=True)]
 
 
-def run_experiment(exp: Experiment | Prepared) -> Result:
+def run_experiment(exp: Experiment | Prepared) -> ExperimentResult:
     """Prepare (unless prepared already), simulate and measure one experiment (:func:`evaluate`
     of one); timings in seconds."""
     (result,) = evaluate([exp])
@@ -148,7 +150,7 @@ class LoopSimulator:
         simulation: Mapping[str, Any] | None = None,
         uncertainty: Mapping[str, Any] | None = None,
         measure: bool = True,
-    ) -> Result:
+    ) -> ExperimentResult:
         raw = copy.deepcopy(self.raw)
         raw["controllers"] = {label: {k: v for k, v in c.items() if k != "tune"} for label, c in controllers.items()}
         raw.setdefault("simulation", {}).update(simulation or {})

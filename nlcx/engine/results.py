@@ -97,10 +97,6 @@ class ExperimentResult:
         return [row[1:] for row in block.table.rows[block.start : block.stop]]
 
 
-#: :class:`ExperimentResult` under the name :mod:`nlcx.engine` exports.
-Result = ExperimentResult
-
-
 def shared_metrics(results: list[ExperimentResult]) -> pd.DataFrame:
     """The metrics of ``results`` (from one :func:`~nlcx.engine.evaluate` call) in one table, with the
     column ``experiment``: the position of the row's result in ``results``, ascending."""

@@ -49,11 +49,11 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable
-from typing import Any
 
 from numba import cfunc, njit, types
 
 from nlcx._numba_compat import register_typeof
+from nlcx.kernel.signatures import FloatArray, IntArray, NumbaSignature
 from nlcx.layout import Layout
 
 F64 = types.float64
@@ -117,7 +117,7 @@ class Padding(types.WrapperAddressProtocol):
     (:func:`numba.cfunc`, disk-cached), read once. Called anyway, it runs ``function``.
     A padding pickles by reference, as the attribute ``name`` of the module ``module``."""
 
-    def __init__(self, signature: Any, function: Callable[..., Any], module: str, name: str) -> None:
+    def __init__(self, signature: NumbaSignature, function: Callable[..., object], module: str, name: str) -> None:
         self._signature = signature
         self._compiled = cfunc(signature, cache=True)(function)
         self._home = (module, name)
@@ -127,10 +127,10 @@ class Padding(types.WrapperAddressProtocol):
         assert address is not None  # a cfunc has its address once compiled, here in __init__
         return int(address)
 
-    def signature(self) -> Any:
+    def signature(self) -> NumbaSignature:
         return self._signature
 
-    def __reduce__(self) -> tuple[Any, ...]:
+    def __reduce__(self) -> tuple[Callable[[str, str], Padding], tuple[str, str]]:
         return _padding, self._home
 
     def __repr__(self) -> str:
@@ -142,11 +142,25 @@ def _padding(module: str, name: str) -> Padding:
     return getattr(importlib.import_module(module), name)
 
 
-def _no_callback(t, e, edot, p, row, offset):  # pragma: no cover - compiled
+def _no_callback(
+    t: float, e: float, edot: float, p: FloatArray, row: int, offset: int
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     return 0.0, 0.0, 0.0
 
 
-def _no_element(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
+def _no_element(
+    t: float,
+    dt: float,
+    k: int,
+    signal: FloatArray,
+    vid: IntArray,
+    ep: FloatArray,
+    es: FloatArray,
+    data: FloatArray,
+    p_off: int,
+    s_off: int,
+    d_off: int,
+) -> None:  # pragma: no cover - compiled
     return
 
 

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 from nlcx.kernel.device import Retarget, cuda
 from nlcx.kernel.friction import friction_forces, has_friction, initial_modes, update_friction_modes
 from nlcx.kernel.friction_path import sample_stage, step_with_friction
-from nlcx.kernel.signatures import FloatArray, IntArray
+from nlcx.kernel.signatures import DeviceFunction, FloatArray, IntArray
 from nlcx.kernel.structures import FrictionScratch, FrictionWork, OneColumn
 
 if TYPE_CHECKING:
@@ -45,12 +45,14 @@ class FrictionDevices(NamedTuple):
     with ``record``, the friction forces into ``f_k`` (1, n_u); :data:`OVER_STEP`, the step into
     ``xn`` (n, 1)."""
 
-    has: Any
-    start: Any
-    act: Any
+    has: DeviceFunction
+    start: DeviceFunction
+    act: DeviceFunction
 
 
-def friction_devices(retarget: Retarget, rhs: Any, n_x: int, n_u: int, n_stages: int, n_d: int) -> FrictionDevices:
+def friction_devices(
+    retarget: Retarget, rhs: DeviceFunction, n_x: int, n_u: int, n_stages: int, n_d: int
+) -> FrictionDevices:
     """The friction path compiled for a kernel with friction (``rhs``: the plant's right-hand
     side as a device function; the sizes of the thread's work space)."""
     global cuda_module

@@ -34,17 +34,35 @@ from __future__ import annotations
 import functools
 import math
 import re
-from collections.abc import Callable
 from typing import Any, NamedTuple, TypeAlias
 
 import numpy as np
 
 from nlcx._numba_compat import is_numba_function
-from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, STATUS_OK, no_element
+from nlcx.kernel.abi import (
+    ACTUATOR,
+    ELEMENT_ENTRY,
+    SENSOR,
+    STATUS_BOUND,
+    STATUS_NONFINITE,
+    STATUS_OK,
+    Padding,
+    no_element,
+)
 from nlcx.kernel.cuda_friction import AT_SAMPLE, OVER_STEP, FrictionDevices, friction_devices, frictionless
 from nlcx.kernel.device import Retarget, cuda, kept, refused
 from nlcx.kernel.friction import any_friction
-from nlcx.kernel.signatures import Callbacks, FloatArray, IntArray
+from nlcx.kernel.signatures import (
+    Callbacks,
+    ControllerStep,
+    DeviceArray,
+    DeviceFunction,
+    FloatArray,
+    GainSchedule,
+    IntArray,
+    LoopElement,
+    RightHandSide,
+)
 from nlcx.kernel.stepping import (
     CLASSIC,
     SEQUENTIAL,
@@ -55,8 +73,16 @@ from nlcx.kernel.stepping import (
     sample_signals,
     stage_nodes,
 )
-from nlcx.kernel.structures import CLASSIC_RK4, Integration
-from nlcx.protocols import CompiledFunction
+from nlcx.kernel.structures import (
+    CLASSIC_RK4,
+    ControllerCall,
+    Integration,
+    LoopElements,
+    Outcome,
+    PlantCall,
+    PlantForces,
+    Records,
+)
 
 EE = ELEMENT_ENTRY.at
 #: What a recorded signal is (column 0 of ``recorded``): a state, an output (row of C), an input,
@@ -66,15 +92,19 @@ STATE, OUTPUT, INPUT, FRICTION = 0, 1, 2, 3
 THREADS = 128
 
 
+#: An entry of the element table: (hook, function, p_off, s_off, d_off).
+ElementEntry: TypeAlias = tuple[int, LoopElement | Padding, int, int, int]
+
+
 class LoopShape(NamedTuple):
     """What a compiled closed-loop kernel is specialised to: the plugins' functions (CPU forms),
     the element table's order and offsets, whether any variant has friction, and the sizes of
     the thread's local arrays."""
 
-    rhs: Any
-    step: Any
-    schedules: tuple[tuple[int, Any], ...]  # (slot, schedule function) of the callback table
-    elements: tuple[tuple[int, Any, int, int, int], ...]  # (hook, function, p_off, s_off, d_off)
+    rhs: RightHandSide
+    step: ControllerStep
+    schedules: tuple[tuple[int, GainSchedule], ...]  # (slot, schedule function) of the callback table
+    elements: tuple[ElementEntry, ...]
     n_x: int
     n_u: int
     n_y: int
@@ -89,7 +119,13 @@ class LoopShape(NamedTuple):
 
 
 def shape_of(
-    plant: Any, controller: Any, elements: Any, forces: Any, n_u: int, n_log: int, integration: Any
+    plant: PlantCall,
+    controller: ControllerCall,
+    elements: LoopElements,
+    forces: PlantForces,
+    n_u: int,
+    n_log: int,
+    integration: Integration,
 ) -> LoopShape:
     """The :class:`LoopShape` of a kernel call's structures (``n_u`` inputs, ``n_log`` logged values)."""
     schedules = tuple((slot, fn) for slot, fn in enumerate(controller.callbacks) if is_numba_function(fn))
@@ -107,7 +143,7 @@ def shape_of(
     )  # fmt: skip
 
 
-def unsupported(plant: Any, controller: Any, elements: Any) -> str | None:
+def unsupported(plant: PlantCall, controller: ControllerCall, elements: LoopElements) -> str | None:
     """Why a kernel call cannot run on the GPU (one line naming what), or None."""
     for what, fn in (("plant right-hand side", plant.rhs), ("controller step", controller.step)):
         if not is_numba_function(fn):
@@ -120,8 +156,12 @@ def unsupported(plant: Any, controller: Any, elements: Any) -> str | None:
 
 # ----------------------------------------------------------------------------- device functions
 
+#: The device functions of a closed-loop kernel: (rhs, controller step, sensor chain, actuator
+#: chain, friction path).
+LoopDevices: TypeAlias = tuple[DeviceFunction, DeviceFunction, DeviceFunction, DeviceFunction, FrictionDevices]
 
-def _via_slot(retarget: Retarget, schedules: tuple[tuple[int, Any], ...]) -> Any:
+
+def _via_slot(retarget: Retarget, schedules: tuple[tuple[int, GainSchedule], ...]) -> DeviceFunction:
     """The GPU's :func:`nlcx.controllers.pid_step.via_slot`: a branch over the slots in use."""
     gpu = cuda()
 
@@ -137,7 +177,7 @@ def _via_slot(retarget: Retarget, schedules: tuple[tuple[int, Any], ...]) -> Any
     return chain
 
 
-def _slot_branch(slot: int, gains: Any, rest: Any) -> Any:
+def _slot_branch(slot: int, gains: DeviceFunction, rest: DeviceFunction) -> DeviceFunction:
     @cuda().jit(device=True)
     def branch(
         callbacks: Callbacks, s: int, t: float, e: float, edot: float, p: FloatArray, row: int, offset: int
@@ -149,7 +189,7 @@ def _slot_branch(slot: int, gains: Any, rest: Any) -> Any:
     return branch
 
 
-def _element_chain(retarget: Retarget, entries: tuple[tuple[int, Any, int, int, int], ...], hook: int) -> Any:
+def _element_chain(retarget: Retarget, entries: tuple[ElementEntry, ...], hook: int) -> DeviceFunction:
     """One device function calling the elements at ``hook`` in table order."""
     gpu = cuda()
 
@@ -166,7 +206,7 @@ def _element_chain(retarget: Retarget, entries: tuple[tuple[int, Any, int, int, 
     return chain
 
 
-def _element_link(fn: Any, p_off: int, s_off: int, d_off: int, rest: Any) -> Any:
+def _element_link(fn: DeviceFunction, p_off: int, s_off: int, d_off: int, rest: DeviceFunction) -> DeviceFunction:
     @cuda().jit(device=True)
     def link(
         t: float, dt: float, k: int, signal: FloatArray, vid: IntArray, ep: FloatArray, es: FloatArray, data: FloatArray
@@ -177,7 +217,7 @@ def _element_link(fn: Any, p_off: int, s_off: int, d_off: int, rest: Any) -> Any
     return link
 
 
-def _devices(shape: LoopShape) -> tuple[Any, Any, Any, Any, FrictionDevices]:
+def _devices(shape: LoopShape) -> LoopDevices:
     """(rhs, controller step, sensor chain, actuator chain, friction path) compiled for the GPU."""
     from nlcx.controllers.pid_step import via_slot
 
@@ -197,10 +237,10 @@ def _devices(shape: LoopShape) -> tuple[Any, Any, Any, Any, FrictionDevices]:
 
 # ----------------------------------------------------------------------------- the kernel
 
-_KERNELS: dict[LoopShape, Any] = {}
+_KERNELS: dict[LoopShape, DeviceFunction] = {}
 
 
-def loop_kernel(shape: LoopShape) -> Any:
+def loop_kernel(shape: LoopShape) -> DeviceFunction:
     """The closed-loop kernel of ``shape``, compiled on its first launch (one per shape and process)."""
     if shape not in _KERNELS:
         _KERNELS[shape] = kept(_build(shape, *_devices(shape)), loop_kernel, shape)
@@ -213,7 +253,7 @@ cuda_module: Any = None
 
 
 @functools.cache
-def _steps() -> tuple[Any, Any, Any, Any]:
+def _steps() -> tuple[DeviceFunction, DeviceFunction, DeviceFunction, DeviceFunction]:
     """(sample_signals, hold_input, rk_step, first_failing_state) of :mod:`nlcx.kernel.stepping`
     compiled for the GPU, called by a thread with a batch of one."""
     retarget = Retarget()
@@ -223,12 +263,14 @@ def _steps() -> tuple[Any, Any, Any, Any]:
     return sample, hold, advance, failing
 
 
-#: The device functions of a closed-loop kernel: (rhs, controller step, sensor chain, actuator
-#: chain, friction path).
-LoopDevices: TypeAlias = tuple[CompiledFunction, CompiledFunction, CompiledFunction, CompiledFunction, FrictionDevices]
-
-
-def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, friction: FrictionDevices) -> Any:
+def _build(
+    shape: LoopShape,
+    rhs: DeviceFunction,
+    step: DeviceFunction,
+    sensor: DeviceFunction,
+    actuator: DeviceFunction,
+    friction: FrictionDevices,
+) -> DeviceFunction:
     """The kernel of ``shape``: the thread's closed loop from t_0 to t_K (the module docstring),
     with the plugins' device functions, the friction path and the stage combination of its method.
     Its arguments are the arrays of a kernel call's structures (:func:`launch` passes them by name)."""
@@ -238,7 +280,7 @@ def _build(shape: LoopShape, rhs: Any, step: Any, sensor: Any, actuator: Any, fr
     return _thread_loop(shape, (rhs, step, sensor, actuator, friction), combination)
 
 
-def _thread_loop(shape: LoopShape, devices: LoopDevices, combination: int) -> CompiledFunction:
+def _thread_loop(shape: LoopShape, devices: LoopDevices, combination: int) -> DeviceFunction:
     """The kernel of :func:`_build`; the thread's own state, signals and rows live in its local memory."""
     from numba import float64, int64
 
@@ -320,7 +362,7 @@ def _local_sizes(shape: LoopShape) -> tuple[int, int, int, int, int, int, int, i
 
 
 @functools.cache
-def _thread_rows(n_x: int, n_u: int) -> Any:
+def _thread_rows(n_x: int, n_u: int) -> DeviceFunction:
     """The device function that copies thread v's rows into its local memory: the controller's
     parameters and state, the initial state and the state's bounds; no friction force yet."""
 
@@ -355,7 +397,7 @@ def _thread_rows(n_x: int, n_u: int) -> Any:
 
 
 @functools.cache
-def _recorder() -> Callable[..., Any]:
+def _recorder() -> DeviceFunction:
     """The device function that stores a thread's recorded signals of sample k."""
 
     @cuda().jit(device=True)
@@ -394,16 +436,16 @@ class Launch(NamedTuple):
     """What a launch leaves on the GPU: the recorded signals (K+1, signals, B), the controller
     logs (K+1|1, n_log, B) and each row's outcome (status, n_valid, fail_index)."""
 
-    REC: Any
-    LOG: Any
-    status: Any
-    n_valid: Any
-    fail_index: Any
+    REC: DeviceArray
+    LOG: DeviceArray
+    status: DeviceArray
+    n_valid: DeviceArray
+    fail_index: DeviceArray
 
 
 def launch(
-    integration: Any, plant: Any, controller: Any, elements: Any, forces: Any,
-    n_u: int, n_log: int, n_samples: int, recorded: np.ndarray, record_logs: bool,
+    integration: Integration, plant: PlantCall, controller: ControllerCall, elements: LoopElements,
+    forces: PlantForces, n_u: int, n_log: int, n_samples: int, recorded: np.ndarray, record_logs: bool,
 ) -> Launch:  # fmt: skip
     """Run the kernel call's rows on the GPU, recording the signals ``recorded`` ((kind, index)
     rows: :data:`STATE`, :data:`OUTPUT`, :data:`INPUT`) at each of the ``n_samples`` samples; the
@@ -453,7 +495,13 @@ def _first_line(exc: BaseException) -> str:
 
 
 def simulate(
-    integration: Any, plant: Any, controller: Any, elements: Any, forces: Any, records: Any, outcome: Any
+    integration: Integration,
+    plant: PlantCall,
+    controller: ControllerCall,
+    elements: LoopElements,
+    forces: PlantForces,
+    records: Records,
+    outcome: Outcome,
 ) -> None:
     """:func:`nlcx.kernel.integrator.simulate` on the GPU: the same structures in, ``records``
     (every state and input; the logs and friction forces where recorded) and ``outcome`` written."""

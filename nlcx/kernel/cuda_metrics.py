@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from nlcx.kernel.device import Retarget, cuda, kept
-from nlcx.kernel.signatures import FloatArray, IntArray
+from nlcx.kernel.signatures import DeviceFunction, FloatArray, IntArray
 from nlcx.metrics.kernels import Timing
 from nlcx.metrics.sums import DEPTH
 
@@ -38,14 +38,14 @@ class MeasuredRecord(NamedTuple):
 
 
 @functools.cache
-def _measure() -> Any:
+def _measure() -> DeviceFunction:
     """:func:`nlcx.metrics.kernels.measure` as a device function (compiled on first use)."""
     from nlcx.metrics.kernels import measure
 
     return Retarget().device(measure)
 
 
-def _link(measure: Any, record: MeasuredRecord, rest: Any) -> Any:
+def _link(measure: DeviceFunction, record: MeasuredRecord, rest: DeviceFunction) -> DeviceFunction:
     """A device function measuring ``record`` into out[o:] and handing on to ``rest``."""
     kind, q, final, width, row = record.kind, record.signal, record.final, record.width, max(record.ref_row, 0)
     first, j, a, on_grid, t_step, shift, band, rise_low, rise_high, window, abs_tol = record.timing
@@ -71,10 +71,10 @@ def _link(measure: Any, record: MeasuredRecord, rest: Any) -> Any:
 #: numba's CUDA module as a global of this module (where numba's simulator replaces it).
 cuda_module: Any = None
 
-_KERNELS: dict[tuple[tuple[MeasuredRecord, ...], bytes], Any] = {}
+_KERNELS: dict[tuple[tuple[MeasuredRecord, ...], bytes], DeviceFunction] = {}
 
 
-def metrics_kernel(records: tuple[MeasuredRecord, ...], t: np.ndarray) -> Any:
+def metrics_kernel(records: tuple[MeasuredRecord, ...], t: np.ndarray) -> DeviceFunction:
     """A kernel ``kernel(t, REC, REF, OUT, first)`` writing the values of the runs first,
     first + 1, ... of the records (OUT row v: each record's values one after the other) from
     their records (REC[:, :, first + v]) and the references REF (rows ``ref_row``); compiled
@@ -86,7 +86,7 @@ def metrics_kernel(records: tuple[MeasuredRecord, ...], t: np.ndarray) -> Any:
     return _KERNELS[key]
 
 
-def _metrics_kernel(records: tuple[MeasuredRecord, ...]) -> Any:
+def _metrics_kernel(records: tuple[MeasuredRecord, ...]) -> DeviceFunction:
     global cuda_module
     gpu = cuda_module = cuda()
     from numba import float64, int64

@@ -28,12 +28,13 @@ import os
 import re
 import sys
 import types as pytypes
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Protocol
 
 from nlcx._numba_compat import is_numba_function, load_nvvm
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import DeviceFunction, NumbaFunction
 
 #: The devices a closed loop runs on (``simulation.device``, ``--device``).
 DEVICES = ("cpu", "cuda")
@@ -54,7 +55,7 @@ def simulator_enabled() -> bool:
 
 
 @functools.cache
-def cuda() -> Any:
+def cuda() -> pytypes.ModuleType:
     """numba's CUDA module, once a GPU (or the simulator) is there; a one-line ConfigError otherwise."""
     from nlcx import runtime
 
@@ -123,16 +124,17 @@ class Retarget:
     >>> rhs = Retarget().device(x_derived_rhs)  # doctest: +SKIP
     """
 
-    def __init__(self, overrides: Mapping[Any, Any] | None = None) -> None:
-        self._done: dict[Any, Any] = dict(overrides or {})
+    def __init__(self, overrides: Mapping[object, DeviceFunction] | None = None) -> None:
+        self._done: dict[object, DeviceFunction] = dict(overrides or {})
 
-    def stand_in(self, function: Any, device: Any) -> None:
+    def stand_in(self, function: object, device: DeviceFunction) -> None:
         """Let ``device`` stand for ``function`` in whatever is compiled from here on (an
         override made with device functions this :class:`Retarget` compiled)."""
         self._done[function] = device
 
-    def device(self, function: Any) -> Any:
-        """The device function compiled from ``function`` (a numba function) for the GPU."""
+    def device(self, function: object) -> DeviceFunction:
+        """The device function compiled from ``function`` (a numba function; anything else is a
+        TypeError) for the GPU."""
         if function in self._done:
             return self._done[function]
         if not is_numba_function(function):
@@ -151,12 +153,18 @@ class Retarget:
         self._done[function] = compiled
         return compiled
 
-    def _cell(self, cell: Any) -> Any:
+    def _cell(self, cell: pytypes.CellType) -> pytypes.CellType:
         value = cell.cell_contents
         return pytypes.CellType(self.device(value)) if is_numba_function(value) else cell
 
 
-def _code_digest(code: pytypes.CodeType, digest: Any) -> None:
+class Digest(Protocol):
+    """What :func:`source_key` feeds: a :mod:`hashlib` hash."""
+
+    def update(self, data: bytes, /) -> None: ...
+
+
+def _code_digest(code: pytypes.CodeType, digest: Digest) -> None:
     """Feed ``code`` (its bytecode, names and constants, nested code objects too) to ``digest``."""
     digest.update(code.co_code)
     digest.update(repr((code.co_names, code.co_varnames, code.co_freevars)).encode())
@@ -167,7 +175,7 @@ def _code_digest(code: pytypes.CodeType, digest: Any) -> None:
             digest.update(repr(const).encode())
 
 
-def _value_digest(value: Any, digest: Any, seen: set[int]) -> None:
+def _value_digest(value: object, digest: Digest, seen: set[int]) -> None:
     """Feed a global or closure value a compiled function reads to ``digest``: a numba or plain
     function by its source graph, a module by its name, anything else by its ``repr``."""
     if is_numba_function(value):
@@ -201,7 +209,7 @@ def _value_digest(value: Any, digest: Any, seen: set[int]) -> None:
         digest.update(re.sub(r" at 0x[0-9a-fA-F]+", "", repr(value)).encode())
 
 
-def source_key(*parts: Any) -> str:
+def source_key(*parts: object) -> str:
     """A key of compiled GPU code that is the same in every process and changes with its source:
     the numba-cuda version, and each part (a numba or plain function by its code and every
     function it calls, a constant by its ``repr``)."""
@@ -216,7 +224,7 @@ def source_key(*parts: Any) -> str:
     return digest.hexdigest()
 
 
-def kept(kernel: Any, *parts: Any) -> Any:
+def kept(kernel: DeviceFunction, *parts: object) -> DeviceFunction:
     """``kernel`` (a numba-cuda kernel built at run time) with its compiled forms kept on disk
     between processes under :func:`source_key` of ``parts`` (the GPU's name in the key too);
     the simulator compiles nothing, and keeps nothing."""
@@ -228,6 +236,8 @@ def kept(kernel: Any, *parts: Any) -> Any:
     return kernel
 
 
-def device_function(function: Any, overrides: Mapping[Any, Any] | None = None) -> Callable[..., Any]:
+def device_function(
+    function: NumbaFunction, overrides: Mapping[object, DeviceFunction] | None = None
+) -> DeviceFunction:
     """The CUDA device function compiled from the numba function ``function`` (:class:`Retarget`)."""
     return Retarget(overrides).device(function)

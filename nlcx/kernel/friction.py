@@ -17,7 +17,7 @@ parameters of each axis are a :data:`FRICTION_AXIS` block; the configuration liv
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -227,7 +227,7 @@ def disturbance_at(
         out[j] = (1.0 - w) * drow[lo, j] + w * drow[hi, j]
 
 
-def any_friction(axes: Any) -> bool:
+def any_friction(axes: FloatArray | None) -> bool:
     """Whether friction axes (FRICTION_AXIS rows: an item's, or a call's with a leading row axis;
     None: none) hold a friction model anywhere, as :func:`has_friction` decides per row."""
     return axes is not None and bool(np.any(axes[..., FA.model].astype(np.int64) != FRICTION_NONE))

@@ -12,7 +12,7 @@ compiles it; the GPU compiles the same functions for a thread (:mod:`nlcx.kernel
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from numba import njit
 
@@ -20,7 +20,7 @@ from nlcx.kernel.abi import Padding, shared_row
 from nlcx.kernel.friction import FA, SLIP, STUCK, disturbance_at, friction_forces, update_friction_modes
 from nlcx.kernel.signatures import FloatArray, IntArray, RightHandSide
 from nlcx.kernel.stepping import SEQUENTIAL, FrictionStage, rk_step
-from nlcx.kernel.structures import FRICTION_SAMPLE_SIG, FRICTION_STEP_SIG, FrictionPath
+from nlcx.kernel.structures import FRICTION_SAMPLE_SIG, FRICTION_STEP_SIG, FrictionPath, FrictionSample, FrictionStep
 
 if TYPE_CHECKING:
     from nlcx.kernel.structures import FrictionScratch, FrictionWork, Integration, PlantForces, Records, Slots
@@ -253,4 +253,7 @@ no_frictional_sample = Padding(FRICTION_SAMPLE_SIG, _no_frictional_sample, __nam
 no_frictional_step = Padding(FRICTION_STEP_SIG, _no_frictional_step, __name__, "no_frictional_step")
 #: The friction path handed to the kernel, with and without friction.
 FRICTIONAL = FrictionPath(sample=frictional_sample, step=frictional_step)
-FRICTIONLESS = FrictionPath(sample=no_frictional_sample, step=no_frictional_step)
+#: (numba hands a padding over as a function of its slot's signature.)
+FRICTIONLESS = FrictionPath(
+    sample=cast(FrictionSample, no_frictional_sample), step=cast(FrictionStep, no_frictional_step)
+)

@@ -9,10 +9,17 @@ friction kernel); a plugin's compiled function has the alias of its kind.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TypeAlias
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from numba.core.types import Type
+    from numba.cuda.cudadrv.devicearray import DeviceNDArray
+    from numba.cuda.dispatcher import CUDADispatcher
+
+    from nlcx._numba_compat import Dispatcher, Signature
 
 #: An array of float64, the dtype of every state, signal, parameter and record.
 FloatArray: TypeAlias = NDArray[np.float64]
@@ -46,3 +53,18 @@ ElementFunctions: TypeAlias = tuple[LoopElement, ...]
 ControlLaw: TypeAlias = Callable[..., tuple[tuple[float, ...], ...]]
 #: The sums of a metric's terms (:func:`nlcx.metrics.sums.pairwise_sums`): three floats.
 Sums: TypeAlias = tuple[float, float, float]
+
+# numba ships no type information: the checker sees its classes below as opaque, and these names
+# say which of them a value is.
+
+#: A function numba compiles for the CPU (a dispatcher; its Python source is ``py_func``).
+NumbaFunction: TypeAlias = "Dispatcher"
+#: A numba type: the type of an argument, of a structure, of a table of functions.
+NumbaType: TypeAlias = "Type"
+#: A numba signature (``types.void(...)``): what a compiled function takes and returns.
+NumbaSignature: TypeAlias = "Signature"
+#: A function numba-cuda compiles for the GPU: a device function, or a kernel launched as
+#: ``kernel[blocks, threads](*args)``.
+DeviceFunction: TypeAlias = "CUDADispatcher"
+#: An array in the GPU's memory (``copy_to_host`` copies it back).
+DeviceArray: TypeAlias = "DeviceNDArray"

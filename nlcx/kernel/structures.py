@@ -25,7 +25,7 @@ dimensions and layout, so a call costs a lookup per structure whatever plugins i
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import NamedTuple, TypeAlias
 
 import numpy as np
 from numba import types
@@ -45,7 +45,7 @@ from nlcx.kernel.abi import (
     FunctionTable,
     RhsFn,
 )
-from nlcx.kernel.signatures import ControllerStep, RightHandSide
+from nlcx.kernel.signatures import ControllerStep, FloatArray, RightHandSide
 
 IMAT = types.int64[:, ::1]
 BVEC = types.boolean[::1]
@@ -77,11 +77,14 @@ def declare(cls: type, **fields: types.Type) -> types.Type:
     return numba_type
 
 
+#: numba's typing of a declared structure: (the structure's value, numba's typing context) -> its type.
+Typer: TypeAlias = Callable[[tuple[object, ...], object], types.Type]
+
 #: The typing of each declared structure, by class (a structure's structure fields are typed by theirs).
-_TYPERS: dict[type, Callable[[Any, Any], types.Type]] = {}
+_TYPERS: dict[type, Typer] = {}
 
 
-def _typer(name: str, fields: tuple[tuple[str, types.Type], ...], numba_type: types.Type) -> Callable[[Any, Any], Any]:
+def _typer(name: str, fields: tuple[tuple[str, types.Type], ...], numba_type: types.Type) -> Typer:
     """numba's typing of a structure: its declared type, once every array field holds a
     writeable, aligned, C-contiguous array of the declared dtype and dimensions, every table
     field a :class:`~nlcx.kernel.abi.FunctionTable` of the declared type, every number field a
@@ -92,33 +95,35 @@ def _typer(name: str, fields: tuple[tuple[str, types.Type], ...], numba_type: ty
     )
     tables = tuple((i, f, t) for i, (f, t) in enumerate(fields) if isinstance(t, types.UniTuple))
     numbers = tuple((i, f, float if t == F64 else int) for i, (f, t) in enumerate(fields) if t in (F64, I64))
-    nested = tuple(
+    nested: tuple[tuple[int, str, type[tuple[object, ...]]], ...] = tuple(
         (i, f, t.instance_class)
         for i, (f, t) in enumerate(fields)
         if isinstance(t, (types.NamedTuple, types.NamedUniTuple))
     )
 
-    def typer(value: Any, context: Any) -> types.Type:
+    def typer(value: tuple[object, ...], context: object) -> types.Type:
         for i, f, dtype, ndim in arrays:
             if not _is_array(value[i], dtype, ndim):
                 wanted = f"a writeable C-contiguous {ndim}-d {dtype} array"
                 raise TypeError(f"{name}.{f}: {wanted}, got {_described(value[i])}")
         for i, f, table in tables:
-            if not (isinstance(value[i], FunctionTable) and value[i].numba_type == table):
+            functions = value[i]
+            if not (isinstance(functions, FunctionTable) and functions.numba_type == table):
                 raise TypeError(f"{name}.{f}: a FunctionTable of {table}, got {type(value[i]).__name__}")
         for i, f, kind in numbers:
             if not isinstance(value[i], kind) or isinstance(value[i], bool):
                 raise TypeError(f"{name}.{f}: a {kind.__name__}, got {value[i]!r}")
         for i, f, cls in nested:
-            if not isinstance(value[i], cls):
-                raise TypeError(f"{name}.{f}: a {cls.__name__}, got {type(value[i]).__name__}")
-            _TYPERS[cls](value[i], context)
+            structure = value[i]
+            if not isinstance(structure, cls):
+                raise TypeError(f"{name}.{f}: a {cls.__name__}, got {type(structure).__name__}")
+            _TYPERS[cls](structure, context)
         return numba_type
 
     return typer
 
 
-def _is_array(a: Any, dtype: np.dtype, ndim: int) -> bool:
+def _is_array(a: object, dtype: np.dtype, ndim: int) -> bool:
     """Whether ``a`` is an array numba may hand over as a writeable C-contiguous array of ``dtype``."""
     if not isinstance(a, np.ndarray) or a.dtype != dtype or a.ndim != ndim:
         return False
@@ -126,7 +131,7 @@ def _is_array(a: Any, dtype: np.dtype, ndim: int) -> bool:
     return bool(flags.c_contiguous and flags.writeable and flags.aligned)
 
 
-def _described(a: Any) -> str:
+def _described(a: object) -> str:
     if isinstance(a, np.ndarray):
         layout = "C-contiguous" if a.flags.c_contiguous else "non-contiguous"
         access = "" if a.flags.writeable else "read-only "
@@ -278,6 +283,30 @@ class FrictionWork(NamedTuple):
     scratch: FrictionScratch
 
 
+#: The friction path at sample k (:class:`FrictionPath`, :data:`FRICTION_SAMPLE_SIG`).
+FrictionSample: TypeAlias = Callable[
+    [RightHandSide, float, int, int, int, Slots, FloatArray, PlantForces, FrictionWork, Records], None
+]
+#: The friction path over a step (:class:`FrictionPath`, :data:`FRICTION_STEP_SIG`).
+FrictionStep: TypeAlias = Callable[
+    [
+        RightHandSide,
+        float,
+        int,
+        int,
+        int,
+        Slots,
+        FloatArray,
+        FloatArray,
+        PlantForces,
+        FrictionWork,
+        Integration,
+        FloatArray,
+    ],
+    None,
+]
+
+
 class FrictionPath(NamedTuple):
     """The friction path (Appendix A), called through two function values so that a batch
     without friction never compiles it: at sample k, the breakaway of the frictional variants
@@ -285,8 +314,8 @@ class FrictionPath(NamedTuple):
     integration ``step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c)``.
     Working slots n_free..nb-1 are the frictional ones; u by rows."""
 
-    sample: Any
-    step: Any
+    sample: FrictionSample
+    step: FrictionStep
 
 
 IntegrationType = declare(Integration, method=I64, rk_a=MAT, rk_b=VEC, dt=F64)

@@ -26,9 +26,10 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,6 +38,13 @@ from nlcx import plugins
 from nlcx.errors import NlcxError
 from nlcx.sweeps import seals
 from nlcx.sweeps.planning import ColumnPlan, SweepSection, Variant, variant_hash
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+    from nlcx.engine.ensembles import LoopRows, Slot, Template
+    from nlcx.engine.metric_rows import MetricColumns
+    from nlcx.sweeps.batches import BatchResult
 
 #: Up to this many varied keys every corner of their box is probed; above it, the two corners
 #: of all lows and all highs.
@@ -58,7 +66,7 @@ GPU_BATCH_VARIANTS = 250_000
 class Packing:
     """Where each varied key lands in the template's arrays (:class:`nlcx.engine.ensembles.Slot`)."""
 
-    slots: dict[str, tuple[Any, ...]]
+    slots: dict[str, tuple[Slot, ...]]
     #: The bytes of one variant's records (every loop's states and inputs at every sample).
     record_bytes: int
 
@@ -71,7 +79,7 @@ class _Probe:
         self.interpolated = cfg.Interpolated.of(base_raw, allow_env=True)  # checked by planning.load
         self.base = cfg.build(self.interpolated.resolved)
 
-    def template(self, values: dict[str, Any], seed: int) -> Any:
+    def template(self, values: Mapping[str, float], seed: int) -> Template:
         from nlcx import engine
         from nlcx.engine.ensembles import Template
 
@@ -79,12 +87,12 @@ class _Probe:
         return Template.of(engine.prepare(cfg.build(self.interpolated.resolve(settings), like=self.base)))
 
 
-def _probe_values(column: np.ndarray, first: Any) -> list[Any]:
+def _probe_values(column: np.ndarray, first: float) -> list[float]:
     """The column's extremes other than the template's own value (as Python numbers)."""
     return [v for v in dict.fromkeys([column.min().item(), column.max().item()]) if v != first]
 
 
-def _corners(columns: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+def _corners(columns: dict[str, np.ndarray]) -> list[dict[str, float]]:
     """The corners of the box the columns span (:data:`MAX_CORNER_KEYS`)."""
     ranges = {k: (c.min().item(), c.max().item()) for k, c in columns.items()}
     if len(ranges) <= MAX_CORNER_KEYS:
@@ -145,7 +153,7 @@ class ColumnBatch:
     columns: dict[str, np.ndarray]
     seeds: np.ndarray
     #: The template's values and seed (the plan's first variant), from which a worker prepares it.
-    template: tuple[dict[str, Any], int]
+    template: tuple[dict[str, float], int]
     packing: Packing
     base_digest: str
     out_dir: Path
@@ -178,10 +186,10 @@ def column_batches(
     ]  # fmt: skip
 
 
-_TEMPLATES: dict[str, Any] = {}
+_TEMPLATES: dict[str, Template] = {}
 
 
-def _template(batch: ColumnBatch) -> Any:
+def _template(batch: ColumnBatch) -> Template:
     """The batch's template, prepared once per process (kept for the batches that follow)."""
     values, seed = batch.template
     key = variant_hash(batch.base_digest, Variant(0, values, seed))
@@ -191,7 +199,7 @@ def _template(batch: ColumnBatch) -> Any:
     return _TEMPLATES[key]
 
 
-def _statuses(template: Any, rows: list[Any], n: int) -> tuple[np.ndarray, list[str | None]]:
+def _statuses(template: Template, rows: list[LoopRows], n: int) -> tuple[np.ndarray, list[str | None]]:
     """Each variant's status ("ok", or "unstable" when a loop stopped) and message (the first
     stopped loop's label and reason), as :func:`nlcx.sweeps.batches.run_batch` records them."""
     unstable = np.zeros(n, dtype=bool)
@@ -204,13 +212,13 @@ def _statuses(template: Any, rows: list[Any], n: int) -> tuple[np.ndarray, list[
     return np.where(unstable, "unstable", "ok"), message
 
 
-def _text(values: Any) -> Any:
+def _text(values: Sequence[str | None]) -> pa.Array:
     import pyarrow as pa
 
     return pa.array(values, pa.string())
 
 
-def _coded(codes: np.ndarray, categories: list[str]) -> Any:
+def _coded(codes: np.ndarray, categories: list[str]) -> pa.DictionaryArray:
     """A text column from int32 codes into ``categories`` (-1: missing), dictionary-encoded."""
     import pyarrow as pa
 
@@ -219,7 +227,7 @@ def _coded(codes: np.ndarray, categories: list[str]) -> Any:
     return pa.DictionaryArray.from_arrays(indices, _text(categories))
 
 
-def _floats(values: np.ndarray) -> Any:
+def _floats(values: np.ndarray) -> pa.Array:
     """Floats with NaN as a missing value (as metrics.csv writes them)."""
     import pyarrow as pa
 
@@ -244,7 +252,7 @@ def variant_hashes(batch: ColumnBatch) -> list[str]:
     return [hashlib.sha256(head + data[j * width : (j + 1) * width]).hexdigest()[:16] for j in range(batch.n)]
 
 
-def _index_table(batch: ColumnBatch, status: np.ndarray, message: list[str | None]) -> Any:
+def _index_table(batch: ColumnBatch, status: np.ndarray, message: list[str | None]) -> pa.Table:
     """The batch's rows of sweep.csv: variant, seed, config hash, the values, status, message."""
     import pyarrow as pa
 
@@ -261,7 +269,7 @@ def _index_table(batch: ColumnBatch, status: np.ndarray, message: list[str | Non
     return pa.table(columns)
 
 
-def _metrics_table(batch: ColumnBatch, measured: Any) -> Any:
+def _metrics_table(batch: ColumnBatch, measured: MetricColumns) -> pa.Table:
     """The batch's rows of metrics.csv (those of ``batch.metrics`` when it names some)."""
     import pyarrow as pa
 
@@ -279,7 +287,7 @@ def _metrics_table(batch: ColumnBatch, measured: Any) -> Any:
     })  # fmt: skip
 
 
-def write_parquet_table(path: Path, table: Any) -> None:
+def write_parquet_table(path: Path, table: pa.Table) -> None:
     """``table`` as a Parquet file, written atomically: snappy-compressed (half zstd's time, a
     fifth more bytes), its repeated texts dictionary-encoded, min/max statistics for ``variant``
     only (a reader selecting variants skips parts by them; the others cost a third of the write)."""
@@ -294,7 +302,7 @@ def write_parquet_table(path: Path, table: Any) -> None:
     atomic_write(path, lambda tmp: pq.write_table(table, str(tmp), **options))
 
 
-def run_column_batch(batch: ColumnBatch) -> Any:
+def run_column_batch(batch: ColumnBatch) -> BatchResult:
     """Simulate and measure a columnar batch; write its part files (the metrics, the index, then
     their seal, which marks the batch complete). Returns the batch's
     :class:`~nlcx.sweeps.batches.BatchResult`."""

@@ -12,7 +12,7 @@ import hashlib
 import itertools
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -124,14 +124,14 @@ class Variant:
     """One point of a sweep: its index, the values it sets and its spawned seed."""
 
     index: int
-    values: dict[str, Any]
+    values: Mapping[str, object]
     seed: int
 
     def overrides(self) -> list[str]:
         """The variant as ``key=value`` overrides (what ``--dry-run`` prints)."""
         return [f"{key}={json.dumps(value)}" for key, value in self.values.items()] + [f"seed={self.seed}"]
 
-    def settings(self) -> list[tuple[list[str], Any]]:
+    def settings(self) -> list[tuple[list[str], object]]:
         """The variant as (key path, value) pairs for :func:`nlcx.config.set_values`."""
         return [(key.split("."), value) for key, value in self.values.items()] + [(["seed"], self.seed)]
 
@@ -141,8 +141,8 @@ class Variant:
         return base.resolve(self.settings())
 
 
-def _lookup(raw: dict[str, Any], key: str) -> Any:
-    node: Any = raw
+def _lookup(raw: Mapping[str, object], key: str) -> object:
+    node: object = raw
     for part in key.split("."):
         if not isinstance(node, dict) or part not in node:
             raise ConfigError(
@@ -152,7 +152,7 @@ def _lookup(raw: dict[str, Any], key: str) -> Any:
     return node
 
 
-def _draw(dist: Distribution, base: Any, n: int, rng: np.random.Generator) -> list[Any] | np.ndarray:
+def _draw(dist: Distribution, base: Any, n: int, rng: np.random.Generator) -> list[object] | np.ndarray:
     """``n`` draws of ``dist``: an array of floats, or the chosen values of a choice."""
     # Distribution._complete has checked that the parameters each distribution reads are set.
     if dist.dist == "uniform":
@@ -172,7 +172,7 @@ def _draw(dist: Distribution, base: Any, n: int, rng: np.random.Generator) -> li
     return [values[i] for i in rng.integers(0, len(values), n)]
 
 
-def _draws(spec: SweepSection, base_raw: dict[str, Any]) -> dict[str, list[Any] | np.ndarray]:
+def _draws(spec: SweepSection, base_raw: Mapping[str, object]) -> dict[str, list[object] | np.ndarray]:
     """The random section's draws, key by key from one generator spawned from the sweep seed."""
     if spec.random is None:
         return {}
@@ -185,11 +185,11 @@ def _draws(spec: SweepSection, base_raw: dict[str, Any]) -> dict[str, list[Any] 
     return draws
 
 
-def _listed(values: list[Any] | np.ndarray) -> list[Any]:
+def _listed(values: list[object] | np.ndarray) -> list[object]:
     return values.tolist() if isinstance(values, np.ndarray) else values
 
 
-def expand(spec: SweepSection, base_raw: dict[str, Any]) -> list[Variant]:
+def expand(spec: SweepSection, base_raw: Mapping[str, object]) -> list[Variant]:
     """The variants of ``spec``: grid x zip x random, each with a spawned seed."""
     grid_keys = list(spec.grid)
     grid_points = [dict(zip(grid_keys, combo, strict=True)) for combo in itertools.product(*spec.grid.values())]
@@ -208,7 +208,7 @@ def expand(spec: SweepSection, base_raw: dict[str, Any]) -> list[Variant]:
     ]
 
 
-def _column(values: list[Any] | np.ndarray) -> np.ndarray | None:
+def _column(values: Sequence[object] | np.ndarray) -> np.ndarray | None:
     """Values as a column: floats, or integers where every value is one; None where a value is
     not a number (a text, a mapping, a bool) or integers and floats mix."""
     if isinstance(values, np.ndarray):
@@ -242,15 +242,15 @@ class ColumnPlan:
     def n(self) -> int:
         return int(self.seeds.size)
 
-    def values(self, index: int) -> dict[str, Any]:
-        """Variant ``index``'s values, as Python numbers."""
+    def values(self, index: int) -> dict[str, float]:
+        """Variant ``index``'s values, as Python numbers (int or float)."""
         return {key: column[index].item() for key, column in self.columns.items()}
 
     def variant(self, index: int) -> Variant:
         return Variant(index=index, values=self.values(index), seed=int(self.seeds[index]))
 
 
-def expand_columns(spec: SweepSection, base_raw: dict[str, Any]) -> ColumnPlan | None:
+def expand_columns(spec: SweepSection, base_raw: Mapping[str, object]) -> ColumnPlan | None:
     """The variants of ``spec`` as columns (:class:`ColumnPlan`), without a Python object per
     variant; None when a varied value is not a number or a key is varied twice."""
     keys = [*spec.grid, *spec.zip, *(spec.random.params if spec.random else {})]
@@ -279,7 +279,7 @@ def expand_columns(spec: SweepSection, base_raw: dict[str, Any]) -> ColumnPlan |
     return ColumnPlan(columns, spawned_seeds(spec.seed, 1, n).astype(np.int64))
 
 
-def config_hash(raw: Any) -> str:
+def config_hash(raw: object) -> str:
     """A stable hash of a config (canonical JSON)."""
     text = json.dumps(raw, sort_keys=True, default=str, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -294,7 +294,7 @@ def variant_hash(base_digest: str, variant: Variant) -> str:
 
 def load(
     path: str | Path | Mapping[str, Any], overrides: list[str] | None = None, *, allow_env: bool = False
-) -> tuple[dict[str, Any], SweepSection, Any]:
+) -> tuple[dict[str, Any], SweepSection, cfg.Experiment]:
     """(base raw config without ``sweep``, the sweep spec, the validated base experiment) of a
     config file, or of a raw config mapping as a file holds it (:func:`nlcx.sweep`).
 
@@ -313,7 +313,7 @@ def load(
     return raw, spec, base
 
 
-def base_digest(base_raw: dict[str, Any], spec: SweepSection) -> str:
+def base_digest(base_raw: Mapping[str, object], spec: SweepSection) -> str:
     """The hash of what every variant's result depends on besides its values and seed: the base
     config and the metrics kept (a rerun keeping other metrics recomputes)."""
     return config_hash(base_raw if spec.metrics is None else {"base": base_raw, "metrics": spec.metrics})

@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import pandas as pd
 
@@ -32,6 +32,12 @@ from nlcx.sweeps.planning import (
 )
 from nlcx.sweeps.resuming import completed, open_column_staging, open_staging
 from nlcx.sweeps.sizing import check as check_plan_size
+
+if TYPE_CHECKING:
+    from nlcx.config import Experiment
+
+#: A batch of either path: :class:`~nlcx.sweeps.batches.Batch` or :class:`~nlcx.sweeps.columnar.ColumnBatch`.
+BatchT = TypeVar("BatchT")
 
 
 def make_executor(
@@ -125,13 +131,13 @@ class SweepOutcome:
 
 
 def _run_batches(
-    batches: Sequence[Any],
+    batches: Sequence[BatchT],
     executor: str,
     jobs: int,
     scheduler: str | None,
     on_batch: Callable[[BatchResult], None],
+    task: Callable[[BatchT], BatchResult],
     cluster: ClusterSpec | None = None,
-    task: Callable[[Any], BatchResult] = run_batch,
 ) -> None:
     """Run ``task`` on each of ``batches`` on ``executor`` (:func:`make_executor`), handing each
     result to ``on_batch`` as it completes (``task``: :func:`~nlcx.sweeps.batches.run_batch`,
@@ -236,7 +242,7 @@ class _Job:
 
     base_raw: dict[str, Any]
     spec: SweepSection
-    base: Any
+    base: Experiment
     out_dir: Path
     executor: str
     jobs: int
@@ -252,7 +258,7 @@ class _Job:
         return 1 if self.executor == "serial" else self.jobs
 
     def _run(
-        self, batches: Sequence[Any], tally: _Tally, task: Callable[[Any], BatchResult], overlap: bool = False
+        self, batches: Sequence[BatchT], tally: _Tally, task: Callable[[BatchT], BatchResult], overlap: bool = False
     ) -> float:
         """Run the batches (the kernel loaded first, once, before the workers fork); the time they
         started. On the GPU, batches whose task lets one at a time on the device (``overlap``:
@@ -266,7 +272,7 @@ class _Job:
         executor = self.executor
         if self.base.section.simulation.device == "cuda":  # one process holds the GPU
             executor = "gpu" if overlap else "serial"
-        _run_batches(batches, executor, self.jobs, self.scheduler, tally.add, self.cluster, task)
+        _run_batches(batches, executor, self.jobs, self.scheduler, tally.add, task, self.cluster)
         return planned
 
     def _finish(self, staging: Path, statuses: dict[str, int], timings: dict[str, float], variants: int,
@@ -291,7 +297,7 @@ class _Job:
         return SweepOutcome(self.out_dir, computed, variants - computed, end - self.start, statuses, report,
                             reported - end if report else 0.0, how)  # fmt: skip
 
-    def columnar(self, plan: ColumnPlan, found: Any, with_report: bool) -> SweepOutcome:
+    def columnar(self, plan: ColumnPlan, found: columnar.Packing, with_report: bool) -> SweepOutcome:
         """The variants packed from columns, in batches of :func:`~nlcx.sweeps.columnar.batch_size`."""
         from nlcx import engine, rundir
 

@@ -13,11 +13,14 @@ import math
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from nlcx import preflight
 from nlcx.errors import ConfigError
 from nlcx.sweeps.planning import SweepSection
+
+if TYPE_CHECKING:
+    from nlcx.config import Experiment
 
 #: Bytes the parent holds per planned variant (the variant, its seed and hash, its row of
 #: sweep.csv's index), and per value it sets.
@@ -51,7 +54,7 @@ def variant_count(spec: SweepSection) -> int:
     return grid * zipped * (spec.random.n if spec.random is not None else 1)
 
 
-def estimate(spec: SweepSection, base: Any, columnar: bool = False) -> PlanSize:
+def estimate(spec: SweepSection, base: Experiment, columnar: bool = False) -> PlanSize:
     """The size of ``spec``'s plan over the validated base experiment ``base``, expanded as
     columns (``columnar``: :func:`nlcx.sweeps.planning.expand_columns`) or as variants."""
     n = variant_count(spec)
@@ -66,9 +69,9 @@ def estimate(spec: SweepSection, base: Any, columnar: bool = False) -> PlanSize:
     return PlanSize(n, values, memory, n * per_variant_disk)
 
 
-def _largest_factor(spec: SweepSection) -> tuple[str, Any]:
+def _largest_factor(spec: SweepSection) -> tuple[str, object]:
     """The key whose value makes the plan largest, and that value (for the error line)."""
-    factors: list[tuple[int, str, Any]] = [
+    factors: list[tuple[int, str, object]] = [
         (len(v), f"sweep.grid.{k}", f"{len(v)} values") for k, v in spec.grid.items()
     ]
     if spec.zip:
@@ -100,7 +103,7 @@ def _size(n_bytes: float) -> str:
 
 def check(
     spec: SweepSection,
-    base: Any,
+    base: Experiment,
     out_dir: Path | None,
     memory: int | None = None,
     disk: int | None = None,

@@ -12,8 +12,9 @@ from __future__ import annotations
 import functools
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeAlias
 
 import numpy as np
 import pandas as pd
@@ -26,6 +27,9 @@ from nlcx.engine.results import ExperimentResult
 from nlcx.thesis import catalog, hypotheses, packed_cells, profiles
 from nlcx.thesis.tables import lookup_value, rows_lookup
 from nlcx.tuning.optimise import OptimResult
+
+#: A study's progress: (hypotheses done, hypotheses in all, the name of the one just finished).
+StudyProgress: TypeAlias = Callable[[int, int, str], None]
 
 FLOORS = {"Mp": 0.05, "tr": 0.5, "ts": 0.5}
 PENALTY = 10.0

@@ -27,9 +27,10 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from nlcx import config as cfg
 from nlcx import engine, report, runtime, safe_yaml
 from nlcx.errors import NlcxError
+from nlcx.kernel.signatures import FloatArray
 from nlcx.thesis import catalog, hypotheses, profiles, split
 from nlcx.thesis.cstr import CSTR_METRICS, cstr_value
-from nlcx.thesis.fitting import fit_table, relative_errors, train_loss, write_study
+from nlcx.thesis.fitting import StudyProgress, fit_table, relative_errors, train_loss, write_study
 from nlcx.thesis.identify import finished, save_fit, spec_digest
 from nlcx.tuning.optimise import GASettings, evolve
 from nlcx.validation import validate_model
@@ -75,7 +76,9 @@ class MethodRuns:
         return profiles.apply(self.raw[method], hyp, values, ["u"])
 
 
-def measure(runs: MethodRuns, hyp: hypotheses.Hypothesis, candidates: list[dict[str, float]], cells: pd.DataFrame):
+def measure(
+    runs: MethodRuns, hyp: hypotheses.Hypothesis, candidates: list[dict[str, float]], cells: pd.DataFrame
+) -> FloatArray:
     """Our value of every cell (rows) for every candidate (columns); NaN where a run or its
     tuning failed or the metric is undefined."""
     methods = list(dict.fromkeys(cells.method))
@@ -89,10 +92,9 @@ def measure(runs: MethodRuns, hyp: hypotheses.Hypothesis, candidates: list[dict[
             label = runs.files[method][1]
             if not any(run.label == label and run.status == "ok" for run in result.runs):
                 continue
-            cell: Any  # a row of ``cells``: its method, metric and printed value
             for i, cell in enumerate(cells.itertuples(index=False)):
                 if cell.method == method:
-                    out[i, k] = cstr_value(result.metrics, label, METRIC[cell.metric])
+                    out[i, k] = cstr_value(result.metrics, label, METRIC[str(cell.metric)])
     return out
 
 
@@ -146,7 +148,7 @@ def method_scores(fit: pd.DataFrame) -> dict[str, float]:
 
 
 def identify_cstr(
-    path: Path, out_dir: Path, jobs: int = 1, root: Path | None = None, progress: Any = None
+    path: Path, out_dir: Path, jobs: int = 1, root: Path | None = None, progress: StudyProgress | None = None
 ) -> pd.DataFrame:
     """Fit every chapter-5 hypothesis of spec ``path`` (resuming: each finished fit is written
     at once); ranking.csv (by train loss) and profile.yaml."""

@@ -19,6 +19,7 @@ from pydantic import Field
 
 from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError, did_you_mean
+from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.layout import Layout
 from nlcx.uncertainty.base import Element, Hooks, UncertaintyConfig, UncertaintyModel
 from nlcx.validation import join
@@ -38,14 +39,26 @@ class ActuatorSaturationConfig(UncertaintyConfig):
 
 
 @hot_njit(cache=True, inline="always", error_model="numpy")
-def saturate(u, limit):  # pragma: no cover - compiled
+def saturate(u: float, limit: float) -> float:  # pragma: no cover - compiled
     """u clipped to [-limit, limit] (limit inf: u): the actuator's saturation, which this element
     and the PID's ``saturation`` apply."""
     return min(max(u, -limit), limit)
 
 
 @hot_njit(cache=True, error_model="numpy")
-def saturate_inputs(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off):  # pragma: no cover - compiled
+def saturate_inputs(
+    t: float,
+    dt: float,
+    k: int,
+    signal: FloatArray,
+    vid: IntArray,
+    ep: FloatArray,
+    es: FloatArray,
+    data: FloatArray,
+    p_off: int,
+    s_off: int,
+    d_off: int,
+) -> None:  # pragma: no cover - compiled
     """Clip every limited input of every row to [-u_max, u_max] (:func:`saturate`)."""
     for b in range(signal.shape[0]):
         v_id = vid[b]
