@@ -73,7 +73,7 @@ class Result:
         trajectories: dict[str, pd.DataFrame] | None,
         outputs: list[tuple[str, str, str]],
         *,
-        source: engine.Result | None = None,
+        source: engine.ExperimentResult | None = None,
         directory: Path | None = None,
         signals: Mapping[str, Sequence[Any]] | None = None,
     ) -> None:
@@ -89,7 +89,7 @@ class Result:
         self._signals = {kind: list(values) for kind, values in (signals or {}).items()}
 
     @classmethod
-    def from_engine(cls, result: engine.Result) -> Result:
+    def from_engine(cls, result: engine.ExperimentResult) -> Result:
         """The :class:`Result` of a run the engine returned (:func:`nlcx.engine.run_experiment`)."""
         from nlcx import report
 

@@ -41,9 +41,6 @@ from nlcx.engine.prewarm import load_kernel, prewarm
 from nlcx.engine.results import METRIC_COLUMNS, ExperimentResult, MetricBlock, MetricTable, Run, shared_metrics
 from nlcx.engine.simulate import simulate_items
 
-#: The former name of :class:`ExperimentResult`: :mod:`nlcx.results` still annotates with it.
-Result = ExperimentResult
-
 __all__ = [
     "METRIC_COLUMNS",
     "TABLEAUS",
