@@ -163,7 +163,7 @@ def _simulate_measure_all(ensembles: Sequence[Ensemble]) -> list[tuple[list[Loop
 def _calls(ensemble: Ensemble) -> list[_Call]:
     """The GPU calls of an ensemble (one per call of :func:`ensemble_calls`), not yet run; a
     plugin that cannot run on the GPU is refused in one line."""
-    from nlcx.kernel import cuda_loop
+    from nlcx.kernel import cuda_shape
 
     template, slots, columns, n_variants = ensemble
     p = template.prepared
@@ -173,7 +173,7 @@ def _calls(ensemble: Ensemble) -> list[_Call]:
     out = []
     for pattern, step in ensemble_calls(items, n_variants):
         arguments = call_arguments(template, pattern, step, n_variants, slots, columns)
-        why = cuda_loop.unsupported(*arguments[:3])
+        why = cuda_shape.unsupported(*arguments[:3])
         if why is not None:
             raise refused(f"{why}; use device: cpu")
         recorded: list[tuple[int, int]] = []
@@ -193,9 +193,9 @@ _WHOLE = ("C", "dist_map", "table")
 def _launch_key(call: _Call) -> tuple[Any, ...]:
     """What the calls of one launch share: the loop kernel, the time grid and integration, the
     signals recorded, and each shared array (by content); per-row arrays by their row shape."""
-    from nlcx.kernel import cuda_loop
+    from nlcx.kernel import cuda_shape
 
-    shape = cuda_loop.shape_of(*call.arguments, call.n_u, call.n_log, call.integration)
+    shape = cuda_shape.shape_of(*call.arguments, call.n_u, call.n_log, call.integration)
     fields: list[tuple[Any, ...]] = []
     for part in call.arguments:
         for name, value in part._asdict().items():

@@ -100,10 +100,10 @@ def on_gpu(
 ) -> None:  # fmt: skip
     """A kernel call on the GPU (:func:`nlcx.kernel.cuda_loop.simulate`), or a one-line
     ConfigError naming what cannot run there."""
-    from nlcx.kernel import cuda_loop
+    from nlcx.kernel import cuda_loop, cuda_shape
     from nlcx.kernel.device import refused
 
-    why = cuda_loop.unsupported(plant, controller, elements)
+    why = cuda_shape.unsupported(plant, controller, elements)
     if why is not None:
         raise refused(f"{why}; use device: cpu")
     cuda_loop.simulate(integration, plant, controller, elements, forces, records, outcome)

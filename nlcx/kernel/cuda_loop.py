@@ -24,9 +24,10 @@ and input and copies them back as the CPU kernel's :class:`~nlcx.kernel.structur
 A variant with friction is stepped by the CPU's friction path (Appendix A), compiled for its
 thread (:mod:`nlcx.kernel.cuda_friction`); a kernel whose variants have none is compiled without it.
 
-Not on the GPU: plugins that are not numba functions, which :func:`unsupported` names before any
-work; and any plugin whose source numba-cuda cannot compile, which :func:`launch` names with
-numba's reason when the kernel compiles, before any thread runs.
+Not on the GPU: plugins that are not numba functions, which
+:func:`nlcx.kernel.cuda_shape.unsupported` names before any work; and any plugin whose source
+numba-cuda cannot compile, which :func:`launch` names with numba's reason when the kernel
+compiles, before any thread runs.
 """
 
 from __future__ import annotations
@@ -34,34 +35,23 @@ from __future__ import annotations
 import functools
 import math
 import re
-from typing import Any, NamedTuple, TypeAlias
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from nlcx._numba_compat import is_numba_function
 from nlcx.kernel.abi import (
-    ACTUATOR,
-    ELEMENT_ENTRY,
-    SENSOR,
     STATUS_BOUND,
     STATUS_NONFINITE,
     STATUS_OK,
-    Padding,
-    no_element,
 )
-from nlcx.kernel.cuda_friction import AT_SAMPLE, OVER_STEP, FrictionDevices, friction_devices, frictionless
+from nlcx.kernel.cuda_friction import AT_SAMPLE, OVER_STEP, FrictionDevices
+from nlcx.kernel.cuda_shape import LoopDevices, LoopShape, loop_devices, shape_of
 from nlcx.kernel.device import Retarget, cuda, kept, refused
-from nlcx.kernel.friction import any_friction
 from nlcx.kernel.signatures import (
-    Callbacks,
-    ControllerStep,
     DeviceArray,
     DeviceFunction,
     FloatArray,
-    GainSchedule,
     IntArray,
-    LoopElement,
-    RightHandSide,
 )
 from nlcx.kernel.stepping import (
     CLASSIC,
@@ -84,155 +74,11 @@ from nlcx.kernel.structures import (
     Records,
 )
 
-EE = ELEMENT_ENTRY.at
 #: What a recorded signal is (column 0 of ``recorded``): a state, an output (row of C), an input,
 #: the friction force on an input's axis.
 STATE, OUTPUT, INPUT, FRICTION = 0, 1, 2, 3
 #: Threads per block of the closed-loop and metric kernels.
 THREADS = 128
-
-
-#: An entry of the element table: (hook, function, p_off, s_off, d_off).
-ElementEntry: TypeAlias = tuple[int, LoopElement | Padding, int, int, int]
-
-
-class LoopShape(NamedTuple):
-    """What a compiled closed-loop kernel is specialised to: the plugins' functions (CPU forms),
-    the element table's order and offsets, whether any variant has friction, and the sizes of
-    the thread's local arrays."""
-
-    rhs: RightHandSide
-    step: ControllerStep
-    schedules: tuple[tuple[int, GainSchedule], ...]  # (slot, schedule function) of the callback table
-    elements: tuple[ElementEntry, ...]
-    n_x: int
-    n_u: int
-    n_y: int
-    n_r: int
-    n_log: int
-    n_cp: int
-    n_cs: int
-    method: int
-    n_stages: int
-    friction: bool
-    n_d: int
-
-
-def shape_of(
-    plant: PlantCall,
-    controller: ControllerCall,
-    elements: LoopElements,
-    forces: PlantForces,
-    n_u: int,
-    n_log: int,
-    integration: Integration,
-) -> LoopShape:
-    """The :class:`LoopShape` of a kernel call's structures (``n_u`` inputs, ``n_log`` logged values)."""
-    schedules = tuple((slot, fn) for slot, fn in enumerate(controller.callbacks) if is_numba_function(fn))
-    table = tuple(
-        (int(row[EE.hook]), elements.functions[int(row[EE.slot])], int(row[EE.param_offset]),
-         int(row[EE.state_offset]), int(row[EE.data_offset]))
-        for row in elements.table
-    )  # fmt: skip
-    return LoopShape(
-        rhs=plant.rhs, step=controller.step, schedules=schedules, elements=table,
-        n_x=plant.x0.shape[1], n_u=n_u, n_y=plant.C.shape[0], n_r=controller.ref.shape[2], n_log=n_log,
-        n_cp=controller.cp.shape[1], n_cs=controller.cs0.shape[1], method=integration.method,
-        n_stages=integration.rk_b.shape[0], friction=any_friction(forces.friction),
-        n_d=forces.dist.shape[3],
-    )  # fmt: skip
-
-
-def unsupported(plant: PlantCall, controller: ControllerCall, elements: LoopElements) -> str | None:
-    """Why a kernel call cannot run on the GPU (one line naming what), or None."""
-    for what, fn in (("plant right-hand side", plant.rhs), ("controller step", controller.step)):
-        if not is_numba_function(fn):
-            return f"the {what} {getattr(fn, '__name__', fn)!r} is not a numba function"
-    for fn in elements.functions:
-        if fn is not no_element and not is_numba_function(fn):  # no_element: the table's padding
-            return f"the loop element {getattr(fn, '__name__', fn)!r} is not a numba function"
-    return None
-
-
-# ----------------------------------------------------------------------------- device functions
-
-#: The device functions of a closed-loop kernel: (rhs, controller step, sensor chain, actuator
-#: chain, friction path).
-LoopDevices: TypeAlias = tuple[DeviceFunction, DeviceFunction, DeviceFunction, DeviceFunction, FrictionDevices]
-
-
-def _via_slot(retarget: Retarget, schedules: tuple[tuple[int, GainSchedule], ...]) -> DeviceFunction:
-    """The GPU's :func:`nlcx.controllers.pid_step.via_slot`: a branch over the slots in use."""
-    gpu = cuda()
-
-    @gpu.jit(device=True)
-    def none(
-        callbacks: Callbacks, slot: int, t: float, e: float, edot: float, p: FloatArray, row: int, offset: int
-    ) -> tuple[float, float, float]:  # pragma: no cover - device
-        return 0.0, 0.0, 0.0
-
-    chain = none
-    for slot, fn in reversed(schedules):
-        chain = _slot_branch(slot, retarget.device(fn), chain)
-    return chain
-
-
-def _slot_branch(slot: int, gains: DeviceFunction, rest: DeviceFunction) -> DeviceFunction:
-    @cuda().jit(device=True)
-    def branch(
-        callbacks: Callbacks, s: int, t: float, e: float, edot: float, p: FloatArray, row: int, offset: int
-    ) -> tuple[float, float, float]:  # pragma: no cover - device
-        if s == slot:
-            return gains(t, e, edot, p, row, offset)
-        return rest(callbacks, s, t, e, edot, p, row, offset)
-
-    return branch
-
-
-def _element_chain(retarget: Retarget, entries: tuple[ElementEntry, ...], hook: int) -> DeviceFunction:
-    """One device function calling the elements at ``hook`` in table order."""
-    gpu = cuda()
-
-    @gpu.jit(device=True)
-    def nothing(
-        t: float, dt: float, k: int, signal: FloatArray, vid: IntArray, ep: FloatArray, es: FloatArray, data: FloatArray
-    ) -> None:  # pragma: no cover - device
-        return
-
-    chain = nothing
-    for h, fn, p_off, s_off, d_off in reversed(entries):
-        if h == hook:
-            chain = _element_link(retarget.device(fn), p_off, s_off, d_off, chain)
-    return chain
-
-
-def _element_link(fn: DeviceFunction, p_off: int, s_off: int, d_off: int, rest: DeviceFunction) -> DeviceFunction:
-    @cuda().jit(device=True)
-    def link(
-        t: float, dt: float, k: int, signal: FloatArray, vid: IntArray, ep: FloatArray, es: FloatArray, data: FloatArray
-    ) -> None:  # pragma: no cover - device
-        fn(t, dt, k, signal, vid, ep, es, data, p_off, s_off, d_off)
-        rest(t, dt, k, signal, vid, ep, es, data)
-
-    return link
-
-
-def _devices(shape: LoopShape) -> LoopDevices:
-    """(rhs, controller step, sensor chain, actuator chain, friction path) compiled for the GPU."""
-    from nlcx.controllers.pid_step import via_slot
-
-    retarget = Retarget()  # one for the schedules and the step that calls them: each compiled once
-    retarget.stand_in(via_slot, _via_slot(retarget, shape.schedules))
-    entries = tuple(e for e in shape.elements if e[1] is not no_element)
-    rhs = retarget.device(shape.rhs)
-    friction = (
-        friction_devices(retarget, rhs, shape.n_x, shape.n_u, shape.n_stages, shape.n_d)
-        if shape.friction else frictionless()
-    )  # fmt: skip
-    return (
-        rhs, retarget.device(shape.step),
-        _element_chain(retarget, entries, SENSOR), _element_chain(retarget, entries, ACTUATOR), friction,
-    )  # fmt: skip
 
 
 # ----------------------------------------------------------------------------- the kernel
@@ -243,7 +89,7 @@ _KERNELS: dict[LoopShape, DeviceFunction] = {}
 def loop_kernel(shape: LoopShape) -> DeviceFunction:
     """The closed-loop kernel of ``shape``, compiled on its first launch (one per shape and process)."""
     if shape not in _KERNELS:
-        _KERNELS[shape] = kept(_build(shape, *_devices(shape)), loop_kernel, shape)
+        _KERNELS[shape] = kept(_build(shape, *loop_devices(shape)), loop_kernel, shape)
     return _KERNELS[shape]
 
 
