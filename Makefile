@@ -7,10 +7,13 @@ STAMP := $(VENV)/.nlcx-installed
 DEV_STAMP := $(VENV)/.nlcx-dev-installed
 TUNING_STAMP := $(VENV)/.nlcx-tuning-installed
 JOBS ?= 2
+# make test and test-fast: JOBS pytest-xdist workers, a test file's tests on one worker (its
+# module-scoped fixtures built once); a plain `python -m pytest tests/test_x.py` runs in one process
+XDIST = -n $(JOBS) --dist loadfile
 
 BASELINE_TABLES := table-2.3,table-2.5,table-3.2,table-3.7,table-4.2,table-4.4,table-5.1,table-5.8
 
-.PHONY: install tuning-install dev-install run test lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
+.PHONY: install tuning-install dev-install run test test-fast lint screenshots reproduce reproduce-pendulums reproduce-cstr tables figures calibrate configs errata identify \
 	baseline baseline-diff baselines sweep-demo bench bench-gpu docs clean typecheck
 
 $(STAMP): pyproject.toml
@@ -48,9 +51,13 @@ dev-install: $(DEV_STAMP)
 run: install
 	$(BIN)/nlcx run configs/xyz_error_ags.yaml
 
-## test: the whole test suite, ruff included (what CI runs)
+## test: the whole test suite, ruff included, on $(JOBS) pytest-xdist workers (what CI runs)
 test: dev-install
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(XDIST)
+
+## test-fast: the edit-test loop: every test but the slow, browser, gpu and notebook ones (a few minutes)
+test-fast: dev-install
+	$(BIN)/python -m pytest -q $(XDIST) -m "not slow and not browser and not gpu and not notebook"
 
 ## docs: build the documentation site into site/ (mkdocs, --strict; also a test)
 docs: dev-install

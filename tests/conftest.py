@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -61,6 +62,21 @@ def open_loop_pendulum(
     }
     (run,) = run_raw(raw).runs
     return run
+
+
+@pytest.fixture(scope="module", autouse=True)
+def registries_restored() -> Iterator[None]:
+    """Whatever a test module registers (a plant of a docstring example, a test's
+    ``@nlcx.plant``) is taken out of the process's plugin registries after the module (a registry
+    has no unregister: its entries are restored as they were), so that another file's tests,
+    under pytest-xdist in any order, see only the plugins they registered themselves."""
+    from nlcx import registry
+
+    saved = {kind: (dict(reg._entries), dict(reg._loaded), reg._scanned) for kind, reg in registry.ALL.items()}
+    yield
+    for kind, (entries, loaded, scanned) in saved.items():
+        reg = registry.ALL[kind]
+        reg._entries, reg._loaded, reg._scanned = entries, loaded, scanned
 
 
 @pytest.fixture

@@ -15,6 +15,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from nlcx import _numba_compat, compiled_cache
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -220,6 +222,7 @@ def _cache_index(cache: Path) -> set[str]:
     return {p.name.split("-")[0] for p in cache.rglob("*.nbi")}
 
 
+@pytest.mark.slow
 def test_prewarm_compiles_what_a_run_needs_except_the_kernel(tmp_path: Path) -> None:
     """`nlcx prewarm` (what `nlcx run` starts beside itself on an empty cache) fills the cache
     with the run's plugin and metric functions, but not the kernel; a run on that cache then

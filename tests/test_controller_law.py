@@ -315,6 +315,7 @@ def test_response_feeds_python_controls_step_info(tmp_path: Path) -> None:
     np.testing.assert_array_equal(again.y, response.y)
 
 
+@pytest.mark.gpu
 def test_a_decorator_controller_on_the_gpu_simulator_matches_the_cpu(plugin_config: Path, tmp_path: Path) -> None:
     """The law's generated step retargeted for CUDA (numba's simulator): statuses and metrics
     within 1e-9 of the CPU's, over a short horizon."""

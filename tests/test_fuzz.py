@@ -252,6 +252,7 @@ def write_config(path: Path, config: Any, allow_unicode: bool, edit: str) -> Pat
 TINY_STEP = {**BASE, "simulation": {**BASE["simulation"], "dt": 5e-324}}
 
 
+@pytest.mark.slow
 @settings(max_examples=EXAMPLES["validate-config-file"], **SETTINGS)
 @example(config=TINY_STEP, allow_unicode=True, edit="none", name="c.yaml")
 @example(config=BASE, allow_unicode=True, edit="recursive-alias", name="c.yaml")
@@ -274,6 +275,7 @@ def test_validate_a_drawn_and_mutated_config_file(
             assert ": valid (" in result.stdout
 
 
+@pytest.mark.slow
 @settings(max_examples=EXAMPLES["validate-overrides"], **SETTINGS)
 @example(texts=["title=caf\udce9"])  # the byte 0xe9 of a Latin-1 argument, as Python decodes argv
 @given(texts=overrides(BASE))
@@ -283,6 +285,7 @@ def test_validate_with_hostile_overrides(base_file: Path, texts: list[str]) -> N
     check_outcome("validate-overrides", runner.invoke(app, ["validate", str(base_file), *texts]))
 
 
+@pytest.mark.slow
 @settings(max_examples=EXAMPLES["validate-any-bytes"], **SETTINGS)
 @given(
     data=st.binary(max_size=300)
@@ -299,6 +302,7 @@ def test_validate_any_bytes_as_a_config(example_dir: Callable[[], Any], data: by
         check_outcome("validate-any-bytes", runner.invoke(app, ["validate", str(path)]))
 
 
+@pytest.mark.slow
 @settings(max_examples=EXAMPLES["run"], **SETTINGS)
 @example(config=BASE, extra=[], out_name="out")
 @example(config=BASE, extra=["name=\ud800"], out_name="out")

@@ -23,6 +23,8 @@ import yaml
 
 from nlcx.results import read_output_table
 
+pytestmark = pytest.mark.gpu  # numba-cuda's simulator, in child processes
+
 ROOT = Path(__file__).resolve().parent.parent
 RTOL = 0.0  # bit for bit: assert_allclose with rtol = atol = 0 is equality
 

@@ -17,6 +17,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+pytestmark = pytest.mark.gpu  # compiles the GPU kernels to PTX with NVVM
+
 ROOT = Path(__file__).resolve().parent.parent
 SHORT = "++simulation.t_end=0.2"
 

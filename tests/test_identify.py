@@ -451,6 +451,7 @@ def test_a_population_packed_into_prepared_tables_gives_each_candidate_s_own_cel
     assert np.array_equal(objective(X), train_loss(own, train))
 
 
+@pytest.mark.slow
 def test_fits_in_lockstep_are_the_fits_alone(tmp_path: Path) -> None:
     """The GPU's way of fitting (every hypothesis's GA stepped side by side, each generation's
     populations measured together, the fitted loops measured together) gives each hypothesis

@@ -29,6 +29,7 @@ def test_the_notebook_is_committed_without_outputs(path: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.notebook
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_the_notebook_runs(path: Path) -> None:
     """Every cell runs without an error (its asserts included), in the examples folder."""

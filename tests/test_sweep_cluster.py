@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
+import pytest
 import yaml
 from typer.testing import CliRunner
 
@@ -61,6 +62,7 @@ def test_a_bad_cluster_file_is_one_line_naming_the_key(tmp_path: Path) -> None:
     assert result.exit_code != 0 and "leave out --scheduler" in result.output
 
 
+@pytest.mark.slow
 def test_a_local_cluster_stands_in_for_the_queue_with_the_serial_results(tmp_path: Path) -> None:
     raw = yaml.safe_load((ROOT / "configs" / "x_error_ags.yaml").read_text())
     params = {"plant.params.M": {"dist": "uniform", "relative": 0.2}}

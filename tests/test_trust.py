@@ -28,6 +28,15 @@ runner = CliRunner()
 EXCEPTION_NAME = re.compile(r"\b[A-Z][A-Za-z]*(Error|Exception)\b|Traceback")
 
 
+@pytest.fixture
+def tmp_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A new directory for each test, with a short name. A one-line error quotes a value of at
+    most 80 characters (:mod:`nlcx.errors`) and these tests assert that it quotes a file's whole
+    path, so the path must stay short wherever the tests run: pytest's own ``tmp_path`` is
+    named after the test, and under pytest-xdist sits one level deeper (``popen-gw0/``)."""
+    return tmp_path_factory.mktemp("t")
+
+
 def one_line(result: object, code: int = 2) -> str:
     """The single stderr line of a refused command (exit ``code``), which names no exception."""
     assert result.exit_code == code, result.output  # type: ignore[attr-defined]
