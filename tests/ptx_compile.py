@@ -68,14 +68,14 @@ def _without_a_gpu(compiled: dict[str, int]) -> None:
     from numba.cuda import dispatcher
 
     from nlcx.engine import gpu
-    from nlcx.kernel import cuda_friction, cuda_loop, cuda_metrics, device
+    from nlcx.kernel import cuda_friction, cuda_loop, cuda_metrics, cuda_shape, device
 
     loop, metrics = cuda_loop.loop_kernel, cuda_metrics.metrics_kernel
     replaced: list[tuple[Any, str, Any]] = [
         (dispatcher, "get_current_device", lambda: _Device()),
         (cuda, "to_device", lambda a: np.ascontiguousarray(a).view(_HostArray)),
         (cuda, "device_array", lambda shape, dtype=np.float64: np.zeros(shape, dtype).view(_HostArray)),
-        *((module, "cuda", lambda: cuda) for module in (device, cuda_loop, cuda_friction, cuda_metrics)),
+        *((module, "cuda", lambda: cuda) for module in (device, cuda_loop, cuda_shape, cuda_friction, cuda_metrics)),
         *((module, "kept", lambda kernel, *parts: kernel) for module in (cuda_loop, cuda_metrics)),
         (gpu, "chunk_rows", lambda n_rows, bytes_per_row: n_rows),
         (cuda_loop, "loop_kernel", lambda shape: _Compiling(loop(shape), "loop", compiled)),
