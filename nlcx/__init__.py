@@ -27,7 +27,7 @@ _HOMES = {
     "load_run": "nlcx.results",
     "run": "nlcx.api",
     "sweep": "nlcx.api",
-    "compare": "nlcx.comparison",
+    "compare": "nlcx.comparison_frame",
     "thesis_improvement": "nlcx.comparison",
     "Comparison": "nlcx.comparison_frame",
     "ConfigError": "nlcx.errors",

@@ -7,9 +7,9 @@ from nlcx.analysis import linearize as linearize
 from nlcx.api import experiment as experiment
 from nlcx.api import run as run
 from nlcx.api import sweep as sweep
-from nlcx.comparison import compare as compare
 from nlcx.comparison import thesis_improvement as thesis_improvement
 from nlcx.comparison_frame import Comparison as Comparison
+from nlcx.comparison_frame import compare as compare
 from nlcx.controllers.law import controller as controller
 from nlcx.errors import ConfigError as ConfigError
 from nlcx.errors import NlcxError as NlcxError

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from numba.core.dispatcher import Dispatcher as Dispatcher
     from numba.core.types import Type
     from numba.core.typing.templates import Signature as Signature
+    from numba.cuda.cudadrv.devicearray import DeviceNDArray as DeviceNDArray
     from numba.cuda.dispatcher import CUDADispatcher, _Kernel
     from numba.cuda.target import CUDATargetContext
 
@@ -194,6 +195,28 @@ def cuda_without_fma() -> None:
 
     strict.without_fma = True  # type: ignore[attr-defined]  # a mark on the function: wrapped once
     nvvm.compile_ir = strict
+
+
+@contextlib.contextmanager
+def on_first_compile(callback: Callable[[], None]) -> Iterator[None]:
+    """Within the block, call ``callback`` once, when numba first compiles a function: a miss of
+    its disk cache (numba's event API, ``numba.core.event``: a ``numba:compile`` event starts only
+    when an overload is neither loaded nor found in the cache)."""
+    from numba.core import event
+
+    class FirstCompile(event.Listener):
+        fired = False
+
+        def on_start(self, ev: object) -> None:
+            if not self.fired:
+                self.fired = True
+                callback()
+
+        def on_end(self, ev: object) -> None:
+            return
+
+    with event.install_listener("numba:compile", FirstCompile()):
+        yield
 
 
 def load_nvvm() -> None:

@@ -18,14 +18,9 @@ from __future__ import annotations
 import math
 from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any
 
 from nlcx.errors import NlcxError, did_you_mean
-
-if TYPE_CHECKING:
-    import pandas as pd
-
-    from nlcx.comparison_frame import Comparison
 
 #: The metrics the thesis's tables compare: step characteristics (a signal regulated to 0 has
 #: its peak deviation instead of overshoot and peak) and the error integrals.
@@ -329,7 +324,7 @@ def _selected(records: list[Mapping[str, Any]], names: Sequence[str] | str | Non
     return wanted
 
 
-def _check_columns(columns: Iterable[str]) -> None:
+def check_columns(columns: Iterable[str]) -> None:
     missing = [c for c in REQUIRED if c not in set(columns)]
     if missing:
         raise NlcxError(
@@ -364,7 +359,7 @@ def comparison(records: Iterable[Mapping[str, Any]], names: Sequence[str] | str 
     """
     rows = list(records)
     if rows:
-        _check_columns(rows[0].keys())
+        check_columns(rows[0].keys())
     selected = set(_selected(rows, names))
     controllers = tuple(dict.fromkeys(_text(r["controller"]) for r in rows))
     status = dict.fromkeys(controllers, "ok")
@@ -395,71 +390,3 @@ def comparison(records: Iterable[Mapping[str, Any]], names: Sequence[str] | str 
         marker = better(m, row_values, stopped=[c for c in controllers if status[c] != "ok"])
         compared.append(Row(s, m, units[(s, m)], tuple(row_values.values()), marker))
     return SideBySide(controllers, status, reasons, tuple(compared))
-
-
-def compare(metrics: pd.DataFrame, names: Sequence[str] | None = None) -> Comparison:
-    """Controllers side by side, per signal and metric, with the change % of each later
-    controller against the first and the better controller of each metric.
-
-    Parameters
-    ----------
-    metrics
-        A long-form metrics frame as ``metrics.csv`` holds it: columns ``controller``,
-        ``signal``, ``metric``, ``value``, ``unit``, ``status``, ``note`` (the last three
-        optional), one run's rows.
-    names
-        The metrics to compare, exactly these; None: those of :data:`THESIS_METRICS` present.
-
-    Returns
-    -------
-    Comparison
-        A pandas DataFrame indexed by (signal, metric): signals in order of first appearance,
-        each signal's metrics in order of first appearance. Columns: ``unit``; one float
-        column per controller (in order of first appearance; NaN where it has no value or its
-        run's status is not ``ok``); ``change_<controller>_pct`` for each controller after the
-        first (the baseline): ``100 (controller - baseline) / |baseline|`` (:func:`change`),
-        negative where that controller has the smaller value; ``better``: the controller with
-        the better value (:func:`better`), ``tie``, or "" for a metric without a direction.
-        Printed, it is a block per signal that fits 80 columns
-        (:class:`~nlcx.comparison_frame.Comparison`).
-
-    Raises
-    ------
-    NlcxError
-        A required column is missing, ``names`` holds a metric the frame lacks, or a
-        (controller, signal, metric) appears twice.
-
-    Examples
-    --------
-    >>> import pandas as pd
-    >>> from nlcx.comparison import compare
-    >>> metrics = pd.DataFrame({
-    ...     "controller": ["conventional", "conventional", "proposed", "proposed"],
-    ...     "signal": ["x", "x", "x", "x"],
-    ...     "metric": ["rise_time", "ise", "rise_time", "ise"],
-    ...     "value": [2.0, 0.5, 1.6, 0.6],
-    ...     "unit": ["s", "m^2*s", "s", "m^2*s"],
-    ...     "status": ["ok"] * 4,
-    ...     "note": [""] * 4,
-    ... })
-    >>> table = compare(metrics)
-    >>> print(table)  # doctest: +NORMALIZE_WHITESPACE
-    Baseline conventional; change % = 100 (other - baseline) / |baseline|
-    <BLANKLINE>
-    x: conventional better on 1 of 2 metrics, proposed on 1
-      metric     unit   conventional  proposed  change %  better
-      rise_time  s                 2       1.6     -20.0  proposed
-      ise        m^2*s           0.5       0.6     +20.0  conventional
-
-    The proposed controller rises in 1.6 s instead of 2.0 s: 100 (1.6 - 2.0) / 2.0 = -20 %.
-
-    >>> table["change_proposed_pct"].round(6).tolist()
-    [-20.0, 20.0]
-    >>> table.better.tolist()
-    ['proposed', 'conventional']
-    """
-    from nlcx.comparison_frame import frame_of
-
-    _check_columns(metrics.columns)
-    records = cast("list[dict[str, Any]]", metrics.to_dict("records"))  # its columns are named by strings
-    return frame_of(comparison(records, names))

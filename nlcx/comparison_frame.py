@@ -19,7 +19,7 @@ from typing import Any, ClassVar, cast
 
 import pandas as pd
 
-from nlcx.comparison import SideBySide, verdict
+from nlcx.comparison import SideBySide, check_columns, comparison, verdict
 
 #: The width the printed table fits.
 WIDTH = 80
@@ -37,7 +37,7 @@ def change_column(controller: str) -> str:
 class Comparison(pd.DataFrame):
     """Controllers side by side: indexed by (signal, metric); columns ``unit``, one per
     controller, ``change_<controller>_pct`` for each controller after the first (the baseline)
-    and ``better`` (:func:`nlcx.comparison.compare` defines each).
+    and ``better`` (:func:`compare` defines each).
 
     Printed (``print``, ``repr``), it is a block per signal, each opened by the line that says
     which controller is better on how many of its metrics, with every controller side by side
@@ -245,3 +245,69 @@ def frame_of(table: SideBySide) -> Comparison:
     frame = pd.DataFrame(columns, index=index)
     numbers = {c: float for c in columns if c not in ("unit", "better")}
     return Comparison(frame.astype(numbers), statuses=table.status)
+
+
+def compare(metrics: pd.DataFrame, names: Sequence[str] | None = None) -> Comparison:
+    """Controllers side by side, per signal and metric, with the change % of each later
+    controller against the first and the better controller of each metric.
+
+    Parameters
+    ----------
+    metrics
+        A long-form metrics frame as ``metrics.csv`` holds it: columns ``controller``,
+        ``signal``, ``metric``, ``value``, ``unit``, ``status``, ``note`` (the last three
+        optional), one run's rows.
+    names
+        The metrics to compare, exactly these; None: those of :data:`THESIS_METRICS` present.
+
+    Returns
+    -------
+    Comparison
+        A pandas DataFrame indexed by (signal, metric): signals in order of first appearance,
+        each signal's metrics in order of first appearance. Columns: ``unit``; one float
+        column per controller (in order of first appearance; NaN where it has no value or its
+        run's status is not ``ok``); ``change_<controller>_pct`` for each controller after the
+        first (the baseline): ``100 (controller - baseline) / |baseline|`` (:func:`change`),
+        negative where that controller has the smaller value; ``better``: the controller with
+        the better value (:func:`better`), ``tie``, or "" for a metric without a direction.
+        Printed, it is a block per signal that fits 80 columns
+        (:class:`~nlcx.comparison_frame.Comparison`).
+
+    Raises
+    ------
+    NlcxError
+        A required column is missing, ``names`` holds a metric the frame lacks, or a
+        (controller, signal, metric) appears twice.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from nlcx.comparison_frame import compare
+    >>> metrics = pd.DataFrame({
+    ...     "controller": ["conventional", "conventional", "proposed", "proposed"],
+    ...     "signal": ["x", "x", "x", "x"],
+    ...     "metric": ["rise_time", "ise", "rise_time", "ise"],
+    ...     "value": [2.0, 0.5, 1.6, 0.6],
+    ...     "unit": ["s", "m^2*s", "s", "m^2*s"],
+    ...     "status": ["ok"] * 4,
+    ...     "note": [""] * 4,
+    ... })
+    >>> table = compare(metrics)
+    >>> print(table)  # doctest: +NORMALIZE_WHITESPACE
+    Baseline conventional; change % = 100 (other - baseline) / |baseline|
+    <BLANKLINE>
+    x: conventional better on 1 of 2 metrics, proposed on 1
+      metric     unit   conventional  proposed  change %  better
+      rise_time  s                 2       1.6     -20.0  proposed
+      ise        m^2*s           0.5       0.6     +20.0  conventional
+
+    The proposed controller rises in 1.6 s instead of 2.0 s: 100 (1.6 - 2.0) / 2.0 = -20 %.
+
+    >>> table["change_proposed_pct"].round(6).tolist()
+    [-20.0, 20.0]
+    >>> table.better.tolist()
+    ['proposed', 'conventional']
+    """
+    check_columns(metrics.columns)
+    records = cast("list[dict[str, Any]]", metrics.to_dict("records"))  # its columns are named by strings
+    return frame_of(comparison(records, names))

@@ -25,7 +25,6 @@ import functools
 import hashlib
 import os
 import subprocess
-import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -94,21 +93,20 @@ COMPILING = (
 
 
 class CompileHelper:
-    """A command run in a second process, started only if a step of this one takes longer than
-    ``after`` seconds: ``nlcx run`` watches loading the kernel, which is quick from numba's
-    cache and takes seconds when it compiles, and then starts ``nlcx prewarm`` with the run's config
-    (:func:`nlcx.engine.prewarm`). Both processes write numba's cache, one function's files at a
-    time (:func:`nlcx._numba_compat.serialize_cache_access`), so either may finish first.
+    """A command run in a second process, started only if numba compiles during a step of this
+    one (a miss of its disk cache: :func:`nlcx._numba_compat.on_first_compile`): ``nlcx run``
+    watches loading the kernel, which is quick from numba's cache and takes seconds when it
+    compiles, and then starts ``nlcx prewarm`` with the run's config (:func:`nlcx.engine.prewarm`).
+    Both processes write numba's cache, one function's files at a time
+    (:func:`nlcx._numba_compat.serialize_cache_access`), so either may finish first.
 
     ``notice``, if given, is called when the command starts (the moment this process knows
     that it compiles): ``nlcx run`` says there in one line what the wait is (:data:`COMPILING`)."""
 
-    def __init__(self, command: list[str], after: float = 1.0, notice: Callable[[], None] | None = None) -> None:
+    def __init__(self, command: list[str], notice: Callable[[], None] | None = None) -> None:
         self.command = command
         self.notice = notice
         self.process: subprocess.Popen[bytes] | None = None
-        self._timer = threading.Timer(after, self._start)
-        self._timer.daemon = True
 
     def _start(self) -> None:
         if self.notice is not None:
@@ -119,16 +117,14 @@ class CompileHelper:
 
     @contextlib.contextmanager
     def watching(self) -> Iterator[None]:
-        """Start the command if the block is still running after ``after`` seconds."""
-        self._timer.start()
-        try:
+        """Start the command (once) when numba compiles within the block."""
+        from nlcx._numba_compat import on_first_compile
+
+        with on_first_compile(self._start):
             yield
-        finally:
-            self._timer.cancel()
 
     def close(self, timeout: float = 120.0) -> None:
         """Wait for the command if it was started (killed after ``timeout`` seconds)."""
-        self._timer.cancel()
         if self.process is None:
             return
         try:

@@ -151,7 +151,7 @@ class Result:
         >>> row.better == ("proposed" if row.proposed < row.conventional else "conventional")
         True
         """
-        from nlcx.comparison import compare
+        from nlcx.comparison_frame import compare
 
         return compare(self.metrics, metrics)
 

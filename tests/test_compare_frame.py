@@ -16,8 +16,8 @@ from typer.testing import CliRunner
 
 import nlcx
 from nlcx.cli import app
-from nlcx.comparison import DIRECTIONS, NEARER_ZERO, SMALLER, TIE, UNDIRECTED, compare
-from nlcx.comparison_frame import Comparison
+from nlcx.comparison import DIRECTIONS, NEARER_ZERO, SMALLER, TIE, UNDIRECTED
+from nlcx.comparison_frame import Comparison, compare
 from nlcx.metrics.names import ERROR_METRICS, INPUT_METRICS, METRIC_UNITS, STEP_INFO_UNITS
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -10,7 +10,8 @@ import pandas as pd
 import pytest
 
 from nlcx import comparison
-from nlcx.comparison import THESIS_METRICS, change, compare, thesis_improvement
+from nlcx.comparison import THESIS_METRICS, change, thesis_improvement
+from nlcx.comparison_frame import compare
 from nlcx.errors import NlcxError
 from nlcx.thesis import tables
 

@@ -176,33 +176,43 @@ def _spied(code: str) -> Any:
     return json.loads(done.stdout.splitlines()[-1])
 
 
-def test_the_helper_starts_only_when_the_watched_step_is_slow(tmp_path: Path) -> None:
+def _compiled_now() -> None:
+    """A function numba has not seen before (a fresh closure, no disk cache), compiled."""
+    from numba import njit
+
+    offset = time.monotonic()
+    njit(lambda x: x + offset)(1.0)
+
+
+def test_the_helper_starts_only_when_numba_compiles_in_the_watched_step(tmp_path: Path) -> None:
     marker = tmp_path / "started"
     command = [sys.executable, "-c", f"open({str(marker)!r}, 'w').close()"]
-    quick = compiled_cache.CompileHelper(command, after=600.0)
+    quick = compiled_cache.CompileHelper(command)
     with quick.watching():
-        pass
+        time.sleep(0.2)  # slow, but nothing compiled
     quick.close()
     assert quick.process is None and not marker.exists()
-    slow = compiled_cache.CompileHelper(command, after=0.05)
-    with slow.watching():  # a step that lasts until the helper has run
-        _wait_for(marker.exists)
+    slow = compiled_cache.CompileHelper(command)
+    with slow.watching():
+        _compiled_now()
+        _compiled_now()  # a second compilation starts nothing more
     slow.close()
-    assert slow.process is not None and slow.process.returncode == 0
+    assert slow.process is not None and slow.process.returncode == 0 and marker.exists()
 
 
-def test_the_compiling_notice_is_given_once_when_the_helper_starts_and_never_on_a_quick_load(tmp_path: Path) -> None:
+def test_the_compiling_notice_is_given_once_when_numba_compiles_and_never_on_a_cached_load(tmp_path: Path) -> None:
     marker = tmp_path / "started"
     command = [sys.executable, "-c", f"open({str(marker)!r}, 'w').close()"]
     notices: list[str] = []
-    quick = compiled_cache.CompileHelper(command, after=600.0, notice=lambda: notices.append("quick"))
+    quick = compiled_cache.CompileHelper(command, notice=lambda: notices.append("quick"))
     with quick.watching():
-        pass
+        time.sleep(0.2)
     quick.close()
     assert notices == []
-    slow = compiled_cache.CompileHelper(command, after=0.05, notice=lambda: notices.append("slow"))
+    slow = compiled_cache.CompileHelper(command, notice=lambda: notices.append("slow"))
     with slow.watching():
-        _wait_for(marker.exists)
+        _compiled_now()
+        _compiled_now()
     slow.close()
     assert notices == ["slow"]
     line = compiled_cache.COMPILING

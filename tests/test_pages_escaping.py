@@ -258,7 +258,8 @@ def test_a_run_page_shows_hostile_fields_as_text_and_runs_nothing(browser: Brows
         k = ["controller", "signal", "metric", "value", "unit", "status", "note"].index(column)
         assert [row[k] for row in cells] == metrics[column].tolist(), column
     header = texts(page, "table.comparison:first-of-type tr:first-child th")
-    assert header[2:7] == list(HOSTILE) and header[7:] == [f"{c} vs {HOSTILE[0]} (%)" for c in HOSTILE[1:]]
+    assert header[2:7] == list(HOSTILE) and header[7:-1] == [f"{c} vs {HOSTILE[0]} (%)" for c in HOSTILE[1:]]
+    assert header[-1] == "better"
     assert HOSTILE[3] in texts(page, "#comparison h3")
     assert set(texts(page, "table.comparison td.status")) == {HOSTILE[0]}  # the run that is not ok
     figures = sorted(p.name for p in run_dir.glob("*.png"))

@@ -84,7 +84,7 @@ def test_the_probe_sees_each_change(tmp_path: Path) -> None:
     planted = """
 import gc, os
 from nlcx import _numba_compat, runtime
-os.environ["OMP_NUM_THREADS"] = "1"
+os.environ["NLCX_PROBE_PLANTED"] = "1"
 gc.freeze()
 _numba_compat.serialize_cache_access()
 runtime.reuse_freed_memory()

@@ -254,7 +254,7 @@ def test_load_run_refuses_a_truncated_file_naming_it(saved_run: Path, tmp_path: 
 def test_a_deleted_time_series_and_a_disabled_one_say_different_things(saved_run: Path, tmp_path: Path) -> None:
     out = _copy(saved_run, tmp_path / "run")
     (out / "timeseries.csv").unlink()
-    with pytest.raises(IntegrityError, match=r"timeseries.csv: missing; .*manifest.json lists it"):
+    with pytest.raises(IntegrityError, match=r"timeseries.csv: missing: .*its manifest lists it"):
         nlcx.load_run(out)
     nlcx.run(CONFIG, [*SHORT, "outputs.timeseries=false"], out=tmp_path / "none")
     with pytest.raises(ConfigError, match=r"written without time series \(outputs.timeseries: false\)"):

@@ -121,13 +121,13 @@ def run(
     flags = ["--allow-env"] if allow_env else []
     flags += [item for file in plugins or [] for item in ("--plugins", str(file.resolve()))]
     command = [sys.executable, "-m", "nlcx.cli", "prewarm", str(config), *flags, *(overrides or [])]
-    # a kernel that takes over a second to load is being compiled: said in one line on stderr (not with -q)
+    # a kernel that numba compiles (its disk cache empty or stale): said in one line on stderr (not with -q)
     helper = CompileHelper(command, notice=None if quiet else lambda: echo(COMPILING, err=True))
     try:
         from nlcx import engine, rundir
 
         runtime.imports_done()
-        with helper.watching():  # a slow load means an empty numba cache: `nlcx prewarm` compiles alongside
+        with helper.watching():  # a compiled kernel means a cold numba cache: `nlcx prewarm` compiles alongside
             engine.load_kernel()
         start = time.perf_counter()
         exp = cfg.build(resolved, allow_env=allow_env)  # cfg.load's steps on the config already read
@@ -187,6 +187,7 @@ def _sweep(
     cluster_file: Path | None = None,
     allow_env: bool = False,
 ) -> None:
+    from rich.console import Console
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -211,7 +212,7 @@ def _sweep(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
         TextColumn("failed {task.fields[failed]}"), TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
     )  # fmt: skip
-    bar = Progress(*columns, transient=False)
+    bar = Progress(*columns, console=Console(), transient=False)  # as wide as the terminal is now
     tasks: list[Any] = []
 
     def progress(done: int, total: int, failed: int) -> None:

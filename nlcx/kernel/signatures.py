@@ -16,10 +16,9 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from numba.core.types import Type
-    from numba.cuda.cudadrv.devicearray import DeviceNDArray
     from numba.cuda.dispatcher import CUDADispatcher
 
-    from nlcx._numba_compat import Dispatcher, Signature
+    from nlcx._numba_compat import DeviceNDArray, Dispatcher, Signature
 
 #: An array of float64, the dtype of every state, signal, parameter and record.
 FloatArray: TypeAlias = NDArray[np.float64]

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from nlcx import compiled_cache, manifest, plugins, runtime, safe_yaml
 from nlcx.errors import ConfigError, NlcxError
@@ -22,7 +22,6 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from nlcx.results import Result
-    from nlcx.sweep_results import SweepResult
     from nlcx.sweeps.planning import Variant
 
 
@@ -36,7 +35,16 @@ class Plan:
     timeseries: bool
 
 
-def variant_results(sweep: SweepResult, chosen: list[int], controller: str | None) -> dict[int, Result]:
+class SweptTables(Protocol):
+    """What :func:`variant_results` reads of a sweep (:class:`nlcx.sweep_results.SweepResult`):
+    its tables of variants and metrics, and the directory it was written to."""
+
+    variants: pd.DataFrame
+    metrics: pd.DataFrame
+    directory: Path | None
+
+
+def variant_results(sweep: SweptTables, chosen: list[int], controller: str | None) -> dict[int, Result]:
     """Variant -> its :class:`~nlcx.results.Result` (:meth:`nlcx.SweepResult.trajectories`)."""
     from nlcx._numba_compat import quiet_first_class_functions
 
@@ -61,7 +69,7 @@ def variant_results(sweep: SweepResult, chosen: list[int], controller: str | Non
     return out
 
 
-def _directory(sweep: SweepResult) -> Path:
+def _directory(sweep: SweptTables) -> Path:
     if sweep.directory is None or not (sweep.directory / "config.yaml").is_file():
         raise ConfigError(
             "directory", None if sweep.directory is None else str(sweep.directory),
