@@ -79,12 +79,18 @@ def stability(metrics: pd.DataFrame, index: pd.DataFrame) -> pd.DataFrame:
     groups, labels = sweep_charts.first_seen([metrics.controller])
     not_ok = (metrics.status != "ok").to_numpy()
     variant = metrics.variant.to_numpy(dtype=np.int64)
+    size = int(variant.max()) + 1 if variant.size else 0
+
+    def variants_of(mask: np.ndarray) -> int:
+        """How many distinct variants the rows of ``mask`` belong to (marks, not a sort)."""
+        marks = np.zeros(size, dtype=bool)
+        marks[variant[mask]] = True
+        return int(marks.sum())
+
     rows = []
     for g, (controller,) in enumerate(labels):
         members = groups == g
-        measured = np.unique(variant[members])
-        stopped = np.unique(variant[members & not_ok])
-        ok = int(measured.size - stopped.size)
+        ok = variants_of(members) - variants_of(members & not_ok)
         rows.append({"controller": controller, "ok": ok, "unstable": variants - failed - ok, "failed": failed,
                      "variants": variants, "stable_share": ok / variants if variants else np.nan})  # fmt: skip
     return pd.DataFrame(rows).set_index("controller")[list(STABILITY_COLUMNS)]
