@@ -319,7 +319,7 @@ def _frozen(setting: _Setting, at: FrozenPoint) -> Linearization:
 
 def _law_linearization(setting: _Setting, at: FrozenPoint, dt: float) -> Linearization:
     """The analysis of a control law (:mod:`nlcx.analysis.law`): nothing to freeze."""
-    from nlcx.analysis import law
+    import nlcx.analysis.law as law
 
     plant, built = setting.prepared.plant, setting.controller
     controller = law.law_system(built, plant, dt)

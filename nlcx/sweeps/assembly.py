@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+import nlcx.sweeps.seals as seals
 from nlcx import config as cfg
 from nlcx import manifest, plugins
-from nlcx.sweeps import seals
 from nlcx.sweeps.planning import SweepSection, Variant
 
 

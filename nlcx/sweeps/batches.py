@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
+import nlcx.sweeps.seals as seals
 from nlcx import config as cfg
 from nlcx import plugins, runtime
-from nlcx.sweeps import seals
 from nlcx.sweeps.planning import Variant
 
 if TYPE_CHECKING:

@@ -33,10 +33,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+import nlcx.sweeps.seals as seals
 from nlcx import config as cfg
 from nlcx import plugins
 from nlcx.errors import NlcxError
-from nlcx.sweeps import seals
 from nlcx.sweeps.planning import ColumnPlan, SweepSection, Variant, variant_hash
 
 if TYPE_CHECKING:

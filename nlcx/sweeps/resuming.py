@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from nlcx.sweeps import seals
+import nlcx.sweeps.seals as seals
 from nlcx.sweeps.planning import Variant
 
 

@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import pandas as pd
 
 import nlcx.sweeps.columnar as columnar
+import nlcx.sweeps.seals as seals
 from nlcx import runtime
 from nlcx.errors import NlcxError
-from nlcx.sweeps import seals
 from nlcx.sweeps.assembly import assemble, assemble_columns, write_manifest
 from nlcx.sweeps.batches import Batch, BatchResult, run_batch
 from nlcx.sweeps.cluster import ClusterSpec
