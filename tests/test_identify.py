@@ -51,7 +51,8 @@ def test_the_study_screens_every_family_within_the_former_studys_fits() -> None:
     """Whichever families the screen forwards, the study fits no more hypotheses than the
     former study of every combination of up to three of the first 11 families (508)."""
     spec = load_spec(ROOT / "configs" / "identify" / "pendulum_all.yaml")
-    assert spec.families == list(hypotheses.FAMILIES) and len(spec.families) == 20
+    final_round = ("conventional_gains", "z_schedule", "rise_time")  # the final round's own families
+    assert spec.families == [f for f in hypotheses.FAMILIES if f not in final_round] and len(spec.families) == 20
     assert spec.screen is not None and spec.screen.keep <= 8 and spec.screen.min_gain == 0.05
     screened = {h.name for h in hypotheses.family(spec.families, 1)}
     assert len(screened) == 31  # the literal loop and the 30 single values

@@ -10,8 +10,10 @@ summary and fit table (:func:`search`, :func:`fitted`) and its scores per part (
 from __future__ import annotations
 
 import functools
+import hashlib
 import json
 import math
+import subprocess
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NamedTuple, TypeAlias
@@ -267,11 +269,36 @@ def fitted(
     return summary, fit
 
 
-def write_study(out_dir: Path, hypotheses_total: int, fitted: int, jobs: int, wall_s: float) -> None:
+def spec_provenance(spec: Path) -> dict[str, Any]:
+    """Which spec a study ran: its path, the SHA-256 of its text, the last commit that changed
+    it and whether the file is that commit's (None for both outside a git checkout), so a
+    pre-registered spec can be shown to precede its results."""
+    digest = hashlib.sha256(spec.read_bytes()).hexdigest()
+    record: dict[str, Any] = {"spec": spec.as_posix(), "spec_sha256": digest, "spec_commit": None,
+                              "spec_committed": None}  # fmt: skip
+    where = str(spec.resolve().parent)
+    try:
+        last = subprocess.run(["git", "-C", where, "log", "-1", "--format=%H", "--", spec.resolve().name],
+                              capture_output=True, text=True, timeout=10)  # fmt: skip
+        changed = subprocess.run(["git", "-C", where, "status", "--porcelain", "--", spec.resolve().name],
+                                 capture_output=True, text=True, timeout=10)  # fmt: skip
+    except (OSError, subprocess.SubprocessError):
+        return record
+    if last.returncode == 0 and last.stdout.strip():
+        record |= {"spec_commit": last.stdout.strip(), "spec_committed": changed.stdout.strip() == ""}
+    return record
+
+
+def write_study(
+    out_dir: Path, hypotheses_total: int, fitted: int, jobs: int, wall_s: float, spec: Path | None = None
+) -> None:
     """study.json: how many hypotheses the study holds, how many this invocation fitted, on how
     many workers and in what wall time (a resumed study's time covers only its rest; a run
-    that fitted nothing keeps the record of the last one that did)."""
+    that fitted nothing keeps the record of the last one that did), and the ``spec`` it ran
+    (:func:`spec_provenance`)."""
     if fitted == 0 and (out_dir / "study.json").is_file():
         return
     record = {"hypotheses": hypotheses_total, "fitted_now": fitted, "jobs": jobs, "wall_s": round(wall_s, 1)}
+    if spec is not None:
+        record |= spec_provenance(spec)
     report.write_text(out_dir / "study.json", json.dumps(record, indent=2) + "\n")

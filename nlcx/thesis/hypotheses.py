@@ -22,8 +22,8 @@ from nlcx.thesis.cstr_options import CSTR_FAMILIES, CSTR_OPERATING_CB
 from nlcx.thesis.loop_options import FAMILIES, NEUTRAL, OptionValue, Raw
 
 __all__ = [
-    "CSTR_FAMILIES", "CSTR_OPERATING_CB", "FAMILIES", "NEUTRAL", "OPTIONS", "Hypothesis", "OptionValue", "default",
-    "family",
+    "CSTR_FAMILIES", "CSTR_OPERATING_CB", "FAMILIES", "NEUTRAL", "OPTIONS", "Hypothesis", "OptionValue", "combine",
+    "default", "family", "parse",
 ]  # fmt: skip
 
 
@@ -87,6 +87,27 @@ class Hypothesis:
                 if controller.get("kind") == "pid":
                     option.change(controller, params, inputs)
         return out
+
+
+def parse(name: str) -> Hypothesis:
+    """The hypothesis named ``name`` ("literal", or "family=value+family=value ..."; its options
+    in the order of :data:`OPTIONS`). Raises ValueError naming an unknown family or value."""
+    if name == "literal":
+        return Hypothesis()
+    options: dict[str, str] = {}
+    for part in name.split("+"):
+        family_name, _, value = part.partition("=")
+        if family_name not in OPTIONS or value not in OPTIONS[family_name] or family_name in options:
+            known = ", ".join(OPTIONS.get(family_name, OPTIONS))
+            raise ValueError(f"hypothesis {name!r}: {part!r} is not one option of a family (allowed: {known})")
+        options[family_name] = value
+    return Hypothesis(tuple((f, options[f]) for f in OPTIONS if f in options))
+
+
+def combine(first: Hypothesis, second: Hypothesis) -> Hypothesis:
+    """``first``'s options with ``second``'s (``second``'s value where both set a family)."""
+    options = dict(first.options) | dict(second.options)
+    return Hypothesis(tuple((f, options[f]) for f in OPTIONS if f in options))
 
 
 def family(

@@ -197,7 +197,7 @@ def identify(
         families = list(table.family[table.forwarded == "yes"])
     family = select(spec, hypotheses.family(families, spec.max_options))
     fits.fit(family)
-    write_study(out_dir, len(fits.examined), fits.fitted_now, jobs, time.perf_counter() - t0)
+    write_study(out_dir, len(fits.examined), fits.fitted_now, jobs, time.perf_counter() - t0, path)
     ranking = write_ranking(out_dir, [h.name for h in family])
     chosen = list(dict.fromkeys(["literal", str(ranking.hypothesis.iloc[0])]))
     write_definitions(out_dir, root, cells, [n for n in chosen if n in set(ranking.hypothesis)])

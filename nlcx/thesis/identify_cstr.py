@@ -168,7 +168,7 @@ def identify_cstr(
             save_fit(fits, digest, summary, fit)
             if progress is not None:
                 progress(len(family) - len(todo) + k + 1, len(family), summary["hypothesis"])
-    write_study(out_dir, len(family), len(todo), jobs, time.perf_counter() - t0)
+    write_study(out_dir, len(family), len(todo), jobs, time.perf_counter() - t0, path)
     return write_ranking(out_dir, [h.name for h in family])
 
 

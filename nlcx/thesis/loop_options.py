@@ -225,18 +225,69 @@ def _integral_limit(signals: tuple[str, ...] | None) -> Callable[[Raw, Mapping[s
     return change
 
 
+def _own_conventional_gains(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
+    """On a plant with a z axis (x-z, x-y-z) only: the constant-gain angle and position loops'
+    k_p, k_i, k_d times their own factors (``c_angle_kp`` ... ``c_position_kd``, free), so these
+    pendulums' conventional gains are their own, not the x pendulum's."""
+    if "z" not in _plant_states(raw):
+        return
+    for controller in (raw.get("controllers") or {}).values():
+        if controller.get("kind") != "pid":
+            continue
+        for key, loop in controller["loops"].items():
+            group = GAIN_GROUPS.get(loop.get("signal") or key)
+            schedule = loop.get("schedule")
+            if group is None or not isinstance(schedule, dict) or schedule.get("kind") != "constant":
+                continue
+            for gain in GAINS:
+                schedule[gain] = schedule[gain] * params[f"c_{group}_{gain}"]
+
+
+def _z_schedule(swapped: bool, rate_free: bool) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """The z loop's gain schedule (Tables 3.6 and 4.1 print its ranges from 25 to 15, and no
+    rate): its printed min and max exchanged, and/or its three rates one free k_z."""
+
+    def change(pid: Raw, params: Mapping[str, float], _: list[str]) -> None:
+        for key, loop in pid["loops"].items():
+            schedule = loop.get("schedule")
+            if (loop.get("signal") or key) != "z" or schedule.get("kind") not in ("time_ags", "error_ags"):
+                continue
+            if swapped:
+                for gain in GAINS:
+                    schedule[gain] = {"min": schedule[gain]["max"], "max": schedule[gain]["min"]}
+            if rate_free:
+                schedule["rate"] = dict.fromkeys(GAINS, params["k_z"])
+
+    return change
+
+
+def _rise_limits(low: float, high: float) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
+    """A measurement option: t_r from ``low`` to ``high`` of the step (metrics.rise_limits)."""
+
+    def change(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
+        _set_metrics(raw, rise_limits=[low, high])
+
+    return change
+
+
 ANGLES = ("theta", "phi")
 #: The position loops (an integrator limit on them leaves the angle and z loops unlimited).
 POSITIONS = ("x", "y")
+#: The loops whose gains :func:`_own_conventional_gains` scales, by group.
+GAIN_GROUPS = {"theta": "angle", "phi": "angle", "x": "position", "y": "position"}
+GAINS = ("kp", "ki", "kd")
+#: The factors of the x-z and x-y-z pendulums' own conventional gains.
+OWN_GAINS = {f"c_{group}_{gain}": (0.2, 5.0) for group in ("angle", "position") for gain in GAINS}
 #: Reference kinds that step (a step, and a step through a prefilter).
 STEPS = ("step", "filtered_step")
 F_MAX = {"F_max": (2.0, 100.0)}
 #: The free parameters' values nearest the default loop: the widest limit, the shortest lag,
 #: prefilter and sampling period, the narrowest absolute band, the unit step, the upright
-#: start, the widest integrator limit.
+#: start, the widest integrator limit, the z schedule's rate as configured (the position
+#: loops'), the shared conventional gains (factors 1).
 NEUTRAL = {
     "F_max": 100.0, "tau": 0.001, "T_f": 0.01, "T_s": 0.001, "u_max": 20.0,
-    "tol": 0.002, "A": 1.0, "theta0": 0.0, "L": 2.0,
+    "tol": 0.002, "A": 1.0, "theta0": 0.0, "L": 2.0, "k_z": 0.1, **dict.fromkeys(OWN_GAINS, 1.0),
 }  # fmt: skip
 #: The integrators' limit L.
 L_MAX = {"L": (0.01, 2.0)}
@@ -387,5 +438,43 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
             "the position loops' (x, y) integrators held inside [-L, L]", _integral_limit(POSITIONS), L_MAX
         ),
         "all": OptionValue("every loop's integrator held inside [-L, L]", _integral_limit(None), L_MAX),
+    },
+    "conventional_gains": {
+        "shared": OptionValue(
+            "one set of conventional angle and position gains for every pendulum (default)", unchanged
+        ),
+        "own_with_z": OptionValue(
+            "x-z, x-y-z: their own conventional angle and position gains, the shared ones times factors c in "
+            "[0.2, 5] (the x-y pendulum keeps the x pendulum's: no train table has it)",
+            _own_conventional_gains,
+            OWN_GAINS,
+            "experiment",
+        ),
+    },
+    "z_schedule": {
+        "as_printed": OptionValue(
+            "x-z, x-y-z AGS: the z ranges as printed (k_p from 25 to 15 ...), the position loops' rates (default)",
+            unchanged,
+        ),
+        "swapped": OptionValue(
+            "the z ranges' printed min and max exchanged (k_p from 15 to 25 ...)", _z_schedule(True, False)
+        ),
+        "rate_free": OptionValue(
+            "the z schedule's three rates one free k_z", _z_schedule(False, True), {"k_z": (0.01, 2.0)}
+        ),
+        "swapped_rate_free": OptionValue(
+            "the z ranges exchanged and the rates one free k_z", _z_schedule(True, True), {"k_z": (0.01, 2.0)}
+        ),
+    },
+    "rise_time": {
+        "10_90": OptionValue("a measurement option: t_r from 10 % to 90 % of the step (default)", unchanged),
+        "0_100": OptionValue(
+            "a measurement option: t_r from the step to its first reaching 100 %",
+            _rise_limits(0.0, 1.0),
+            scope="experiment",
+        ),
+        "5_95": OptionValue(
+            "a measurement option: t_r from 5 % to 95 % of the step", _rise_limits(0.05, 0.95), scope="experiment"
+        ),
     },
 }

@@ -76,7 +76,7 @@ def consistency(
                     store.save_cloud(task[1:3], definition, loops)
             if progress is not None:
                 progress(done, total, f"{task[1]} {task[2]} {task[3] or 'random loops'}")
-    write_study(out_dir, total, done, jobs, time.perf_counter() - t0)
+    write_study(out_dir, total, done, jobs, time.perf_counter() - t0, path)
     return analyse(spec, store, families, tolerances.load(root / "tolerances.yaml"))
 
 
