@@ -110,6 +110,16 @@ def rule_selects(selected: Mapping[str, Any], literal: Mapping[str, Any]) -> boo
     return gain >= MIN_VALIDATION_GAIN and agrees
 
 
+def final_round_selects(final: Mapping[str, Any], current: Mapping[str, Any]) -> bool:
+    """Whether the final round's rank 1 replaces the current selected hypothesis.
+
+    The rule, pre-registered with configs/identify/final_round.yaml: the same rule as
+    :func:`rule_selects`, with the current selected hypothesis (the study's rank 1) in the
+    place of the literal loop. ``final`` and ``current`` are rows of the round's ranking.csv.
+    """
+    return rule_selects(final, current)
+
+
 def default_name(root: Path) -> str:
     """The profile ``nlcx reproduce`` runs without ``--profile``: ``selected`` where
     ``root/profiles/selected.yaml`` records that the rule chose it (``default: true``),
