@@ -217,10 +217,12 @@ def identify(
 ) -> None:
     """Fit loop hypotheses to the train tables, rank them on validation (resumable).
     A spec with "chapter: 5" is chapter 5's study (Table 5.8), ranked by train loss; one with
-    "kind: consistency" asks of each printed conventional column whether any loop gives it."""
+    "kind: consistency" asks of each printed column whether any loop gives it; one with
+    "kind: targeted" searches the sets of printed cells that study found unreachable."""
 
     from nlcx import manifest, rundir
     from nlcx.thesis.consistency import consistency
+    from nlcx.thesis.consistency.targeted import targeted
     from nlcx.thesis.identify import identify as run_identify
     from nlcx.thesis.identify_cstr import identify_cstr
     from nlcx.tuning.optimise import require_pymoo
@@ -232,9 +234,9 @@ def identify(
     if not isinstance(raw, dict) or not isinstance(raw.get("name"), str):
         raise ConfigError("spec", str(spec), "an identification spec: a YAML mapping with a name")
     out_dir = out or Path("results/identify") / raw["name"]
-    pendulum_study = raw.get("kind") != "consistency" and raw.get("chapter") != 5
+    pendulum_study = raw.get("kind") not in ("consistency", "targeted") and raw.get("chapter") != 5
     if device not in (None, "cpu") and not pendulum_study:
-        raise NlcxError(f"--device = {device!r}: a consistency or chapter 5 study runs on the cpu only")
+        raise NlcxError(f"--device = {device!r}: a consistency, targeted or chapter 5 study runs on the cpu only")
 
     def progress(done: int, total: int, name: str) -> None:
         echo(f"  [{done}/{total}] {name}")
@@ -242,11 +244,17 @@ def identify(
     with rundir.claim_in_place(out_dir, "identification"):  # resumed in place: locked, not staged
         if raw.get("kind") == "consistency":
             table = consistency(spec, out_dir, jobs=jobs, progress=progress)
+        elif raw.get("kind") == "targeted":
+            table = targeted(spec, out_dir, jobs=jobs, progress=progress)
         elif raw.get("chapter") == 5:
             table = identify_cstr(spec, out_dir, jobs=jobs, progress=progress)
         else:
             table = run_identify(spec, out_dir, jobs=jobs, progress=progress, device=checked_device(device))
         manifest.update(out_dir, manifest.load(out_dir).get("checksums", {}))  # every file's checksum, anew
+    if raw.get("kind") == "targeted":
+        echo(table[["table", "controller", "cells", "smallest_miss", "loops", "verdict"]].to_string(index=False))
+        echo(f"results in {out_dir}/")
+        return
     if raw.get("kind") == "consistency":
         shown = table[["table", "definition", "loops", "most_cells_hit", "cells", "reproduced"]]
         echo(shown.to_string(index=False))
