@@ -19,7 +19,7 @@ from nlcx import safe_yaml
 from nlcx.thesis import catalog
 
 if TYPE_CHECKING:
-    from nlcx.thesis.reproduce import Record
+    from nlcx.thesis.records import Record
 
 #: Table 5.8 column -> (nlcx metric, unit).
 CSTR_METRICS = {

@@ -18,9 +18,8 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypedDict
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -29,27 +28,10 @@ from nlcx import runtime
 from nlcx.errors import ConfigError, NlcxError, did_you_mean
 from nlcx.thesis import catalog, cstr, profiles, tables
 from nlcx.thesis.catalog import FigureSpec, TableSpec
+from nlcx.thesis.records import Record
 
 if TYPE_CHECKING:
     from nlcx.engine import ExperimentResult
-
-
-@dataclass
-class Record:
-    """What one experiment run hands back to the parent process."""
-
-    config: Path
-    name: str
-    #: The config as run, every default filled in (:meth:`nlcx.config.Experiment.resolved`).
-    resolved: dict[str, Any]
-    metrics: pd.DataFrame
-    status: dict[str, str]
-    extras: pd.DataFrame
-    lyapunov: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
-    tuning: list[dict[str, Any]] = field(default_factory=list)
-    #: Each controller's configuration as built (after its tuners).
-    built: dict[str, dict[str, Any]] = field(default_factory=dict)
-    wall: float = 0.0
 
 
 def _extras(result: ExperimentResult) -> pd.DataFrame:
