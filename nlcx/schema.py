@@ -58,7 +58,8 @@ Schema = dict[str, Any]
 def _plugin_model(kind: str, name: str) -> type[BaseModel]:
     """The model that validates a plugin's section: a plant's ``Params``, the others' ``Config``."""
     plugin = registry.ALL[kind].get(name)
-    return plugin.Params if kind == "plants" else plugin.Config
+    model: type[BaseModel] = getattr(plugin, "Params" if kind == "plants" else "Config")
+    return model
 
 
 def _definitions() -> tuple[Schema, dict[type, str]]:
