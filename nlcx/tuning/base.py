@@ -23,14 +23,17 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
-import numpy as np
 from pydantic import BaseModel, ConfigDict
 
-from nlcx.controllers.base import ControllerInstance
 from nlcx.errors import ConfigError
 from nlcx.plants.base import Plant
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from nlcx.controllers.base import ControllerInstance
 
 
 class TunerConfig(BaseModel):
