@@ -57,9 +57,8 @@ class LazyCommand(TyperCommand):
 
         name = str(self.name)
         single = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
-        single.command(name)(
-            cast("Callable[..., object]", load_entry_point(THESIS_COMMANDS[name][0]))
-        )  # a command's function
+        function = cast("Callable[..., object]", load_entry_point(THESIS_COMMANDS[name][0]))  # the command's
+        single.command(name)(function)
         command = typer.main.get_command(single)
         assert isinstance(command, TyperCommand), f"{name}: one function makes one command"
         return readable(command)
