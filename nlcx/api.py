@@ -14,7 +14,7 @@ import os
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Union
+from typing import TYPE_CHECKING, Union
 
 from nlcx import compiled_cache, runtime
 from nlcx._numba_compat import quiet_first_class_functions
@@ -30,12 +30,12 @@ if TYPE_CHECKING:
 __all__ = ["Result", "SweepResult", "experiment", "load_run", "run", "sweep"]
 
 #: A config: a YAML file's path, a mapping of sections, or a validated experiment.
-ConfigLike = Union[str, "os.PathLike[str]", Mapping[str, Any], "Experiment"]
+ConfigLike = Union[str, "os.PathLike[str]", Mapping[str, object], "Experiment"]
 #: Overrides: ``["key=value", "+key=value", "~key"]`` strings, or a nested mapping merged on top.
-OverridesLike = Union[Sequence[str], Mapping[str, Any], None]  # noqa: UP007 - a runtime alias, as ConfigLike
+OverridesLike = Union[Sequence[str], Mapping[str, object], None]  # noqa: UP007 - a runtime alias, as ConfigLike
 
 
-def _raw(config: ConfigLike) -> dict[str, Any]:
+def _raw(config: ConfigLike) -> dict[str, object]:
     """The raw (not yet interpolated) mapping of ``config``."""
     from nlcx import config as cfg
     from nlcx.config import Experiment
@@ -49,7 +49,7 @@ def _raw(config: ConfigLike) -> dict[str, Any]:
     raise ConfigError("config", type(config).__name__, "a YAML path, a mapping of sections or an Experiment")
 
 
-def _with_overrides(raw: dict[str, Any], overrides: OverridesLike) -> dict[str, Any]:
+def _with_overrides(raw: dict[str, object], overrides: OverridesLike) -> dict[str, object]:
     """``raw`` with ``overrides`` applied: strings in the command line's grammar, or a nested
     mapping merged on top as an ``extends:`` child is (a section whose ``kind`` changes is replaced)."""
     from nlcx import config as cfg

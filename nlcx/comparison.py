@@ -294,7 +294,7 @@ def verdict(
     return f"{signal}: " + ", ".join(parts) + last
 
 
-def _text(value: Any) -> str:
+def _text(value: object) -> str:
     """A text field as written ('' for a missing one: None or pandas' NaN)."""
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return ""
@@ -302,13 +302,13 @@ def _text(value: Any) -> str:
 
 
 def _float(value: Any) -> float:
-    """A value as a float (NaN for a missing or empty one)."""
+    """A value as a float (NaN for a missing or empty one): a number, or its text as a CSV file holds it."""
     if value is None or value == "":
         return math.nan
     return float(value)
 
 
-def _selected(records: list[Mapping[str, Any]], names: Sequence[str] | str | None) -> tuple[str, ...]:
+def _selected(records: list[Mapping[str, object]], names: Sequence[str] | str | None) -> tuple[str, ...]:
     """The metric names to compare: ``names`` checked against the metrics present, or the
     thesis's metrics that are present."""
     present = list(dict.fromkeys(_text(r["metric"]) for r in records))
@@ -332,7 +332,7 @@ def check_columns(columns: Iterable[str]) -> None:
         )
 
 
-def comparison(records: Iterable[Mapping[str, Any]], names: Sequence[str] | str | None = None) -> SideBySide:
+def comparison(records: Iterable[Mapping[str, object]], names: Sequence[str] | str | None = None) -> SideBySide:
     """The comparison of long-form metric records (the rows of ``metrics.csv`` as mappings).
 
     Parameters

@@ -147,7 +147,7 @@ class Comparison(pd.DataFrame):
         parts = [f'<table class="nlcx-comparison" style="font-size:12px"><thead><tr>{cells}</tr></thead><tbody>']
         for signal, rows in self._blocks():
             for k, (key, row) in enumerate(rows.iterrows()):
-                metric = cast("tuple[Any, Any]", key)[1]
+                metric = cast("tuple[object, object]", key)[1]
                 first = f'<th rowspan="{len(rows)}" style="text-align:left">{html.escape(str(signal))}</th>'
                 tds = [first] if k == 0 else []
                 tds += [
@@ -166,7 +166,7 @@ class Comparison(pd.DataFrame):
         return "".join(f"<p style='margin:2px 0'>{html.escape(n)}</p>" for n in notes) + "".join(parts)
 
 
-def _value(value: Any, status: str) -> str:
+def _value(value: object, status: str) -> str:
     """A controller's value as printed: 4 significant digits, its run's status where it stopped."""
     if isinstance(value, float) and math.isnan(value):
         return status if status != "ok" else MISSING
@@ -175,14 +175,14 @@ def _value(value: Any, status: str) -> str:
     return MISSING if value is None else str(value)
 
 
-def _percent(value: Any) -> str:
+def _percent(value: object) -> str:
     """A change % as printed: signed, one decimal."""
     if isinstance(value, float):
         return MISSING if math.isnan(value) else f"{value:+.1f}"
     return MISSING if value is None else str(value)
 
 
-def _change_header(column: str, changes: Sequence[Any]) -> str:
+def _change_header(column: str, changes: Sequence[object]) -> str:
     """``change %``, or ``change % <controller>`` where several controllers are compared."""
     return "change %" if len(changes) == 1 else f"change % {column.removeprefix('change_').removesuffix('_pct')}"
 
@@ -236,7 +236,7 @@ def _column(header: str, cells: list[str], *, left: bool = False) -> list[str]:
 def frame_of(table: SideBySide) -> Comparison:
     """The :class:`Comparison` of a :class:`~nlcx.comparison.SideBySide`."""
     index = pd.MultiIndex.from_tuples([(r.signal, r.metric) for r in table.rows], names=["signal", "metric"])
-    columns: dict[str, list[Any]] = {"unit": [r.unit for r in table.rows]}
+    columns: dict[str, list[object]] = {"unit": [r.unit for r in table.rows]}
     for k, controller in enumerate(table.controllers):
         columns[controller] = [float(r.values[k]) for r in table.rows]
     for k, controller in enumerate(table.controllers[1:]):
@@ -309,5 +309,5 @@ def compare(metrics: pd.DataFrame, names: Sequence[str] | None = None) -> Compar
     ['proposed', 'conventional']
     """
     check_columns(metrics.columns)
-    records = cast("list[dict[str, Any]]", metrics.to_dict("records"))  # its columns are named by strings
+    records = cast("list[dict[str, object]]", metrics.to_dict("records"))  # its columns are named by strings
     return frame_of(comparison(records, names))

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Callable, Iterable
-from typing import Any
 
 
 class NlcxError(Exception):
@@ -17,13 +16,13 @@ class NlcxError(Exception):
 class ConfigError(NlcxError):
     """A configuration value is invalid: names the key path, the value and what is allowed."""
 
-    def __init__(self, path: str, value: Any, allowed: str) -> None:
+    def __init__(self, path: str, value: object, allowed: str) -> None:
         self.path = path
         self.value = value
         self.allowed = allowed
         super().__init__(self.line())
 
-    def __reduce__(self) -> tuple[type, tuple[str, Any, str]]:
+    def __reduce__(self) -> tuple[type, tuple[str, object, str]]:
         return (type(self), (self.path, self.value, self.allowed))
 
     def line(self) -> str:
@@ -36,7 +35,7 @@ class ConfigError(NlcxError):
 _MISSING = object()
 
 
-def _short_repr(value: Any, limit: int = 80) -> str:
+def _short_repr(value: object, limit: int = 80) -> str:
     if value is _MISSING:
         return "(missing)"
     text = repr(value)

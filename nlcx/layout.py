@@ -45,7 +45,7 @@ class Layout:
         """Number of float64 values in one block."""
         return len(self.fields)
 
-    def pack(self, values: Mapping[str, Any] | None = None, **kwargs: Any) -> np.ndarray:
+    def pack(self, values: Mapping[str, float] | None = None, **kwargs: float) -> np.ndarray:
         """One block from every field by name (bools become 1.0/0.0); missing or unknown names are errors."""
         given = {**(values or {}), **kwargs}
         if given.keys() != self._names:

@@ -8,8 +8,6 @@ are :mod:`nlcx.safe_yaml`'s; those of a sweep's plan (variants, memory, disk) ar
 
 from __future__ import annotations
 
-from typing import Any
-
 from nlcx.errors import ConfigError
 
 __all__ = ["MAX_JOBS", "MAX_POINTS", "check_count"]
@@ -20,7 +18,7 @@ MAX_JOBS = 256
 MAX_POINTS = 10_000
 
 
-def check_count(key: str, value: Any, lowest: int, highest: int, what: str) -> int:
+def check_count(key: str, value: object, lowest: int, highest: int, what: str) -> int:
     """``value`` if it is an integer from ``lowest`` to ``highest``; else a :class:`ConfigError`
     naming ``key`` (``what`` says what the count is)."""
     if isinstance(value, bool) or not isinstance(value, int) or not lowest <= value <= highest:

@@ -233,13 +233,13 @@ def _files(directory: Path) -> list[Path]:
     return found
 
 
-def checksums(directory: Path, known: Mapping[str, Checksum] | None = None) -> dict[str, dict[str, Any]]:
+def checksums(directory: Path, known: Mapping[str, Checksum] | None = None) -> dict[str, dict[str, object]]:
     """``checksums`` for every file under ``directory`` (:func:`_files`): relative path ->
     SHA-256, bytes and rows. ``known``: entries computed before (by relative path), taken as
     they are; a file hard-linked under two names is hashed once."""
     known = dict(known or {})
     by_inode: dict[tuple[int, int], Checksum] = {}
-    out: dict[str, dict[str, Any]] = {}
+    out: dict[str, dict[str, object]] = {}
     for path in _files(directory):
         rel = path.relative_to(directory).as_posix()
         stat = path.stat()
@@ -252,7 +252,9 @@ def checksums(directory: Path, known: Mapping[str, Checksum] | None = None) -> d
     return out
 
 
-def write(directory: Path, record: Mapping[str, Any], known: Mapping[str, Checksum] | None = None) -> dict[str, Any]:
+def write(
+    directory: Path, record: Mapping[str, object], known: Mapping[str, Checksum] | None = None
+) -> dict[str, object]:
     """Write ``directory``'s manifest.json: ``record`` (which names its kind under
     :data:`MARKER`), the directory's id (:func:`mark`, written first) and the checksums of
     every file in it (:func:`checksums`). Returns what was written."""
@@ -267,7 +269,7 @@ def write(directory: Path, record: Mapping[str, Any], known: Mapping[str, Checks
     return out
 
 
-def update(directory: Path, changed: Iterable[str] = (), **fields: Any) -> dict[str, Any]:
+def update(directory: Path, changed: Iterable[str] = (), **fields: object) -> dict[str, object]:
     """Add ``fields`` to ``directory``'s manifest and list the files written since (hashed anew:
     those missing from its checksums, and the relative paths ``changed``)."""
     record = load(directory)
@@ -287,13 +289,13 @@ def verify(directory: Path, names: Iterable[str] | None = None) -> dict[str, Any
         bytes are not those it recorded (truncated or altered); one line naming the file.
     """
     record = load(directory)
-    listed: dict[str, Any] = record.get("checksums", {})
+    listed: dict[str, dict[str, object]] = record.get("checksums", {})  # validated by load
     for rel in listed if names is None else names:
         _verified(directory / rel, listed.get(rel), directory)
     return record
 
 
-def _verified(path: Path, entry: Mapping[str, Any] | None, directory: Path) -> None:
+def _verified(path: Path, entry: Mapping[str, object] | None, directory: Path) -> None:
     """Check one file against its manifest entry (None: the manifest does not list it)."""
     if entry is None:
         raise IntegrityError(path, f"not listed in {directory / MANIFEST}", "a file the manifest lists")

@@ -23,11 +23,13 @@ import importlib
 import importlib.util
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TypeVar
 
 from nlcx.errors import ConfigError
+
+T = TypeVar("T")
 
 __all__ = ["IMPORTS", "SUFFIX", "load", "load_config_imports", "loaded", "resolved"]
 
@@ -42,7 +44,7 @@ _FILES: dict[Path, tuple[str, str]] = {}
 _LOADED: dict[str, dict[str, str]] = {}
 
 
-def resolved(entries: Any, base: Path, key: str = IMPORTS) -> list[str]:
+def resolved(entries: object, base: Path, key: str = IMPORTS) -> list[str]:
     """``entries`` (a config file's ``imports``) with each file made absolute against ``base``,
     the config file's directory; a module name as it is. One line for anything else."""
     if entries is None:
@@ -82,7 +84,8 @@ def _import_file(path: Path, key: str) -> dict[str, str]:
         raise ConfigError(key, str(path), "a Python file")
     module = importlib.util.module_from_spec(spec)
     sys.modules[module_name] = module
-    _run(lambda: spec.loader.exec_module(module), key, str(path))
+    loader = spec.loader
+    _run(lambda: loader.exec_module(module), key, str(path))
     _FILES[path] = (digest, module_name)
     return {"name": str(path), "path": str(path), "sha256": digest}
 
@@ -97,7 +100,7 @@ def _import_module(name: str, key: str) -> dict[str, str]:
     return record
 
 
-def _run(action: Any, key: str, what: str) -> Any:
+def _run(action: Callable[[], T], key: str, what: str) -> T:
     """``action()``, a failure of the plugin's own code as one line naming it: a config error
     it raised as it is, anything else by the plugin's first line of complaint."""
     try:
@@ -129,7 +132,7 @@ def loaded() -> list[dict[str, str]]:
     return [dict(record) for record in _LOADED.values()]
 
 
-def load_config_imports(raw: dict[str, Any], base: Path | None = None) -> dict[str, Any]:
+def load_config_imports(raw: dict[str, object], base: Path | None = None) -> dict[str, object]:
     """Import what a raw config's ``imports`` names (files relative to ``base``, default the
     working directory, where a file is not absolute yet) before it is validated; the config
     with those entries made absolute."""

@@ -14,11 +14,15 @@ import math
 import os
 import time
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING
 
 from nlcx.controllers.base import ControllerInstance
 from nlcx.errors import ConfigError
 from nlcx.plants.base import Plant
+
+if TYPE_CHECKING:
+    from nlcx.config.building import PluginSection
+    from nlcx.protocols import ReferencePlugin
 
 BYTES_PER_VALUE = 8
 #: Fraction of the available memory a run may plan to use (metrics and plots need the rest).
@@ -41,7 +45,7 @@ def check_signal_names(plant: Plant) -> None:
             seen[name] = kind
 
 
-def check_reference_times(references: Mapping[str, Any], t_end: float, dt: float) -> None:
+def check_reference_times(references: Mapping[str, PluginSection[ReferencePlugin]], t_end: float, dt: float) -> None:
     """A step reference (or any measured as one) must step at a sample that leaves at least two
     samples of the run after it: its time at most ``t_end - dt``."""
     latest = t_end - dt
@@ -57,7 +61,10 @@ def check_reference_times(references: Mapping[str, Any], t_end: float, dt: float
 
 
 def check_references(
-    configured: Iterable[str], references: Mapping[str, Any], plant: Plant, controllers: list[ControllerInstance]
+    configured: Iterable[str],
+    references: Mapping[str, PluginSection[ReferencePlugin]],
+    plant: Plant,
+    controllers: list[ControllerInstance],
 ) -> None:
     """Every configured reference must be read by a controller (``reference.<signal>``)."""
     followed = {s for c in controllers for s in c.reference_signals}
@@ -106,7 +113,7 @@ def run_bytes(n_samples: int, n_stages: int, plant: Plant, channels: Iterable[in
     return n_samples * per_sample * BYTES_PER_VALUE * copies
 
 
-def check_memory(needed: int, key: str, value: Any, advice: str, limit: int | None = None) -> None:
+def check_memory(needed: int, key: str, value: object, advice: str, limit: int | None = None) -> None:
     """Refuse a run whose arrays (``needed`` bytes) would not fit in memory, naming ``key``."""
     limit = available_memory() if limit is None else limit
     if limit is None or needed <= MEMORY_SHARE * limit:

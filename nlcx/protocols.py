@@ -18,21 +18,18 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, Protocol, TypeAlias
+from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
     import numpy as np
     from pydantic import BaseModel
 
     from nlcx.controllers.base import ControllerConfig, ControllerInstance, ControllerModel
+    from nlcx.kernel.signatures import GainSchedule
     from nlcx.plants.base import Plant, PlantModel, PlantParams, Signal
     from nlcx.references.base import ReferenceConfig, ReferenceModel, SignalPlan
     from nlcx.tuning.base import TuneContext, TunerConfig, TunerModel
     from nlcx.uncertainty.base import Hooks, UncertaintyConfig, UncertaintyModel
-
-#: A numba-compiled function (a dispatcher) with one of the signatures of :mod:`nlcx.kernel.abi`;
-#: numba ships no type information, so it is opaque to the type checker.
-CompiledFunction: TypeAlias = Any
 
 
 class PlantPlugin(Protocol):
@@ -81,7 +78,7 @@ class ControllerPlugin(Protocol):
         """The pydantic model of a ``controllers.<label>`` section."""
         ...
 
-    def normalize(self, cfg: Any, path: str) -> Any:
+    def normalize(self, cfg: Any, path: str) -> ControllerConfig:
         """``cfg`` with its nested plugin sections (e.g. gain schedules) validated and completed."""
         ...
 
@@ -103,7 +100,7 @@ class SchedulePlugin(Protocol):
         ...
 
     @property
-    def gains(self) -> CompiledFunction:
+    def gains(self) -> GainSchedule:
         """(t, e, de/dt, p, row, offset) -> (k_p, k_i, k_d), :data:`nlcx.kernel.abi.CALLBACK_SIG`."""
         ...
 
@@ -197,7 +194,7 @@ if TYPE_CHECKING:
     # nlcx's base classes satisfy the protocols: checked by mypy, never run. ScheduleModel's module
     # imports the registry (and so this module), which keeps it out of this check.
     def _base_classes_conform(
-        plant: PlantModel[Any],
+        plant: PlantModel[PlantParams],
         controller: ControllerModel,
         uncertainty: UncertaintyModel,
         reference: ReferenceModel,

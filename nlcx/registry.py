@@ -26,7 +26,7 @@ import typing
 from collections.abc import Iterator
 from dataclasses import dataclass
 from importlib.metadata import entry_points
-from typing import TYPE_CHECKING, Any, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast
 
 from nlcx.errors import ConfigError, did_you_mean
 from nlcx.protocols import (
@@ -42,6 +42,8 @@ from nlcx.protocols import (
 if TYPE_CHECKING:
     from pydantic import BaseModel
 
+    from nlcx.plants.base import Signal
+
 T = TypeVar("T")
 
 #: A plugin's name: what a config writes after ``kind:`` (``name:`` for a plant).
@@ -50,10 +52,10 @@ _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 _ENTRY_POINT = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*(:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*)?")
 
 
-def load_entry_point(entry_point: str) -> Any:
+def load_entry_point(entry_point: str) -> object:
     """Import ``"package.module:attribute"`` and return the attribute."""
     module_name, _, attribute = entry_point.partition(":")
-    obj: Any = importlib.import_module(module_name)
+    obj: object = importlib.import_module(module_name)
     for part in filter(None, attribute.split(".")):
         obj = getattr(obj, part)
     return obj
@@ -69,7 +71,8 @@ class Registry(Generic[T]):
         self.kind = kind
         self.group = group
         self.protocol = protocol
-        self._entries: dict[str, Any] = {}
+        #: name -> its entry point: a ``"module:attribute"`` string, or the object or class itself.
+        self._entries: dict[str, str | T | type[T]] = {}
         self._loaded: dict[str, T] = {}
         self._scanned = False
 
@@ -139,8 +142,7 @@ class Registry(Generic[T]):
                 f"{self._source(name)} lacks {', '.join(missing)}, which every {self.kind} plugin has "
                 f"(nlcx.protocols.{self.protocol.__name__})",
             )
-        plugin: T = obj
-        return plugin
+        return cast(T, obj)  # it has every member of the kind's protocol
 
     def _source(self, name: str) -> str:
         """'the <kind> registered as <name>', with its entry point when it was given as one."""
@@ -221,7 +223,7 @@ def _first_paragraph(doc: str | None) -> str:
     return " ".join((doc or "").strip().split("\n\n")[0].split())
 
 
-def _signals(plugin: Any) -> tuple[tuple[str, tuple[tuple[str, str, str], ...]], ...]:
+def _signals(plugin: object) -> tuple[tuple[str, tuple[tuple[str, str, str], ...]], ...]:
     """A plant's states, inputs and outputs as (name, unit, label); its outputs may be given as
     the names of states."""
     states = tuple(getattr(plugin, "states", ()) or ())
@@ -232,7 +234,7 @@ def _signals(plugin: Any) -> tuple[tuple[str, tuple[tuple[str, str, str], ...]],
     return tuple((group, tuple(_signal_row(s) for s in signals)) for group, signals in groups if signals)
 
 
-def _signal_row(signal: Any) -> tuple[str, str, str]:
+def _signal_row(signal: Signal | str) -> tuple[str, str, str]:
     if isinstance(signal, str):
         return signal, "", ""
     return str(signal.name), str(getattr(signal, "unit", "")), str(getattr(signal, "label", ""))
@@ -244,7 +246,7 @@ def nested_models(model: type[BaseModel]) -> list[type[BaseModel]]:
 
     found: list[type[BaseModel]] = []
 
-    def visit(annotation: Any) -> None:
+    def visit(annotation: object) -> None:
         if isinstance(annotation, type) and issubclass(annotation, BaseModel):
             if annotation in found:
                 return
@@ -283,7 +285,7 @@ _BOUNDS = (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="), ("min_length", 
            ("max_length", "max length"))  # fmt: skip
 
 
-def _bounds(metadata: list[Any]) -> list[str]:
+def _bounds(metadata: list[object]) -> list[str]:
     """A field's constraints (pydantic's ``Field(gt=0)`` and the like) as ``> 0``."""
     words = []
     for item in metadata:
@@ -294,7 +296,7 @@ def _bounds(metadata: list[Any]) -> list[str]:
     return words
 
 
-def type_text(annotation: Any) -> str:
+def type_text(annotation: object) -> str:
     """An annotation as Python spells it, shortened: ``float``, ``'abs' | 'signed'``,
     ``dict[str, LoopConfig]``, ``float | None`` (pydantic's markers such as SerializeAsAny left out)."""
     origin = typing.get_origin(annotation)
@@ -317,7 +319,7 @@ def type_text(annotation: Any) -> str:
     return str(annotation).replace("typing.", "")
 
 
-def _default_text(value: Any) -> str:
+def _default_text(value: object) -> str:
     """A default as JSON (a model as the mapping of its fields)."""
     from pydantic import BaseModel
 
@@ -334,7 +336,15 @@ references: Registry[ReferencePlugin] = Registry("reference", "nlcx.references",
 tuners: Registry[TunerPlugin] = Registry("tuner", "nlcx.tuners", TunerPlugin)
 
 #: Every registry by its kind in the plural; each holds plugins of its own protocol.
-ALL: dict[str, Registry[Any]] = {
+ALL: dict[
+    str,
+    Registry[PlantPlugin]
+    | Registry[ControllerPlugin]
+    | Registry[SchedulePlugin]
+    | Registry[UncertaintyPlugin]
+    | Registry[ReferencePlugin]
+    | Registry[TunerPlugin],
+] = {
     "plants": plants,
     "controllers": controllers,
     "schedules": schedules,

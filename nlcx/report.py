@@ -16,7 +16,7 @@ from concurrent.futures import ThreadPoolExecutor
 from datetime import datetime, timezone
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, TypedDict, cast
 
 import numpy as np
 import yaml
@@ -32,7 +32,7 @@ if TYPE_CHECKING:  # matplotlib is imported by the commands that draw, not by sw
     import pyarrow as pa
     from matplotlib.figure import Figure
 
-    from nlcx.plants.base import Plant
+    from nlcx.plants.base import Plant, Signal
 
 PACKAGES = (
     "numpy", "scipy", "numba", "llvmlite", "pandas", "pyarrow", "pydantic", "matplotlib", "PyYAML", "typer", "pymoo",
@@ -256,7 +256,7 @@ def output_plan(result: ExperimentResult, title: str | None = None) -> FigurePla
     return FigurePlan(n_axes, 1, (7.5, 2.9 * n_axes), tuple(panels), title=title or None, layout="column")
 
 
-def _time_panel(lines: tuple[Line, ...], k: int, sig: Any) -> Panel:
+def _time_panel(lines: tuple[Line, ...], k: int, sig: Signal) -> Panel:
     """Panel (a), (b), ... of a signal against time."""
     return Panel(
         lines, f"({chr(ord('a') + k)}) {sig.label or sig.name} vs time", xlabel="Time (s)", ylabel=sig.axis_label,
@@ -307,7 +307,32 @@ def package_versions() -> dict[str, str]:
     return out
 
 
-def git_state() -> dict[str, Any]:
+class GitState(TypedDict):
+    """The nlcx source tree's commit and whether it has changes (None: not a git checkout)."""
+
+    commit: str | None
+    dirty: bool | None
+
+
+class Environment(TypedDict):
+    """Where an output was made (:func:`environment`)."""
+
+    host: str
+    platform: str
+    versions: dict[str, str]
+    git: GitState
+
+
+class Provenance(TypedDict):
+    """How an output was made (:func:`provenance`)."""
+
+    argv: list[str]
+    overrides: list[str]
+    started: str
+    duration_s: float
+
+
+def git_state() -> GitState:
     """Commit and dirty flag of the nlcx source tree, when it is a git checkout."""
     root = Path(__file__).resolve().parent.parent
     if not (root / ".git").exists():
@@ -336,7 +361,7 @@ def utc_iso(timestamp: float) -> str:
     return datetime.fromtimestamp(timestamp, tz=timezone.utc).isoformat(timespec="milliseconds")
 
 
-def environment() -> dict[str, Any]:
+def environment() -> Environment:
     """Where an output was made: ``host`` (:func:`socket.gethostname`), ``platform``
     (:func:`platform.platform`), the package ``versions`` and the ``git`` state of nlcx."""
     return {
@@ -347,7 +372,7 @@ def environment() -> dict[str, Any]:
     }
 
 
-def provenance(overrides: Sequence[str] = (), started: float | None = None) -> dict[str, Any]:
+def provenance(overrides: Sequence[str] = (), started: float | None = None) -> Provenance:
     """How an output was made: ``argv`` (this process's command line, :data:`sys.argv`), the
     ``overrides`` as given, ``started`` (UTC, ISO 8601) and ``duration_s``, from the
     ``time.perf_counter()`` instant ``started`` (default: now) until now."""
@@ -366,8 +391,8 @@ def manifest(
     timings: dict[str, float],
     overrides: Sequence[str] = (),
     started: float | None = None,
-    where: dict[str, Any] | None = None,
-) -> dict[str, Any]:
+    where: Environment | None = None,
+) -> dict[str, object]:
     """manifest.json of a run directory: its name and kind (``nlcx_output``: run), how and where
     it was made (:func:`provenance` from ``started``, :func:`environment` or ``where``), whether
     the config could read the process's environment (``allow_env``), the seeds, the timings,

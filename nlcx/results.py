@@ -39,6 +39,7 @@ if TYPE_CHECKING:
 
     from nlcx import engine
     from nlcx.comparison_frame import Comparison
+    from nlcx.drawing import FigurePlan
 
 __all__ = ["METRIC_COLUMNS", "Result", "load_run", "read_output_table"]
 
@@ -262,7 +263,7 @@ class Result:
 
         return draw(self._plan(signals, title))
 
-    def _plan(self, signals: Sequence[str] | None, title: str | None) -> Any:
+    def _plan(self, signals: Sequence[str] | None, title: str | None) -> FigurePlan:
         """The figure's plan (:class:`nlcx.drawing.FigurePlan`) from the trajectories."""
         from nlcx.drawing import FigurePlan, Line, Panel
         from nlcx.report import LINE_STYLES, finite_for_plot, thinned
@@ -381,7 +382,7 @@ def load_run(directory: str | os.PathLike[str]) -> Result:
     if not path.is_dir():
         raise ConfigError("directory", str(path), "a run directory (nlcx run --out DIR, Result.save)")
     record = manifest.load(path)
-    listed: dict[str, Any] = record.get("checksums", {})
+    listed: dict[str, dict[str, object]] = record.get("checksums", {})  # validated by manifest.load
     if record.get(manifest.MARKER) != "run" or "metrics.csv" not in listed or "config.yaml" not in listed:
         raise manifest.IntegrityError(
             path / manifest.MANIFEST, "not the manifest of a run with checksums of its files (an output of "

@@ -6,7 +6,7 @@ from __future__ import annotations
 import copy
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -38,7 +38,7 @@ def read_metrics(path: Path) -> pd.DataFrame:
     return metrics_frame(frame)
 
 
-def timeseries_file(directory: Path, listed: Mapping[str, Any], written: bool = False) -> Path | None:
+def timeseries_file(directory: Path, listed: Mapping[str, object], written: bool = False) -> Path | None:
     """The time series file the manifest lists (timeseries.csv or .parquet), or None where the
     run wrote none.
 
@@ -87,7 +87,7 @@ def read_timeseries(path: Path | None) -> dict[str, pd.DataFrame] | None:
     return out
 
 
-def recorded_outputs(record: Mapping[str, Any]) -> list[tuple[str, str, str]] | None:
+def recorded_outputs(record: Mapping[str, object]) -> list[tuple[str, str, str]] | None:
     """(name, unit, label) of the plant's outputs as the manifest records them; None when it
     records none (nothing is then imported to find them: the plant is built, if it is known)."""
     outputs = record.get("outputs")
@@ -98,7 +98,7 @@ def recorded_outputs(record: Mapping[str, Any]) -> list[tuple[str, str, str]] | 
     return [(str(n), str(u), str(label)) for n, u, label in outputs]
 
 
-def outputs_of(config: Mapping[str, Any]) -> list[tuple[str, str, str]]:
+def outputs_of(config: Mapping[str, object]) -> list[tuple[str, str, str]]:
     """(name, unit, label) of the plant's outputs, from the registered plant of ``config``."""
     from nlcx import config as cfg
 

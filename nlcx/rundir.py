@@ -49,7 +49,7 @@ import time
 from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from nlcx import manifest
 from nlcx.errors import NlcxError
@@ -172,7 +172,7 @@ def _readable_manifest(directory: Path) -> None:
 UNMARKED = "exists, is not empty and carries no nlcx mark (an output of an nlcx without the mark: remove it by hand)"
 
 
-def lock_owner(target: Path) -> dict[str, Any] | None:
+def lock_owner(target: Path) -> dict[str, object] | None:
     """The record of the process holding ``target``'s lock (pid, since, host), if readable."""
     try:
         record = json.loads(owner_path(target).read_text(encoding="utf-8"))

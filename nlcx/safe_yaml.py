@@ -19,8 +19,9 @@ then built by ``yaml.SafeLoader``, so the numbers are the ones the configs were 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import yaml
 
@@ -38,7 +39,7 @@ MAX_DEPTH = 64
 _EventParser = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's parser where PyYAML has it
 
 
-def load_file(path: str | os.PathLike[str]) -> Any:
+def load_file(path: str | os.PathLike[str]) -> object:
     """The YAML document of the file at ``path``, read within the limits of this module.
 
     Raises
@@ -84,7 +85,7 @@ def _decoded(data: bytes, source: str) -> str:
     return text.removeprefix("\ufeff")
 
 
-def load_text(text: str, source: str, key: str = "") -> Any:
+def load_text(text: str, source: str, key: str = "") -> object:
     """The YAML document of ``text`` from ``source`` (named in errors), within the limits.
 
     ``key``: the config key ``text`` is the value of (an override's value); an error then
@@ -126,19 +127,31 @@ def _problem(exc: yaml.YAMLError, redact: bool) -> str:
     return "'...'".join(parts[::2]) if redact and len(parts) > 2 else problem
 
 
-def _check_events(events: Any) -> None:
+@dataclass
+class _Open:
+    """A collection whose end the walk of :func:`_check_events` has not reached yet."""
+
+    #: Its nodes so far.
+    nodes: int
+    anchor: str | None
+    #: The deepest nesting below it so far.
+    below: int
+
+
+def _check_events(events: Iterable[yaml.Event]) -> None:
     """Walk the parser's events once: nesting, nodes after alias expansion, lone surrogates."""
-    open_sizes: list[list[Any]] = []  # per open collection: [nodes so far, anchor, deepest nesting below]
+    open_sizes: list[_Open] = []  # per open collection
     anchors: dict[str, tuple[int, int]] = {}  # anchor -> (nodes, nesting)
     nodes = 0
     for event in events:
         if isinstance(event, yaml.CollectionStartEvent):
             nodes += 1
-            open_sizes.append([1, event.anchor, 0])
+            open_sizes.append(_Open(1, event.anchor, 0))
             if len(open_sizes) > MAX_DEPTH:
                 raise _RefusedError(f"nested deeper than {MAX_DEPTH} levels; allowed: at most {MAX_DEPTH}")
         elif isinstance(event, yaml.CollectionEndEvent):
-            size, anchor, below = open_sizes.pop()
+            closed = open_sizes.pop()
+            size, anchor, below = closed.nodes, closed.anchor, closed.below
             if anchor is not None:
                 anchors[anchor] = (size, below + 1)
             _add(open_sizes, size, below + 1)
@@ -150,7 +163,7 @@ def _check_events(events: Any) -> None:
                 anchors[event.anchor] = (1, 0)
             _add(open_sizes, 1, 0)
         elif isinstance(event, yaml.AliasEvent):
-            if any(entry[1] == event.anchor for entry in open_sizes):
+            if any(entry.anchor == event.anchor for entry in open_sizes):
                 raise _RefusedError(f"the alias *{event.anchor} refers to a value that holds it; allowed: aliases "
                                     "of values defined before them")  # fmt: skip
             size, depth = anchors.get(str(event.anchor), (1, 0))
@@ -162,11 +175,11 @@ def _check_events(events: Any) -> None:
             raise _RefusedError(f"more than {MAX_NODES:,} values (aliases expanded); allowed: at most {MAX_NODES:,}")
 
 
-def _add(open_sizes: list[list[Any]], size: int, depth: int) -> None:
+def _add(open_sizes: list[_Open], size: int, depth: int) -> None:
     """Count a finished node of ``size`` nodes and ``depth`` levels into the collection holding it."""
     if open_sizes:
-        open_sizes[-1][0] += size
-        open_sizes[-1][2] = max(open_sizes[-1][2], depth)
+        open_sizes[-1].nodes += size
+        open_sizes[-1].below = max(open_sizes[-1].below, depth)
 
 
 def surrogate_free(text: str) -> bool:

@@ -37,8 +37,10 @@ __all__ = ["DIALECT", "experiment_schema", "schema_text"]
 
 #: The JSON Schema dialect of the schema (pydantic's).
 DIALECT = "https://json-schema.org/draft/2020-12/schema"
+#: A JSON Schema (or part of one) as pydantic makes it: nested mappings and lists.
+Schema = dict[str, Any]
 #: A string holding an interpolation, ``"${vars.gains}"``, which stands for any value.
-INTERPOLATION: dict[str, Any] = {
+INTERPOLATION: Schema = {
     "type": "string",
     "pattern": r"\$\{[^}]+\}",
     "description": "A reference to another key, ${dotted.key}, replaced by a copy of its value before validation.",
@@ -52,13 +54,12 @@ _UNIONS = {
     "tuners": "tuner",
 }
 
-Schema = dict[str, Any]
-
 
 def _plugin_model(kind: str, name: str) -> type[BaseModel]:
     """The model that validates a plugin's section: a plant's ``Params``, the others' ``Config``."""
     plugin = registry.ALL[kind].get(name)
-    return plugin.Params if kind == "plants" else plugin.Config
+    model: type[BaseModel] = getattr(plugin, "Params" if kind == "plants" else "Config")
+    return model
 
 
 def _definitions() -> tuple[Schema, dict[type, str]]:
@@ -103,7 +104,7 @@ def _union(kind: str, names: dict[type, str], tuned: dict[str, str] | None = Non
     return {"oneOf": members, "description": f"A registered {registry.ALL[kind].kind} (nlcx list {kind}), by its kind."}
 
 
-def _refs(node: Any) -> set[str]:
+def _refs(node: object) -> set[str]:
     """The definitions ``node`` refers to directly."""
     if isinstance(node, list):
         return set().union(*(_refs(item) for item in node))
@@ -113,7 +114,7 @@ def _refs(node: Any) -> set[str]:
     return found.union(*(_refs(value) for value in node.values()))
 
 
-def _rename_refs(node: Any, renamed: dict[str, str]) -> None:
+def _rename_refs(node: object, renamed: dict[str, str]) -> None:
     """Every reference in ``node`` to a definition of ``renamed`` pointed at its new name."""
     if isinstance(node, list):
         for item in node:
@@ -171,7 +172,7 @@ def _plant(defs: Schema, names: dict[type, str]) -> None:
     section["allOf"] = cases
 
 
-def _replace_refs(node: Any, old: str, new: Schema) -> None:
+def _replace_refs(node: object, old: str, new: Schema) -> None:
     """Every use of the definition ``old`` in ``node`` replaced by ``new``; an ``anyOf`` that
     offered it beside any mapping (``dict[str, Any] | ScheduleConfig``) keeps only ``new``."""
     if isinstance(node, list):
@@ -238,7 +239,7 @@ def _file_keys(root: Schema, names: dict[type, str]) -> None:
     root["anyOf"] = [{"required": ["extends"]}, {"required": required}]
 
 
-def _walk_values(node: Any, wrap: Callable[[Schema], Schema]) -> None:
+def _walk_values(node: object, wrap: Callable[[Schema], Schema]) -> None:
     """Apply ``wrap`` to every schema of a value in ``node``: a property's, a mapping's values'
     (``additionalProperties``), a list's items'."""
     if isinstance(node, list):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import types
 import typing
-from typing import Any, TypeVar, Union
+from typing import TypeVar, Union
 
 from pydantic import BaseModel, ValidationError
 
@@ -13,7 +13,7 @@ from nlcx.errors import MISSING, ConfigError, did_you_mean
 M = TypeVar("M", bound=BaseModel)
 
 
-def validate_model(model: type[M], data: Any, path: str) -> M:
+def validate_model(model: type[M], data: object, path: str) -> M:
     """``model.model_validate(data)``; a :class:`ConfigError` under ``path`` if invalid."""
     if data is None:
         data = {}
@@ -52,10 +52,10 @@ def config_error(model: type[BaseModel], exc: ValidationError, path: str) -> Con
     return ConfigError(where, value, message)
 
 
-def _unwrap(annotation: Any) -> list[Any]:
+def _unwrap(annotation: object) -> list[object]:
     origin = typing.get_origin(annotation)
     if origin in (Union, types.UnionType):
-        out: list[Any] = []
+        out: list[object] = []
         for arg in typing.get_args(annotation):
             out.extend(_unwrap(arg))
         return out
@@ -64,9 +64,9 @@ def _unwrap(annotation: Any) -> list[Any]:
     return [annotation]
 
 
-def _allowed_keys(model: type[BaseModel], loc: tuple[Any, ...]) -> list[str]:
+def _allowed_keys(model: type[BaseModel], loc: tuple[int | str, ...]) -> list[str]:
     """Field names of the (sub-)model found by following ``loc`` through the annotations."""
-    current: Any = model
+    current: object = model
     for part in loc:
         nxt = None
         for candidate in _unwrap(current):

@@ -19,7 +19,7 @@ plant's linear model gains an output per measured state that is not already an o
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import control as ct
@@ -68,7 +68,7 @@ def _operating_point(controller: ControllerInstance, plant: Plant) -> tuple[np.n
     return y, r, s
 
 
-def _jacobian(f: Any, at: np.ndarray) -> np.ndarray:
+def _jacobian(f: Callable[[np.ndarray], np.ndarray], at: np.ndarray) -> np.ndarray:
     """The Jacobian of ``f`` (a vector of the deviation from ``at``) by central differences."""
     columns = []
     for j in range(at.size):

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, cast
 
 import control as ct
 import numpy as np
@@ -55,7 +55,9 @@ if TYPE_CHECKING:
     from nlcx.api import ConfigLike, OverridesLike
     from nlcx.config import Experiment, PluginSection
     from nlcx.controllers.base import ControllerInstance
+    from nlcx.controllers.pid_config import PIDConfig
     from nlcx.engine import Prepared
+    from nlcx.protocols import ControllerPlugin
 
 __all__ = ["FrozenSweep", "Linearization", "MarginalPole", "analyse", "linearize", "linearize_along"]
 
@@ -220,26 +222,27 @@ class _Setting:
     notes: tuple[str, ...]
 
 
-def _is_pid(section: PluginSection) -> bool:
+def _is_pid(section: PluginSection[ControllerPlugin]) -> bool:
     return section.kind == "pid"
 
 
-def _is_law(section: PluginSection) -> bool:
+def _is_law(section: PluginSection[ControllerPlugin]) -> bool:
     from nlcx.controllers.law import LawController
 
     return isinstance(section.model, LawController)
 
 
-def _scheduled(section: PluginSection) -> bool:
+def _scheduled(section: PluginSection[ControllerPlugin]) -> bool:
     """Whether some loop of a PID section has a schedule that varies."""
-    for loop in section.config.loops.values():
+    config = cast("PIDConfig", section.config)  # a PID section's (the caller's check, _is_pid)
+    for loop in config.loops.values():
         kind = loop.schedule["kind"] if isinstance(loop.schedule, dict) else loop.schedule.kind
         if schedule_axes(str(kind)):
             return True
     return False
 
 
-def _chosen(exp: Experiment, controller: str | None) -> PluginSection:
+def _chosen(exp: Experiment, controller: str | None) -> PluginSection[ControllerPlugin]:
     """The controller section to analyse: the one named, or the config's first PID with a
     scheduled loop, or else its first PID."""
     labels = [c.label for c in exp.controllers]
@@ -336,7 +339,7 @@ def _law_linearization(setting: _Setting, at: FrozenPoint, dt: float) -> Lineari
     )  # fmt: skip
 
 
-def _check_axes(setting: _Setting, given: tuple[str, ...], key: str, value: Any) -> None:
+def _check_axes(setting: _Setting, given: tuple[str, ...], key: str, value: object) -> None:
     """Refuse a frozen point or sweep on an axis no loop of the controller varies with."""
     varying = varying_axes(setting.controller)
     unused = [axis for axis in given if axis not in varying]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
@@ -82,7 +82,7 @@ def _tables(stage: Path, result: Linearization, along: FrozenSweep | None) -> li
 
 def manifest(
     result: Linearization, along: FrozenSweep | None, overrides: Sequence[str] = (), started: float | None = None
-) -> dict[str, Any]:
+) -> dict[str, object]:
     """manifest.json: the name, the kind (``nlcx_output``: linearize), the controller, the frozen
     point and the sweep, how and where it was made; ``files`` is filled in by :func:`save_analysis`."""
     sweep = None

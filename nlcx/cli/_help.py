@@ -14,12 +14,19 @@ from __future__ import annotations
 import types
 import typing
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 
+if TYPE_CHECKING:
+    from typer._click import Command as ClickCommand
+    from typer._click import Context, Parameter
+
+#: A command of the command line (a group is one).
+C = TypeVar("C", bound="ClickCommand")
+
 #: The metavar of an option's value, by its Python type.
-METAVARS: dict[Any, str] = {int: "N", float: "NUMBER", str: "TEXT", Path: "PATH"}
+METAVARS: dict[object, str] = {int: "N", float: "NUMBER", str: "TEXT", Path: "PATH"}
 
 
 class Argument(TyperArgument):
@@ -35,12 +42,12 @@ class Argument(TyperArgument):
         name = name if self.required else f"[{name}]"
         return name + ("..." if self.nargs != 1 else "")
 
-    def display_type_rich(self, ctx: Any) -> str | None:
+    def display_type_rich(self, ctx: Context) -> str | None:
         """Nothing beside an argument's name: CONFIG says what it is."""
         return None
 
 
-def value_metavar(annotation: Any) -> str:
+def value_metavar(annotation: object) -> str:
     """The metavar of a value of type ``annotation``: :data:`METAVARS`, a tuple's members
     side by side, a list's element (the option repeats), ``a|b`` for a Literal."""
     origin = typing.get_origin(annotation)
@@ -59,7 +66,7 @@ def value_metavar(annotation: Any) -> str:
 class Option(TyperOption):
     """An option with a readable metavar: its own, none for a flag, else :func:`value_metavar`."""
 
-    def display_type_rich(self, ctx: Any) -> str | None:
+    def display_type_rich(self, ctx: Context) -> str | None:
         if self.metavar is not None:
             return self.metavar
         if self.is_flag or self.count:
@@ -72,13 +79,13 @@ class Option(TyperOption):
         return value_metavar(desc.annotation)
 
 
-def readable(command: Any) -> Any:
+def readable(command: C) -> C:
     """``command`` (and a group's commands, recursively) with its parameters named as this
     module names them: a Typer command becomes a :class:`Command` (a group keeps its class),
     whose parameters, the ones Typer adds included (--help, --install-completion), are
     :class:`Argument` and :class:`Option` (subclasses without state of their own)."""
     if type(command) is TyperCommand:
-        command.__class__ = Command
+        cast(TyperCommand, command).__class__ = Command
     for param in command.params:
         _named(param)
     if isinstance(command, TyperGroup):
@@ -87,7 +94,7 @@ def readable(command: Any) -> Any:
     return command
 
 
-def _named(param: Any) -> Any:
+def _named(param: Parameter) -> Parameter:
     if type(param) is TyperArgument:
         param.__class__ = Argument
     elif type(param) is TyperOption:
@@ -98,7 +105,7 @@ def _named(param: Any) -> Any:
 class Command(TyperCommand):
     """A command whose parameters are named readably (see :func:`readable`)."""
 
-    def get_params(self, ctx: Any) -> list[Any]:
+    def get_params(self, ctx: Context) -> list[Parameter]:
         return [_named(param) for param in super().get_params(ctx)]
 
 
@@ -109,5 +116,5 @@ class ReadableGroup(TyperGroup):
         super().__init__(*args, **kwargs)
         readable(self)
 
-    def get_params(self, ctx: Any) -> list[Any]:
+    def get_params(self, ctx: Context) -> list[Parameter]:
         return [_named(param) for param in super().get_params(ctx)]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -28,11 +28,14 @@ from nlcx.plugins import load_config_imports
 from nlcx.terminal import echo
 
 if TYPE_CHECKING:
+    from rich.progress import TaskID
+
     from nlcx.drawing import Painter
+    from nlcx.engine import ExperimentResult
     from nlcx.sweeps.cluster import ClusterSpec
 
 
-def _painter(raw: dict[str, Any]) -> Painter | None:
+def _painter(raw: dict[str, object]) -> Painter | None:
     """A figure painter process (:class:`nlcx.drawing.Painter`) unless the config turns every
     figure off (unset keys take :class:`nlcx.config.OutputsSection`'s defaults)."""
     from nlcx.config import OutputsSection
@@ -46,7 +49,7 @@ def _painter(raw: dict[str, Any]) -> Painter | None:
     return Painter()
 
 
-def _summary(result: Any) -> str:
+def _summary(result: ExperimentResult) -> str:
     """Per controller and regulated output: the headline metrics of the thesis's tables."""
     lines = []
     for run in result.runs:
@@ -213,7 +216,7 @@ def _sweep(
         TextColumn("failed {task.fields[failed]}"), TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
     )  # fmt: skip
     bar = Progress(*columns, console=Console(), transient=False)  # as wide as the terminal is now
-    tasks: list[Any] = []
+    tasks: list[TaskID] = []
 
     def progress(done: int, total: int, failed: int) -> None:
         if not tasks:  # shown from the first batch on: a refused plan prints its one line alone

@@ -10,13 +10,18 @@ place outside ``nlcx/thesis`` that names the thesis's modules (tests/test_archit
 from __future__ import annotations
 
 import functools
-from typing import Any
+from typing import TYPE_CHECKING, cast
 
 import typer
 from typer.core import TyperCommand
 
 from nlcx.cli._app import app
 from nlcx.cli._help import readable
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from typer._click import Context
 
 #: command -> (``module:function`` of its function, the one line of help ``nlcx --help`` lists).
 THESIS_COMMANDS: dict[str, tuple[str, str]] = {
@@ -52,12 +57,15 @@ class LazyCommand(TyperCommand):
 
         name = str(self.name)
         single = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
-        single.command(name)(load_entry_point(THESIS_COMMANDS[name][0]))
+        function = cast("Callable[..., object]", load_entry_point(THESIS_COMMANDS[name][0]))  # the command's
+        single.command(name)(function)
         command = typer.main.get_command(single)
         assert isinstance(command, TyperCommand), f"{name}: one function makes one command"
         return readable(command)
 
-    def make_context(self, info_name: str | None, args: list[str], parent: Any = None, **extra: Any) -> Any:
+    def make_context(
+        self, info_name: str | None, args: list[str], parent: Context | None = None, **extra: object
+    ) -> Context:
         """The loaded command's context for ``args``: it parses them (its ``--help`` included),
         and the group runs it."""
         return self.loaded.make_context(info_name, args, parent=parent, **extra)

@@ -91,7 +91,7 @@ class SignalTarget:
         return f"step at {self.t_step:g} s{separator}{final}"
 
 
-def _csv_column(frame: Any, column: str, key: str, file: Path, where: str = "") -> Any:
+def _csv_column(frame: pd.DataFrame, column: str, key: str, file: Path, where: str = "") -> np.ndarray:
     """Column ``column`` of ``frame`` as finite floats; a one-line error naming ``key`` if it is
     not (``where``: the controller whose rows ``frame`` holds, as the message names it)."""
     import numpy as np
@@ -168,7 +168,9 @@ def _default_signals(frame: pd.DataFrame, time_column: str, reference: float | s
     return [c for c in columns if c != reference and pd.api.types.is_numeric_dtype(frame[c])]
 
 
-def signals_of(frame: pd.DataFrame, file: Path, time_column: str, signals: list[str], reference: Any) -> list[str]:
+def signals_of(
+    frame: pd.DataFrame, file: Path, time_column: str, signals: list[str], reference: float | str | None
+) -> list[str]:
     """The columns to measure: ``--signal`` (each once), or :func:`_default_signals`."""
     others = [c for c in frame.columns if c != time_column]
     names = list(dict.fromkeys(signals)) or _default_signals(frame, time_column, reference)
@@ -221,7 +223,7 @@ def source_of(name: str, reference: float | str | None, columns: list[str]) -> f
 
 def _target(t: np.ndarray, y: np.ndarray, r: np.ndarray | None, source: Any, t_step: float | None) -> SignalTarget:
     """How a signal with samples ``y`` is measured against ``source`` (a number, None: its last
-    sample, or a column whose samples are ``r``); ``t_step``: ``--t-step`` if given.
+    sample, or the name of a column whose samples are ``r``; :func:`source_of`); ``t_step``: ``--t-step`` if given.
 
     A reference column that holds one value is a step to it, unless that value is 0 or the
     one the signal starts at: then there is no step, and the signal is regulated (nlcx's
@@ -284,7 +286,12 @@ class Measured:
 
 
 def measure_block(
-    block: Block, file: Path, names: list[str], sources: dict[str, Any], t_step: float | None, s: Settings
+    block: Block,
+    file: Path,
+    names: list[str],
+    sources: dict[str, float | str | None],
+    t_step: float | None,
+    s: Settings,
 ) -> Measured:
     """Each signal ``names`` of ``block`` measured against its target, from its source in ``sources``
     (:func:`source_of`); ``t_step``: ``--t-step`` if given."""

@@ -10,38 +10,57 @@ experiment validated before whose raw mapping is unchanged (a sweep's variants).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Generic, Protocol, TypeVar
+
+from pydantic import BaseModel
 
 from nlcx import registry
 from nlcx.config.sections import ExperimentSection
 from nlcx.errors import MISSING, ConfigError
 from nlcx.validation import join, validate_model
 
+if TYPE_CHECKING:
+    from nlcx.plants.base import PlantParams
+    from nlcx.protocols import ControllerPlugin, PlantPlugin, ReferencePlugin, TunerPlugin, UncertaintyPlugin
+
+
+class _Configured(Protocol):
+    """A plugin with a configuration model (every kind but the plants)."""
+
+    @property
+    def Config(self) -> type[BaseModel]: ...
+
+
+#: The protocol of a plugin section's kind (:mod:`nlcx.protocols`).
+P = TypeVar("P", bound=_Configured)
+
 
 @dataclass(frozen=True)
-class PluginSection:
+class PluginSection(Generic[P]):
     """A plugin section resolved to its registered model and validated configuration."""
 
     label: str
     kind: str
-    model: Any
-    config: Any
+    model: P
+    #: An instance of the plugin's ``Config``.
+    config: BaseModel
     #: Tuners applied to a controller before it is built (``tune:``), in order.
-    tuners: tuple[PluginSection, ...] = ()
+    tuners: tuple[PluginSection[TunerPlugin], ...] = ()
 
 
 @dataclass(frozen=True)
 class Experiment:
     """A fully validated experiment configuration."""
 
-    raw: dict[str, Any]
+    raw: dict[str, object]
     section: ExperimentSection
-    plant_model: Any
-    plant_params: Any
-    controllers: tuple[PluginSection, ...]
-    uncertainties: tuple[PluginSection, ...]
-    references: dict[str, PluginSection]
+    plant_model: PlantPlugin
+    plant_params: PlantParams
+    controllers: tuple[PluginSection[ControllerPlugin], ...]
+    uncertainties: tuple[PluginSection[UncertaintyPlugin], ...]
+    references: dict[str, PluginSection[ReferencePlugin]]
     #: Whether its interpolation could read the process (``--allow-env``); recorded in the manifest.
     allow_env: bool = False
 
@@ -49,7 +68,7 @@ class Experiment:
     def name(self) -> str:
         return self.section.name
 
-    def resolved(self) -> dict[str, Any]:
+    def resolved(self) -> dict[str, object]:
         """The configuration with every default filled in, as written to config.yaml."""
         sec = self.section
         return {
@@ -78,8 +97,8 @@ class Experiment:
 
 
 def _plugin(
-    reg: registry.Registry[Any], label: str, data: Any, path: str, default_kind: str | None = None
-) -> PluginSection:
+    reg: registry.Registry[P], label: str, data: object, path: str, default_kind: str | None = None
+) -> PluginSection[P]:
     """Resolve ``data['kind']`` in ``reg`` and validate ``data`` with that plugin's model."""
     if not isinstance(data, dict):
         raise ConfigError(path, data, "must be a mapping of keys to values")
@@ -93,7 +112,7 @@ def _plugin(
     return PluginSection(label=label, kind=kind, model=model, config=cfg)
 
 
-def controller_section(label: str, data: Any, path: str) -> PluginSection:
+def controller_section(label: str, data: object, path: str) -> PluginSection[ControllerPlugin]:
     """A controller section validated by its registered model, with its tuners."""
     if isinstance(data, dict) and "tune" in data:
         data = dict(data)
@@ -111,7 +130,7 @@ def controller_section(label: str, data: Any, path: str) -> PluginSection:
     return PluginSection(c.label, c.kind, c.model, config, tuners)
 
 
-def build(raw: dict[str, Any], like: Experiment | None = None, allow_env: bool = False) -> Experiment:
+def build(raw: dict[str, object], like: Experiment | None = None, allow_env: bool = False) -> Experiment:
     """Validate a raw config mapping (after overrides).
 
     ``like`` is an experiment validated before, e.g. a sweep's base: its sections whose raw
@@ -128,18 +147,21 @@ def build(raw: dict[str, Any], like: Experiment | None = None, allow_env: bool =
         plant_params = like.plant_params
     else:
         plant_params = validate_model(plant_model.Params, section.plant.params, "plant.params")
-    before = _plugins_by_key(like) if like is not None else {}
+    before_controllers = _plugins_by_label(like, "controllers", like.controllers) if like is not None else {}
+    before_uncertainties = _plugins_by_label(like, "uncertainty", like.uncertainties) if like is not None else {}
+    before_references = _plugins_by_label(like, "reference", like.references.values()) if like is not None else {}
     controllers = tuple(
-        _reused(before, raw, ("controllers", label)) or controller_section(label, data, join("controllers", label))
+        _reused(before_controllers, raw, ("controllers", label))
+        or controller_section(label, data, join("controllers", label))
         for label, data in section.controllers.items()
     )
     uncertainties = tuple(
-        _reused(before, raw, ("uncertainty", label))
+        _reused(before_uncertainties, raw, ("uncertainty", label))
         or _plugin(registry.uncertainties, label, data, join("uncertainty", label), default_kind=label)
         for label, data in section.uncertainty.items()
     )
     references = {
-        signal: _reused(before, raw, ("reference", signal))
+        signal: _reused(before_references, raw, ("reference", signal))
         or _plugin(registry.references, signal, data, join("reference", signal))
         for signal, data in section.reference.items()
     }
@@ -159,14 +181,14 @@ def build(raw: dict[str, Any], like: Experiment | None = None, allow_env: bool =
 _MODEL_SECTIONS = ("plant", "simulation", "metrics", "outputs")
 
 
-def _unchanged(raw: dict[str, Any], like: Experiment | None) -> set[str]:
+def _unchanged(raw: dict[str, object], like: Experiment | None) -> set[str]:
     """The top-level keys of ``raw`` whose value equals the one ``like`` was built from."""
     if like is None:
         return set()
     return {key for key, value in raw.items() if key in like.raw and like.raw[key] == value}
 
 
-def _with_validated_sections(raw: dict[str, Any], like: Experiment | None, same: set[str]) -> dict[str, Any]:
+def _with_validated_sections(raw: dict[str, object], like: Experiment | None, same: set[str]) -> dict[str, object]:
     """``raw`` with its unchanged model sections replaced by ``like``'s validated ones (pydantic
     takes a validated instance as it is)."""
     if like is None:
@@ -174,24 +196,24 @@ def _with_validated_sections(raw: dict[str, Any], like: Experiment | None, same:
     return {**raw, **{key: getattr(like.section, key) for key in _MODEL_SECTIONS if key in same}}
 
 
-def _plugins_by_key(exp: Experiment) -> dict[tuple[str, str], tuple[Any, PluginSection]]:
-    """(section, label) -> (the raw mapping it was validated from, the validated plugin)."""
-    found: dict[tuple[str, str], tuple[Any, PluginSection]] = {}
-    for key, plugins in (
-        ("controllers", exp.controllers),
-        ("uncertainty", exp.uncertainties),
-        ("reference", tuple(exp.references.values())),
-    ):
-        for plugin in plugins:
-            found[(key, plugin.label)] = (exp.raw.get(key, {}).get(plugin.label), plugin)
-    return found
+def _plugins_by_label(
+    exp: Experiment, key: str, plugins: Iterable[PluginSection[P]]
+) -> dict[str, tuple[object, PluginSection[P]]]:
+    """label -> (the raw mapping it was validated from, the validated plugin), of section ``key``."""
+    section = exp.raw.get(key, {})  # a mapping: ``exp`` was validated from it
+    return {
+        plugin.label: (section.get(plugin.label) if isinstance(section, dict) else None, plugin) for plugin in plugins
+    }
 
 
 def _reused(
-    before: dict[tuple[str, str], tuple[Any, PluginSection]], raw: dict[str, Any], key: tuple[str, str]
-) -> PluginSection | None:
+    before: dict[str, tuple[object, PluginSection[P]]], raw: dict[str, object], key: tuple[str, str]
+) -> PluginSection[P] | None:
     """The plugin validated before from a raw mapping equal to ``raw``'s at ``key``, if any."""
-    old = before.get(key)
-    if old is None or old[0] is None or raw[key[0]][key[1]] != old[0]:
+    old = before.get(key[1])
+    if old is None or old[0] is None:
+        return None
+    section = raw[key[0]]  # a mapping: ``raw`` was validated
+    if not isinstance(section, dict) or section[key[1]] != old[0]:
         return None
     return old[1]

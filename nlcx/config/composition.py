@@ -12,15 +12,16 @@ file to OmegaConf's containers and back.
 from __future__ import annotations
 
 import copy
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import cast
 
 from nlcx import safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.plugins import IMPORTS, resolved
 
 
-def deep_merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+def deep_merge(base: dict[str, object], top: Mapping[str, object]) -> dict[str, object]:
     """``top`` over ``base``: mappings merge key by key, anything else replaces.
 
     A plugin section whose ``kind`` changes (e.g. a step reference replaced by a sine) is
@@ -33,13 +34,13 @@ def deep_merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
             isinstance(old, dict) and isinstance(value, dict) and value.get("kind", old.get("kind")) != old.get("kind")
         )
         if isinstance(value, dict) and isinstance(old, dict) and not changes_kind:
-            out[key] = deep_merge(out[key], value)
+            out[key] = deep_merge(old, value)
         else:
             out[key] = copy.deepcopy(value)
     return out
 
 
-def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, object]:
     """Read a config file, first merging the files its ``extends`` key names.
 
     ``extends`` is a YAML file (``.yaml`` or ``.yml``) or a list of them, relative to the file;
@@ -64,10 +65,11 @@ def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any
     for parent in parents:
         if Path(parent).suffix.lower() not in YAML_SUFFIXES:
             raise ConfigError("extends", parent, f"a YAML file ({' or '.join(YAML_SUFFIXES)}) relative to {path.name}")
-    merged: dict[str, Any] = {}
+    merged: dict[str, object] = {}
     for parent in parents:
         merged = deep_merge(merged, read_config(path.parent / parent, (*_seen, path)))
-    imports = list(dict.fromkeys([*merged.pop(IMPORTS, []), *own_imports]))
+    inherited = cast(list[str], merged.pop(IMPORTS, []))  # as read_config puts them: resolved entries
+    imports = list(dict.fromkeys([*inherited, *own_imports]))
     out = deep_merge(merged, data)
     return {IMPORTS: imports, **out} if imports else out
 
@@ -76,7 +78,7 @@ def read_config(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any
 YAML_SUFFIXES = (".yaml", ".yml")
 
 
-def read_yaml(path: str | Path) -> dict[str, Any]:
+def read_yaml(path: str | Path) -> dict[str, object]:
     """Parse a YAML file within the limits of :mod:`nlcx.safe_yaml`; it must hold a mapping.
     No error quotes the file's content: a file that is not a config may be anything."""
     path = Path(path)

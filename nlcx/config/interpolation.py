@@ -14,8 +14,9 @@ to and from OmegaConf's containers would cost more than building the variant doe
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Protocol, cast
 
 from nlcx.config.overrides import set_values
 from nlcx.errors import MISSING, ConfigError
@@ -36,7 +37,7 @@ class _NotDirectError(Exception):
     """The direct walk of :func:`interpolate` stops: OmegaConf resolves the config (or reports its error)."""
 
 
-def interpolate(raw: dict[str, Any], *, allow_env: bool = False) -> dict[str, Any]:
+def interpolate(raw: dict[str, object], *, allow_env: bool = False) -> dict[str, object]:
     """Resolve every ``${...}`` reference by OmegaConf's rules, then drop ``vars``.
 
     ``"${dotted.key}"`` is replaced by a copy of that key's value, ``"x_${a}"`` by a string,
@@ -67,7 +68,7 @@ def interpolate(raw: dict[str, Any], *, allow_env: bool = False) -> dict[str, An
 CONFIG_RESOLVERS = frozenset({"oc.select", "oc.dict.keys", "oc.dict.values"})
 
 
-def check_resolvers(node: Any, path: tuple[str, ...] = ()) -> None:
+def check_resolvers(node: object, path: tuple[str, ...] = ()) -> None:
     """Refuse (:class:`ConfigError`, naming the key) a string anywhere in ``node`` that calls a
     resolver outside :data:`CONFIG_RESOLVERS`: ``oc.env`` reads the process's environment,
     ``oc.decode`` and ``oc.create`` parse text outside the limits of :mod:`nlcx.safe_yaml`, and
@@ -89,6 +90,12 @@ def check_resolvers(node: Any, path: tuple[str, ...] = ()) -> None:
             )  # fmt: skip
 
 
+class _ParseNode(Protocol):
+    """A node of the tree OmegaConf's grammar parses (a rule's context or a terminal)."""
+
+    def getChild(self, i: int) -> _ParseNode: ...
+
+
 def _resolvers_called(text: str) -> list[str]:
     """The names of the resolvers ``text`` calls, as OmegaConf's grammar parses it (a name built
     by an interpolation appears as its text, ``${...}``, and is never one that is on); none
@@ -102,7 +109,7 @@ def _resolvers_called(text: str) -> list[str]:
     except GrammarParseError:
         return []
     names: list[str] = []
-    stack: list[Any] = [tree]
+    stack: list[_ParseNode] = [tree]
     while stack:
         node = stack.pop()
         if isinstance(node, OmegaConfGrammarParser.InterpolationResolverContext):
@@ -111,15 +118,15 @@ def _resolvers_called(text: str) -> list[str]:
     return names
 
 
-def _resolved_directly(raw: dict[str, Any]) -> dict[str, Any]:
+def _resolved_directly(raw: dict[str, object]) -> dict[str, object]:
     """``raw`` with each whole-value reference to an absolute key (``"${a.b}"``) replaced by its
     resolved value, as OmegaConf resolves it; :class:`_NotDirectError` for any other reference
     and for any reference that does not resolve (OmegaConf then resolves it or reports it)."""
 
-    def lookup(path: str, trail: tuple[str, ...]) -> Any:
+    def lookup(path: str, trail: tuple[str, ...]) -> object:
         if path in trail:
             raise _NotDirectError
-        node: Any = raw
+        node: object = raw
         for part in path.split("."):
             if not isinstance(node, dict) or part not in node:
                 raise _NotDirectError
@@ -128,7 +135,7 @@ def _resolved_directly(raw: dict[str, Any]) -> dict[str, Any]:
             raise _NotDirectError
         return resolve(node, (*trail, path))
 
-    def resolve(node: Any, trail: tuple[str, ...]) -> Any:
+    def resolve(node: object, trail: tuple[str, ...]) -> object:
         if isinstance(node, dict):
             return {k: resolve(v, trail) for k, v in node.items()}
         if isinstance(node, list):
@@ -140,10 +147,10 @@ def _resolved_directly(raw: dict[str, Any]) -> dict[str, Any]:
             return lookup(match.group(1), trail)
         return node
 
-    return resolve(raw, ())
+    return {k: resolve(v, ()) for k, v in raw.items()}
 
 
-def _resolved_by_omegaconf(raw: dict[str, Any]) -> dict[str, Any]:
+def _resolved_by_omegaconf(raw: dict[str, object]) -> dict[str, object]:
     """``raw`` resolved by ``OmegaConf.to_container(..., resolve=True)``: plain mappings and lists
     again, every other value (PyYAML's numbers included) as it was."""
     from omegaconf import OmegaConf
@@ -153,10 +160,10 @@ def _resolved_by_omegaconf(raw: dict[str, Any]) -> dict[str, Any]:
         resolved = OmegaConf.to_container(OmegaConf.create(raw, flags={"allow_objects": True}), resolve=True)
     except OmegaConfBaseException as exc:
         raise _interpolation_error(raw, exc) from None
-    return cast(dict[str, Any], resolved)
+    return cast(dict[str, object], resolved)
 
 
-def _interpolation_error(raw: dict[str, Any], exc: OmegaConfBaseException) -> ConfigError:
+def _interpolation_error(raw: dict[str, object], exc: OmegaConfBaseException) -> ConfigError:
     """OmegaConf's error as one line: the key holding the reference, its value and the problem."""
     where = getattr(exc, "full_key", None) or ""
     parts = [index or key for index, key in re.findall(r"\[(\d+)\]|([^.\[\]]+)", where)]
@@ -170,9 +177,9 @@ def _interpolation_error(raw: dict[str, Any], exc: OmegaConfBaseException) -> Co
     return ConfigError(".".join(parts), value, f"cannot be interpolated: {problem}")
 
 
-def _raw_value(raw: dict[str, Any], parts: list[str]) -> Any:
+def _raw_value(raw: dict[str, object], parts: list[str]) -> object:
     """The value at a key path whose list indices are digits, or MISSING."""
-    node: Any = raw
+    node: object = raw
     for part in parts:
         if isinstance(node, dict) and part in node:
             node = node[part]
@@ -183,7 +190,7 @@ def _raw_value(raw: dict[str, Any], parts: list[str]) -> Any:
     return node
 
 
-def _reference_targets(node: Any) -> set[tuple[str, ...]]:
+def _reference_targets(node: object) -> set[tuple[str, ...]]:
     """The key paths that the ``${...}`` references anywhere in ``node`` refer to; the empty path
     (every key) for a reference whose target is not an absolute dotted key (a relative or
     nested reference, a resolver)."""
@@ -204,17 +211,17 @@ class Interpolated:
     without interpolating the whole config again when no value can change what a reference
     resolves to."""
 
-    raw: dict[str, Any]
-    resolved: dict[str, Any]
+    raw: dict[str, object]
+    resolved: dict[str, object]
     targets: frozenset[tuple[str, ...]]
 
     allow_env: bool = False
 
     @classmethod
-    def of(cls, raw: dict[str, Any], *, allow_env: bool = False) -> Interpolated:
+    def of(cls, raw: dict[str, object], *, allow_env: bool = False) -> Interpolated:
         return cls(raw, interpolate(raw, allow_env=allow_env), frozenset(_reference_targets(raw)), allow_env)
 
-    def resolve(self, values: list[tuple[list[str], Any]]) -> dict[str, Any]:
+    def resolve(self, values: Sequence[tuple[list[str], object]]) -> dict[str, object]:
         """``interpolate(set_values(raw, values))``: the values set on the interpolated config
         when each is independent of interpolation (:meth:`_independent`), else the full path.
         Both share unchanged parts with ``raw`` or ``resolved`` (treat them as read-only)."""
@@ -222,7 +229,7 @@ class Interpolated:
             return set_values(self.resolved, values)
         return interpolate(set_values(self.raw, values), allow_env=self.allow_env)
 
-    def _independent(self, parts: list[str], value: Any) -> bool:
+    def _independent(self, parts: list[str], value: object) -> bool:
         """Whether setting ``value`` at ``parts`` commutes with interpolation: the value holds
         no reference; no reference points at, into or above the key (one whose target is not
         an absolute dotted key, a relative or nested reference, points above every key); the
@@ -234,11 +241,12 @@ class Interpolated:
             return False
         if any(target[: len(key)] == key or key[: len(target)] == target for target in self.targets):
             return False
-        node: Any = self.raw
+        node = self.raw
         for part in key[:-1]:
-            node = node.get(part)
-            if node is None:
+            child = node.get(part)
+            if child is None:
                 return True
-            if not isinstance(node, dict):
+            if not isinstance(child, dict):
                 return False
+            node = child
         return True

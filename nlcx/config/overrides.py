@@ -10,9 +10,9 @@ is how a sweep's variants are made from their base.
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 from nlcx import safe_yaml
 from nlcx.errors import MISSING, ConfigError, did_you_mean
@@ -33,7 +33,7 @@ class Override:
     #: The dotted key, split at its dots.
     key: tuple[str, ...]
     #: The value parsed as YAML; for a delete, the value the key must hold (MISSING: any value).
-    value: Any
+    value: object
     #: The override as written.
     text: str
 
@@ -86,7 +86,7 @@ def parse_override(text: str) -> Override:
     return Override(action, parts, parsed, text)
 
 
-def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+def apply_overrides(raw: dict[str, object], overrides: list[str]) -> dict[str, Any]:
     """A deep copy of ``raw`` with each override (Hydra's grammar, :func:`parse_override`) applied in order.
 
     ``key=value`` and ``++key=value`` set the key whether it exists or not (creating the
@@ -105,14 +105,14 @@ def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]
 LABELLED = {"controllers": "controller", "reference": "reference"}
 
 
-def _check_label(data: dict[str, Any], override: Override) -> None:
+def _check_label(data: dict[str, object], override: Override) -> None:
     """Refuse ``section.label.key=value`` where ``section`` (:data:`LABELLED`) has no ``label``
     and ``key`` is not ``kind``: one line naming the labels, the closest one suggested."""
     section, key = override.key[0], override.key
     if section not in LABELLED or len(key) < 3 or key[2] == "kind":
         return
-    labels = data.get(section)
-    labels = [str(k) for k in labels] if isinstance(labels, dict) else []
+    section_data = data.get(section)
+    labels = [str(k) for k in section_data] if isinstance(section_data, dict) else []
     if key[1] in labels:
         return
     what = LABELLED[section]
@@ -124,7 +124,7 @@ def _check_label(data: dict[str, Any], override: Override) -> None:
     )
 
 
-def _apply(data: dict[str, Any], override: Override) -> dict[str, Any]:
+def _apply(data: dict[str, object], override: Override) -> dict[str, object]:
     """``data`` with one override applied (the mappings on the key's path copied)."""
     if override.action == "set":
         _check_label(data, override)
@@ -148,9 +148,9 @@ def _apply(data: dict[str, Any], override: Override) -> dict[str, Any]:
     return _without(data, override.key)
 
 
-def _find(data: dict[str, Any], key: tuple[str, ...]) -> tuple[bool, Any]:
+def _find(data: dict[str, object], key: tuple[str, ...]) -> tuple[bool, object]:
     """(whether ``key`` is in ``data``, its value or None)."""
-    node: Any = data
+    node: object = data
     for part in key:
         if not isinstance(node, dict) or part not in node:
             return False, None
@@ -158,27 +158,29 @@ def _find(data: dict[str, Any], key: tuple[str, ...]) -> tuple[bool, Any]:
     return True, node
 
 
-def _same(current: Any, value: Any) -> bool:
+def _same(current: object, value: object) -> bool:
     """Equal values, where a boolean equals only a boolean (``True == 1`` in Python)."""
     return isinstance(current, bool) == isinstance(value, bool) and current == value
 
 
-def _without(data: dict[str, Any], key: tuple[str, ...]) -> dict[str, Any]:
+def _without(data: dict[str, object], key: tuple[str, ...]) -> dict[str, object]:
     """A copy of ``data`` without the (existing) ``key``; only the mappings on its path are copied."""
     out = dict(data)
     node = out
     for part in key[:-1]:
-        node[part] = dict(node[part])
-        node = node[part]
+        # the key exists (_find), so every value on its path is a mapping
+        child = dict(cast(dict[str, object], node[part]))
+        node[part] = child
+        node = child
     del node[key[-1]]
     return out
 
 
 def set_values(
-    raw: dict[str, Any],
-    values: list[tuple[list[str], Any]],
-    defaults: Callable[[list[str]], list[Any] | None] | None = None,
-) -> dict[str, Any]:
+    raw: Mapping[str, object],
+    values: Sequence[tuple[list[str], object]],
+    defaults: Callable[[list[str]], list[object] | None] | None = None,
+) -> dict[str, object]:
     """A copy of ``raw`` with each (key path, value) set; only the mappings and lists on the
     paths are copied, the rest is shared with ``raw`` (treat both as read-only afterwards).
 
@@ -188,7 +190,7 @@ def set_values(
     """
     data = dict(raw)
     for parts, value in values:
-        node: dict[str, Any] | list[Any] = data
+        node: dict[str, object] | list[object] = data
         for i in range(len(parts) - 1):
             child = _child(node, parts, i)
             if child is None and parts[i + 1].isdigit() and defaults is not None:
@@ -207,7 +209,7 @@ def set_values(
     return data
 
 
-def _index(node: list[Any], parts: list[str], i: int) -> int:
+def _index(node: list[object], parts: list[str], i: int) -> int:
     """The list index ``parts[i]`` names in ``node``; a one-line error where it is none."""
     part, where = parts[i], ".".join(parts[: i + 1])
     if not part.isdigit():
@@ -223,14 +225,14 @@ def _index(node: list[Any], parts: list[str], i: int) -> int:
     return index
 
 
-def _child(node: dict[str, Any] | list[Any], parts: list[str], i: int) -> Any:
+def _child(node: dict[str, object] | list[object], parts: list[str], i: int) -> object:
     """What ``node`` holds at ``parts[i]`` (None where a mapping lacks it)."""
     if isinstance(node, list):
         return node[_index(node, parts, i)]
     return node.get(parts[i])
 
 
-def _put(node: dict[str, Any] | list[Any], parts: list[str], i: int, value: Any) -> None:
+def _put(node: dict[str, object] | list[object], parts: list[str], i: int, value: object) -> None:
     """Set ``parts[i]`` of ``node`` (a list's element, which must exist, or a mapping's key)."""
     if isinstance(node, list):
         node[_index(node, parts, i)] = value
@@ -238,14 +240,14 @@ def _put(node: dict[str, Any] | list[Any], parts: list[str], i: int, value: Any)
         node[parts[i]] = value
 
 
-def schema_default(parts: list[str]) -> list[Any] | None:
+def schema_default(parts: list[str]) -> list[object] | None:
     """The default list of the section field at ``parts`` (e.g. ``metrics.rise_limits``), or None."""
     from pydantic import BaseModel
 
     from nlcx.config.sections import ExperimentSection
 
-    model: Any = ExperimentSection
-    default: Any = None
+    model: object = ExperimentSection
+    default: object = None
     for part in parts:
         field = model.model_fields.get(part) if isinstance(model, type) and issubclass(model, BaseModel) else None
         if field is None:

@@ -9,7 +9,7 @@ each by the model of the plugin its ``kind`` selects.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
@@ -36,7 +36,7 @@ class PlantSection(Section):
     """
 
     name: str = Field(description="Registered plant name (``nlcx list plants``).")
-    params: dict[str, Any] = Field(
+    params: dict[str, object] = Field(
         default={}, description="Parameter overrides; the defaults come from the plant's parameter model."
     )
     x0: dict[str, float] = Field(
@@ -188,13 +188,13 @@ class ExperimentSection(Section):
     title: str | None = Field(None, description="Figure title (e.g. the thesis's caption).")
     seed: int = Field(0, ge=0, description="Root of numpy.random.SeedSequence for everything random in the run.")
     plant: PlantSection = Field(description="The plant and its parameters.")
-    controllers: dict[str, dict[str, Any]] = Field(
+    controllers: dict[str, dict[str, object]] = Field(
         min_length=1, description="Controllers compared side by side, by label (e.g. conventional, proposed)."
     )
-    uncertainty: dict[str, dict[str, Any]] = Field(
+    uncertainty: dict[str, dict[str, object]] = Field(
         default={}, description="Uncertainties by label; each has ``kind`` (default: the label)."
     )
-    reference: dict[str, dict[str, Any]] = Field(
+    reference: dict[str, dict[str, object]] = Field(
         default={}, description="References by signal name; outputs not listed are regulated to 0."
     )
     simulation: SimulationSection = Field(

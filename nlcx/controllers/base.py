@@ -62,7 +62,7 @@ class ControllerModel:
     Config: ClassVar[type[ControllerConfig]] = ControllerConfig
     step: ClassVar[Any] = None
 
-    def normalize(self, cfg: Any, path: str) -> Any:
+    def normalize(self, cfg: Any, path: str) -> ControllerConfig:
         """Validate nested plugin sections (e.g. gain schedules) and fill their defaults."""
         return cfg
 

@@ -6,9 +6,11 @@ batched kernel call; :func:`kernel_calls` decides which controller step each cal
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from collections.abc import Hashable
+from typing import NamedTuple, cast
 
 from nlcx.engine.prepared import Item
+from nlcx.kernel.signatures import ControllerStep
 
 #: Rows a loop structure needs for a kernel call of its own (see :func:`kernel_calls`).
 MIN_ROWS_PER_STEP = 8
@@ -18,10 +20,10 @@ class KernelCall(NamedTuple):
     """One call of the kernel: the items it simulates (their positions) and the controller step it runs."""
 
     indices: list[int]
-    step: Any
+    step: ControllerStep
 
 
-def group_key(item: Item) -> tuple[Any, ...]:
+def group_key(item: Item) -> tuple[Hashable, ...]:
     """What items simulated in one kernel call share: their compiled functions (the controller's
     general step where it has one), state, input, log and reference sizes, output matrix,
     disturbance map and loop elements."""
@@ -36,9 +38,9 @@ def group_key(item: Item) -> tuple[Any, ...]:
     )  # fmt: skip
 
 
-def groups_of(group_keys: list[tuple[Any, ...]]) -> list[list[int]]:
+def groups_of(group_keys: list[tuple[Hashable, ...]]) -> list[list[int]]:
     """The items grouped by their key (:func:`group_key`), in order."""
-    groups: dict[tuple[Any, ...], list[int]] = {}
+    groups: dict[tuple[Hashable, ...], list[int]] = {}
     for i, key in enumerate(group_keys):
         groups.setdefault(key, []).append(i)
     return list(groups.values())
@@ -60,5 +62,6 @@ def kernel_calls(groups: list[list[int]], items: list[Item]) -> list[KernelCall]
         if len(by_step) == 1 or all(len(rows) >= MIN_ROWS_PER_STEP for rows in by_step.values()):
             calls += [KernelCall(rows, items[rows[0]].controller.step) for rows in by_step.values()]
         else:
-            calls.append(KernelCall(indices, items[indices[0]].controller.general_step))
+            # steps differ within a group only where its controllers have a general step (group_key)
+            calls.append(KernelCall(indices, cast(ControllerStep, items[indices[0]].controller.general_step)))
     return calls

@@ -15,9 +15,9 @@ rows, the loop elements' parameters, states and data, the disturbance and the fr
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeAlias, cast
 
 import numpy as np
 
@@ -38,7 +38,20 @@ from nlcx.engine.simulate import (
 )
 from nlcx.kernel.friction import any_friction
 from nlcx.kernel.friction_path import FRICTIONAL, FRICTIONLESS
-from nlcx.kernel.structures import Integration, Outcome, method_of
+from nlcx.kernel.signatures import ControllerStep
+from nlcx.kernel.structures import (
+    ControllerCall,
+    Integration,
+    LoopElements,
+    Outcome,
+    PlantCall,
+    PlantForces,
+    method_of,
+)
+from nlcx.plants.base import Plant
+
+#: The structures of a kernel call: (plant, controller, elements, forces).
+CallArguments: TypeAlias = tuple[PlantCall, ControllerCall, LoopElements, PlantForces]
 
 #: The per-loop arrays of an item, by name, and the kernel argument (structure, field) each becomes.
 ITEM_FIELDS: dict[str, tuple[Callable[[Item], np.ndarray | None], str, str]] = {
@@ -84,7 +97,7 @@ class Template:
         """Each loop's arrays (:data:`ITEM_FIELDS`)."""
         return [{name: get(item) for name, (get, _, _) in ITEM_FIELDS.items()} for item in self.items]
 
-    def structure(self) -> tuple[Any, ...]:
+    def structure(self) -> tuple[Hashable, ...]:
         """What the variants of an ensemble must share, numbers of the item arrays aside: the
         loops' compiled functions and sizes (:func:`~nlcx.engine.batching.group_key`), their
         controller steps, references, logs and array shapes, the plant's signals, the metric
@@ -201,13 +214,13 @@ def _expanded(base: np.ndarray, n_variants: int, n_rows: int) -> np.ndarray:
     return np.ascontiguousarray(np.tile(rows, (n_variants,) + (1,) * (rows.ndim - 1)))
 
 
-def ensemble_calls(items: list[Item], n_variants: int) -> list[tuple[np.ndarray, Any]]:
+def ensemble_calls(items: list[Item], n_variants: int) -> list[tuple[np.ndarray, ControllerStep]]:
     """The kernel calls of ``n_variants`` variants of the loops ``items`` (each variant's loops
     in the same order): (the loops of one variant in the call, the controller step it runs).
     The calls :func:`~nlcx.engine.batching.kernel_calls` makes for the variants' items, found on
     one variant's: a group of loops splits into a call per step when each step has
     :data:`~nlcx.engine.batching.MIN_ROWS_PER_STEP` rows over all the variants."""
-    calls: list[tuple[np.ndarray, Any]] = []
+    calls: list[tuple[np.ndarray, ControllerStep]] = []
     for group in groups_of([group_key(item) for item in items]):
         by_step: dict[int, list[int]] = {}
         for i in group:
@@ -215,17 +228,19 @@ def ensemble_calls(items: list[Item], n_variants: int) -> list[tuple[np.ndarray,
         if len(by_step) == 1 or all(n_variants * len(rows) >= MIN_ROWS_PER_STEP for rows in by_step.values()):
             calls += [(np.array(rows), items[rows[0]].controller.step) for rows in by_step.values()]
         else:
-            calls.append((np.array(group), items[group[0]].controller.general_step))
+            # steps differ within a group only where its controllers have a general step (group_key)
+            calls.append((np.array(group), cast(ControllerStep, items[group[0]].controller.general_step)))
     return calls
 
 
 def call_arguments(
-    template: Template, pattern: np.ndarray, step: Any, n_variants: int,
+    template: Template, pattern: np.ndarray, step: ControllerStep, n_variants: int,
     slots: Mapping[str, Sequence[Slot]], columns: Mapping[str, np.ndarray],
-) -> tuple[Any, Any, Any, Any]:  # fmt: skip
+) -> CallArguments:  # fmt: skip
     """(plant, controller, elements, forces) of a call: the pattern's loops of the template,
     repeated per variant, each slot's positions written from its column."""
     group = [template.items[i] for i in pattern]
+    # fields are replaced by name (``_replace(**{name: array})``), which no static type can follow
     parts: dict[str, Any] = {
         "plant": plant_call(group),
         "controller": controller_call(group, step),
@@ -341,7 +356,7 @@ def failure_rows(
 
 
 def _reasons(
-    plant: Any, stopped: np.ndarray, status: np.ndarray, fail_index: np.ndarray, n_valid: np.ndarray,
+    plant: Plant, stopped: np.ndarray, status: np.ndarray, fail_index: np.ndarray, n_valid: np.ndarray,
     t_fail: np.ndarray, bounds: np.ndarray,
 ) -> list[str]:  # fmt: skip
     """Each stopped run's reason (:func:`~nlcx.engine.simulate.failure_reason`), written once

@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import hashlib
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple, TypeVar
 
 import numpy as np
 
 from nlcx.engine.ensembles import (
+    CallArguments,
     LoopRows,
     OkValues,
     Slot,
@@ -40,7 +41,14 @@ from nlcx.engine.ensembles import (
 from nlcx.engine.metric_rows import MetricColumns
 from nlcx.engine.prepared import TABLEAUS
 from nlcx.kernel.device import refused
+from nlcx.kernel.signatures import DeviceArray
 from nlcx.kernel.structures import Integration, method_of
+
+if TYPE_CHECKING:
+    from nlcx.kernel.cuda_metrics import MeasuredRecord
+
+#: One of a kernel call's structures (:data:`~nlcx.engine.ensembles.CallArguments`).
+Structure = TypeVar("Structure", bound=NamedTuple)
 
 #: Share of the GPU's free memory one chunk's records may take.
 MEMORY_SHARE = 0.6
@@ -49,7 +57,9 @@ MEMORY_SHARE = 0.6
 _ON_DEVICE = threading.Lock()
 
 
-def _measured(template: Template, i: int, recorded: list[tuple[int, int]]) -> tuple[tuple[Any, ...], np.ndarray]:
+def _measured(
+    template: Template, i: int, recorded: list[tuple[int, int]]
+) -> tuple[tuple[MeasuredRecord, ...], np.ndarray]:
     """The measured signals of loop i as the GPU's metric kernel reads them
     (:class:`nlcx.kernel.cuda_metrics.MeasuredRecord`, in the order of the loop's
     :class:`~nlcx.engine.plan.LoopPlan`), and their reference table (rows of K+1 samples); the
@@ -85,17 +95,20 @@ def chunk_rows(n_rows: int, bytes_per_row: int) -> int:
     return max(1, min(n_rows, int(free * MEMORY_SHARE) // max(bytes_per_row, 1)))
 
 
-def _chunk(arguments: tuple[Any, ...], rows: slice) -> tuple[Any, ...]:
+def _chunk(arguments: CallArguments, rows: slice) -> CallArguments:
     """The kernel call's structures for the rows ``rows`` (arrays of one shared row stay whole)."""
-    out = []
-    for part in arguments:
-        fields = {}
-        for name, value in part._asdict().items():
-            per_row = isinstance(value, np.ndarray) and value.ndim >= 1 and name not in ("C", "dist_map", "table")
-            if per_row and value.shape[0] > 1:
-                fields[name] = np.ascontiguousarray(value[rows])
-        out.append(part._replace(**fields))
-    return tuple(out)
+    plant, controller, elements, forces = arguments
+    return _rows(plant, rows), _rows(controller, rows), _rows(elements, rows), _rows(forces, rows)
+
+
+def _rows(part: Structure, rows: slice) -> Structure:
+    """One of :func:`_chunk`'s structures."""
+    fields = {}
+    for name, value in part._asdict().items():
+        per_row = isinstance(value, np.ndarray) and value.ndim >= 1 and name not in ("C", "dist_map", "table")
+        if per_row and value.shape[0] > 1:
+            fields[name] = np.ascontiguousarray(value[rows])
+    return part._replace(**fields)
 
 
 class Ensemble(NamedTuple):
@@ -115,16 +128,16 @@ class _Call:
     loop's metric rows over the call's rows (pieces in row order)."""
 
     pattern: np.ndarray
-    arguments: tuple[Any, Any, Any, Any]
+    arguments: CallArguments
     integration: Integration
     t: np.ndarray
     recorded: np.ndarray
-    measuring: dict[int, tuple[tuple[Any, ...], np.ndarray]]
+    measuring: dict[int, tuple[tuple[MeasuredRecord, ...], np.ndarray]]
     n_rows: int
     n_u: int
     n_log: int
     #: What each loop of the call is measured with (its blocks and reference table's digest).
-    signature: tuple[tuple[Any, str], ...] = ()
+    signature: tuple[tuple[tuple[MeasuredRecord, ...], str], ...] = ()
     outcome: tuple[np.ndarray, ...] = ()
     pieces: dict[int, list[np.ndarray]] = field(default_factory=dict)
 
@@ -152,7 +165,7 @@ def simulate_measure_all(ensembles: Sequence[Ensemble]) -> list[tuple[list[LoopR
 def _simulate_measure_all(ensembles: Sequence[Ensemble]) -> list[tuple[list[LoopRows], OkValues]]:
     """:func:`simulate_measure_all`, the GPU held."""
     calls = [_calls(e) for e in ensembles]
-    groups: dict[tuple[Any, ...], list[_Call]] = {}
+    groups: dict[tuple[Hashable, ...], list[_Call]] = {}
     for call in (c for mine in calls for c in mine):
         groups.setdefault(_launch_key(call), []).append(call)
     for group in groups.values():
@@ -190,13 +203,13 @@ def _calls(ensemble: Ensemble) -> list[_Call]:
 _WHOLE = ("C", "dist_map", "table")
 
 
-def _launch_key(call: _Call) -> tuple[Any, ...]:
+def _launch_key(call: _Call) -> tuple[Hashable, ...]:
     """What the calls of one launch share: the loop kernel, the time grid and integration, the
     signals recorded, and each shared array (by content); per-row arrays by their row shape."""
     from nlcx.kernel import cuda_shape
 
     shape = cuda_shape.shape_of(*call.arguments, call.n_u, call.n_log, call.integration)
-    fields: list[tuple[Any, ...]] = []
+    fields: list[tuple[Hashable, ...]] = []
     for part in call.arguments:
         for name, value in part._asdict().items():
             if _per_row(name, value, call.n_rows):
@@ -207,7 +220,7 @@ def _launch_key(call: _Call) -> tuple[Any, ...]:
     return (shape, i.dt, _digest(i.rk_a), _digest(i.rk_b), _digest(call.t), call.recorded.tobytes(), tuple(fields))
 
 
-def _per_row(name: str, value: Any, n_rows: int) -> bool:
+def _per_row(name: str, value: object, n_rows: int) -> bool:
     """Whether a field of a call's structures holds a row per row of the call (else it is shared)."""
     if not isinstance(value, np.ndarray) or value.ndim == 0 or name in _WHOLE:
         return False
@@ -218,26 +231,34 @@ def _digest(array: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(array).tobytes()).hexdigest()
 
 
-def _joined(group: list[_Call]) -> tuple[Any, ...]:
+def _joined(group: list[_Call]) -> CallArguments:
     """The structures of one launch: the calls' per-row arrays one after the other, the shared
     ones as they are (the same in every call of a launch, :func:`_launch_key`)."""
     if len(group) == 1:
         return group[0].arguments
-    out = []
-    for k, part in enumerate(group[0].arguments):
-        fields = {}
-        for name, value in part._asdict().items():
-            if _per_row(name, value, group[0].n_rows):
-                fields[name] = np.concatenate([c.arguments[k]._asdict()[name] for c in group])
-        out.append(part._replace(**fields))
-    return tuple(out)
+    n_rows = group[0].n_rows
+    return (
+        _joined_part([c.arguments[0] for c in group], n_rows),
+        _joined_part([c.arguments[1] for c in group], n_rows),
+        _joined_part([c.arguments[2] for c in group], n_rows),
+        _joined_part([c.arguments[3] for c in group], n_rows),
+    )
+
+
+def _joined_part(parts: list[Structure], n_rows: int) -> Structure:
+    """One of :func:`_joined`'s structures, from the calls' (``n_rows``: the first call's rows)."""
+    fields = {}
+    for name, value in parts[0]._asdict().items():
+        if _per_row(name, value, n_rows):
+            fields[name] = np.concatenate([part._asdict()[name] for part in parts])
+    return parts[0]._replace(**fields)
 
 
 class _MetricRun(NamedTuple):
     """One metric launch of a loop launch: the measured records and reference table it measures with, over
     the launch's rows [start, stop), which are the rows of ``members`` (call, loop, first row)."""
 
-    records: tuple[Any, ...]
+    records: tuple[MeasuredRecord, ...]
     table: np.ndarray
     digest: str  # the table's
     start: int
@@ -277,7 +298,7 @@ def _run_group(group: list[_Call]) -> None:
     offsets = np.cumsum([0] + [c.n_rows for c in group])
     n_rows = int(offsets[-1])
     t_dev = gpu.to_device(one.t)
-    tables: dict[str, Any] = {}
+    tables: dict[str, DeviceArray] = {}
     measuring = []
     for run in _metric_runs(group, offsets):
         if run.digest not in tables:
@@ -336,7 +357,7 @@ def _assembled(ensemble: Ensemble, calls: list[_Call]) -> tuple[list[LoopRows], 
 
 def ensemble_metrics(
     template: Template, slots: Mapping[str, Sequence[Slot]], columns: Mapping[str, np.ndarray], n_variants: int
-) -> tuple[list[LoopRows], Any]:
+) -> tuple[list[LoopRows], MetricColumns]:
     """Simulate and measure ``n_variants`` variants packed from ``columns`` (as
     :func:`~nlcx.engine.ensembles.simulate_ensemble`) where the template's experiment says
     (``simulation.device``: on the GPU, :func:`simulate_measure`; on the CPU, the ensemble's

@@ -13,18 +13,21 @@ import dataclasses
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from nlcx import preflight
-from nlcx.config import Experiment, MetricsSection, build, controller_section
+from nlcx.config import Experiment, MetricsSection, PluginSection, build, controller_section
 from nlcx.engine.measure import controller_records, measure_experiments
 from nlcx.engine.prepared import Prepared, check_memory, perturbations, reference_models, time_grid
 from nlcx.engine.results import ExperimentResult, MetricBlock, Run
 from nlcx.engine.simulate import simulate_experiments
 from nlcx.plants.base import Plant
 from nlcx.tuning.base import TuneContext
+
+if TYPE_CHECKING:
+    from nlcx.protocols import ControllerPlugin
 
 
 def evaluate(
@@ -72,7 +75,7 @@ def prepare(exp: Experiment) -> Prepared:
     plant = exp.plant_model.build(sec.plant.name, exp.plant_params, sec.plant.x0, sim.bounds)
     preflight.check_signal_names(plant)
     references = reference_models(exp, plant)
-    tuning: list[dict[str, Any]] = []
+    tuning: list[dict[str, object]] = []
     controllers = []
     for c in exp.controllers:
         section = _tuned_section(exp, c, plant, tuning)
@@ -94,7 +97,9 @@ def prepare(exp: Experiment) -> Prepared:
     )
 
 
-def _tuned_section(exp: Experiment, c: Any, plant: Plant, rows: list[dict[str, Any]]) -> Any:
+def _tuned_section(
+    exp: Experiment, c: PluginSection[ControllerPlugin], plant: Plant, rows: list[dict[str, object]]
+) -> PluginSection[ControllerPlugin]:
     """The controller section of ``c`` after its tuners (in order) filled in its numbers; their
     rows of tuning.csv are appended to ``rows``."""
     if not c.tuners:
@@ -110,7 +115,7 @@ def _tuned_section(exp: Experiment, c: Any, plant: Plant, rows: list[dict[str, A
     return controller_section(c.label, data, path)
 
 
-def remeasure(results: Sequence[ExperimentResult], metrics: Mapping[str, Any]) -> list[ExperimentResult]:
+def remeasure(results: Sequence[ExperimentResult], metrics: Mapping[str, object]) -> list[ExperimentResult]:
     """The runs of ``results`` (one :func:`evaluate` call) measured again under other metric
     definitions, without simulating them again: ``metrics`` updates the metrics section of
     every experiment (e.g. ``{"rise_limits": [0, 1], "settling_band": 0.05}``)."""
@@ -142,18 +147,19 @@ class LoopSimulator:
     given, replaces the uncertainty section (``{}``: the nominal plant).
     """
 
-    raw: dict[str, Any]
+    raw: dict[str, object]
 
     def __call__(
         self,
-        controllers: Mapping[str, Mapping[str, Any]],
-        simulation: Mapping[str, Any] | None = None,
-        uncertainty: Mapping[str, Any] | None = None,
+        controllers: Mapping[str, Mapping[str, object]],
+        simulation: Mapping[str, object] | None = None,
+        uncertainty: Mapping[str, object] | None = None,
         measure: bool = True,
     ) -> ExperimentResult:
         raw = copy.deepcopy(self.raw)
         raw["controllers"] = {label: {k: v for k, v in c.items() if k != "tune"} for label, c in controllers.items()}
-        raw.setdefault("simulation", {}).update(simulation or {})
+        # a mapping: the experiment was validated from ``raw``
+        cast(dict[str, object], raw.setdefault("simulation", {})).update(simulation or {})
         if uncertainty is not None:
             raw["uncertainty"] = dict(uncertainty)
         (result,) = evaluate([build(raw)], measure=measure)

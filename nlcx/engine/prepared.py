@@ -11,7 +11,7 @@ import functools
 import json
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -21,6 +21,11 @@ from nlcx.controllers.base import ControllerInstance
 from nlcx.errors import ConfigError
 from nlcx.plants.base import Plant
 from nlcx.uncertainty.base import Element, Hooks
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
+
+    from nlcx.protocols import ReferencePlugin
 
 
 class Tableau(NamedTuple):
@@ -44,8 +49,9 @@ TABLEAUS: dict[str, Tableau] = {
 class Reference(NamedTuple):
     """A signal's reference: its registered model and the model's configuration."""
 
-    model: Any
-    config: Any
+    model: ReferencePlugin
+    #: An instance of the model's ``Config``.
+    config: BaseModel
 
 
 @dataclass(frozen=True)
@@ -88,7 +94,7 @@ class Prepared:
     hooks: Hooks
     seed_sequence: np.random.SeedSequence
     #: Rows of tuning.csv: what the tuners of each controller found.
-    tuning: list[dict[str, Any]] = field(default_factory=list)
+    tuning: list[dict[str, object]] = field(default_factory=list)
 
 
 def reference_models(exp: Experiment, plant: Plant) -> dict[str, Reference]:
@@ -150,7 +156,8 @@ class ReferenceCache:
 
     def __init__(self, size: int = 64) -> None:
         self.size = size
-        self._arrays: OrderedDict[tuple[Any, ...], np.ndarray] = OrderedDict()
+        # keyed on ((signal, offset, configuration as JSON) of each channel, dt, steps)
+        self._arrays: OrderedDict[tuple[tuple[tuple[str, float, str], ...], float, int], np.ndarray] = OrderedDict()
 
     def array(
         self, prepared: Prepared, signals: tuple[str, ...], offsets: tuple[float, ...] | None = None
@@ -213,7 +220,7 @@ def items_of(prepared: Prepared) -> list[Item]:
     hooks = prepared.hooks
     dist, dist_map = hooks.dist_arrays()
     data = hooks.element_data()
-    refs: dict[tuple[Any, ...], np.ndarray] = {}
+    refs: dict[tuple[tuple[str, ...], tuple[float, ...] | None], np.ndarray] = {}
     out = []
     for c in prepared.controllers:
         key = (c.reference_signals, c.reference_offsets)

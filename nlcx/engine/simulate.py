@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
 
 import numpy as np
 
@@ -21,6 +20,7 @@ from nlcx.engine.results import Run
 from nlcx.kernel.abi import ELEMENT_ENTRY, HOOKS, STATUS_BOUND, STATUS_NONFINITE, callback_slots, element_slots
 from nlcx.kernel.friction import FRICTION_AXIS, any_friction
 from nlcx.kernel.friction_path import FRICTIONAL, FRICTIONLESS
+from nlcx.kernel.signatures import ControllerStep
 from nlcx.kernel.structures import (
     ControllerCall,
     FrictionPath,
@@ -42,7 +42,7 @@ def simulate_experiments(
     time grid (dt, number of steps, integrator) go through one :func:`simulate_items` call, whose
     time is split evenly between them (``timings[e]["simulate"]``)."""
     runs: list[list[Run]] = [[] for _ in prepared]
-    grids: dict[tuple[Any, ...], list[int]] = {}
+    grids: dict[tuple[float, int, str, str], list[int]] = {}
     for e, p in enumerate(prepared):
         sim = p.experiment.section.simulation
         grids.setdefault((sim.dt, p.grid.n_steps, sim.integrator, sim.device), []).append(e)
@@ -121,7 +121,7 @@ def plant_call(group: list[Item]) -> PlantCall:
     )
 
 
-def controller_call(group: list[Item], step: Any) -> ControllerCall:
+def controller_call(group: list[Item], step: ControllerStep) -> ControllerCall:
     """The controller of a kernel call: ``step``, the first item's callbacks, every item's arrays."""
     return ControllerCall(
         step=step,

@@ -14,11 +14,10 @@ A page's module is imported when a directory of its kind is reported, not before
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
-from typing import Any
 
 from nlcx.errors import ConfigError
 from nlcx.registry import load_entry_point
@@ -41,7 +40,7 @@ class ReportPage:
     page's default), ``repo`` the nlcx checkout (None for an installed nlcx)."""
 
     templates: Path
-    context: Callable[[Path, Path | None, Path | None], dict[str, Any]]
+    context: Callable[[Path, Path | None, Path | None], Mapping[str, object]]
 
 
 @functools.cache

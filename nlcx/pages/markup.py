@@ -13,7 +13,6 @@ is built.
 from __future__ import annotations
 
 import re
-from typing import Any
 from urllib.parse import quote
 
 from markupsafe import Markup
@@ -34,7 +33,7 @@ _MARKDOWN = str.maketrans(
 )
 
 
-def markdown_text(value: Any) -> str:
+def markdown_text(value: object) -> str:
     """``value`` as Markdown text that renders as exactly its characters (a Markup value, which
     nlcx generated, as it is)."""
     if hasattr(value, "__html__"):
@@ -42,7 +41,7 @@ def markdown_text(value: Any) -> str:
     return str(value).translate(_MARKDOWN)
 
 
-def href(path: Any) -> str:
+def href(path: object) -> str:
     """A relative link to a file: the path URL-quoted and starting with ``./`` or ``../``, so
     no file name becomes another scheme (``javascript:x.png`` -> ``./javascript%3Ax.png``), an
     attribute or a Markdown link's end."""
@@ -50,7 +49,7 @@ def href(path: Any) -> str:
     return quoted if quoted.startswith(("./", "../")) else "./" + quoted
 
 
-def fenced(text: Any, language: str = "") -> Markup:
+def fenced(text: object, language: str = "") -> Markup:
     """``text`` as a Markdown fenced code block, its fence longer than any run of backticks in
     it (the text cannot close the block)."""
     text = str(text)
@@ -60,7 +59,7 @@ def fenced(text: Any, language: str = "") -> Markup:
     return Markup(f"{fence}{language}\n{body}{fence}")
 
 
-def code(text: Any) -> Markup:
+def code(text: object) -> Markup:
     """``text`` as an inline Markdown code span in a table cell: delimited by more backticks
     than any run in it, lines joined, ``|`` escaped (GitHub's tables split cells at ``|`` even
     in code)."""

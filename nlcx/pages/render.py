@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import jinja2
 
@@ -51,7 +50,7 @@ def _named_kind(directory: Path) -> str | None:
     return kind if isinstance(kind, str) else None
 
 
-def number(value: Any, digits: int = 4) -> str:
+def number(value: object, digits: int = 4) -> str:
     """A number as the page prints it (— for missing, inf, otherwise ``digits`` significant)."""
     if value is None or value == "":
         return "—"
@@ -70,18 +69,18 @@ def is_html(name: str | None) -> bool:
 
 
 @jinja2.pass_eval_context
-def _finalize(eval_ctx: jinja2.nodes.EvalContext, value: Any) -> Any:
+def _finalize(eval_ctx: jinja2.nodes.EvalContext, value: object) -> object:
     """Every printed value: left to autoescaping on an HTML page, escaped as Markdown text on
     a Markdown page."""
     return value if eval_ctx.autoescape else markup.markdown_text(value)
 
 
-def _markdown_only(build: Callable[..., Any]) -> Callable[..., Any]:
+def _markdown_only(build: Callable[..., object]) -> Callable[..., object]:
     """A filter that builds Markdown (:func:`~nlcx.pages.markup.fenced`, :func:`~nlcx.pages.markup.code`):
     on an HTML page its result is plain text, escaped like any other value."""
 
     @jinja2.pass_eval_context
-    def apply(eval_ctx: jinja2.nodes.EvalContext, value: Any, *args: Any) -> Any:
+    def apply(eval_ctx: jinja2.nodes.EvalContext, value: object, *args: object) -> object:
         built = build(value, *args)
         return str(built) if eval_ctx.autoescape else built
 

@@ -11,7 +11,6 @@ import csv
 import json
 import math
 from pathlib import Path
-from typing import Any
 
 from nlcx import safe_yaml
 from nlcx.comparison import Row, SideBySide, comparison
@@ -19,13 +18,13 @@ from nlcx.pages.kinds import ReportPage
 from nlcx.pages.render import TEMPLATES
 
 
-def metric_records(path: Path) -> list[dict[str, Any]]:
+def metric_records(path: Path) -> list[dict[str, object]]:
     """metrics.csv's rows: every field as written, ``value`` as a float (NaN where empty)."""
     with path.open(newline="", encoding="utf-8") as file:
         return [{**row, "value": float(row["value"]) if row["value"] else math.nan} for row in csv.DictReader(file)]
 
 
-def by_signal(table: SideBySide) -> list[dict[str, Any]]:
+def by_signal(table: SideBySide) -> list[dict[str, object]]:
     """The comparison's rows grouped by signal: ``{"signal": s, "rows": [Row, ...]}`` in order."""
     groups: dict[str, list[Row]] = {}
     for row in table.rows:
@@ -33,7 +32,7 @@ def by_signal(table: SideBySide) -> list[dict[str, Any]]:
     return [{"signal": signal, "rows": rows} for signal, rows in groups.items()]
 
 
-def _config(directory: Path) -> tuple[str, dict[str, Any]]:
+def _config(directory: Path) -> tuple[str, dict[str, object]]:
     """config.yaml's text and its mapping (both empty when the directory has none)."""
     path = directory / "config.yaml"
     text = path.read_text(encoding="utf-8") if path.is_file() else ""
@@ -41,7 +40,7 @@ def _config(directory: Path) -> tuple[str, dict[str, Any]]:
     return text, loaded if isinstance(loaded, dict) else {}
 
 
-def context(directory: Path) -> dict[str, Any]:
+def context(directory: Path) -> dict[str, object]:
     """Everything the run page shows."""
     config, raw = _config(directory)
     manifest = json.loads((directory / "manifest.json").read_text()) if (directory / "manifest.json").is_file() else {}
@@ -61,7 +60,7 @@ def context(directory: Path) -> dict[str, Any]:
     }
 
 
-def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, Any]:
+def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, object]:
     """The page's :func:`context` (it reads only the directory's own files)."""
     return context(directory)
 

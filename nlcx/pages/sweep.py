@@ -14,7 +14,7 @@ interquartile range per bin of the parameter; ``profiles.csv`` holds the numbers
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 import pandas as pd
@@ -106,12 +106,22 @@ def robustness(table: pd.DataFrame) -> str:
     return line + (f"; failed (did not run): {failed} of {int(table.variants.iloc[0])}" if failed else "")
 
 
-def side_by_side(table: pd.DataFrame) -> dict[str, Any]:
+class SweepSummaryRow(TypedDict):
+    """One (signal, metric) of :func:`side_by_side`: its statistics by controller."""
+
+    signal: str
+    metric: str
+    unit: object
+    #: controller -> median, q25, q75 and n.
+    by: dict[str, dict[str, object]]
+
+
+def side_by_side(table: pd.DataFrame) -> dict[str, object]:
     """The summary (:func:`summary`) with the controllers side by side: ``controllers`` in
     order, and ``rows``, one per (signal, metric) in order, each with its ``unit`` and, per
     controller, its ``median``, ``q25``, ``q75`` and ``n`` (None where it has none)."""
     controllers = [str(c) for c in dict.fromkeys(table.controller)] if len(table) else []
-    rows: dict[tuple[str, str], dict[str, Any]] = {}
+    rows: dict[tuple[str, str], SweepSummaryRow] = {}
     for r in table.to_dict("records"):
         key = (str(r["signal"]), str(r["metric"]))
         row = rows.setdefault(key, {"signal": key[0], "metric": key[1], "unit": r["unit"], "by": {}})
@@ -199,7 +209,7 @@ def _metrics_frame(files: list[Path]) -> pd.DataFrame:
     return pd.DataFrame({"variant": variant, **frame, "value": value}, copy=False)
 
 
-def context(directory: Path) -> dict[str, Any]:
+def context(directory: Path) -> dict[str, object]:
     """Everything the sweep page shows; writes summary.csv, profiles.csv and the charts' SVG files beside it.
     ``usable`` is False when no variant measured any metric (every one failed or was unstable):
     the page then says so first."""
@@ -261,7 +271,7 @@ def table_files(directory: Path) -> dict[str, str]:
     return {stem: path.name for stem, path in names.items() if path is not None}
 
 
-def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, Any]:
+def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, object]:
     """The page's :func:`context` (it reads only the directory's own files)."""
     return context(directory)
 

@@ -16,10 +16,12 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
+import numpy.typing as npt
 from numba.core.errors import NumbaError
 from pydantic import BaseModel, ConfigDict
 
 from nlcx.errors import ConfigError, did_you_mean
+from nlcx.kernel.signatures import RightHandSide
 
 
 class PlantParams(BaseModel):
@@ -75,11 +77,12 @@ class Plant:
     states: tuple[Signal, ...]
     inputs: tuple[Signal, ...]
     outputs: tuple[Signal, ...]
-    rhs: Any
+    rhs: RightHandSide
     p: np.ndarray
     C: np.ndarray
     x0: np.ndarray
-    params: dict[str, Any]
+    #: The validated parameters (the parameter model's fields).
+    params: dict[str, object]
     param_units: dict[str, str]
     bounds: np.ndarray
     features: PlantFeatures = field(default_factory=PlantFeatures)
@@ -99,7 +102,7 @@ class Plant:
     def state_index(self, name: str) -> int:
         return self.state_names.index(name)
 
-    def f(self, x: Any, u: Any, t: float = 0.0) -> np.ndarray:
+    def f(self, x: npt.ArrayLike, u: npt.ArrayLike, t: float = 0.0) -> np.ndarray:
         """dx/dt = f(t, x, u; p) for one state (1-D x, u) or for each row of 2-D x, u."""
         return evaluate_rhs(self.rhs, x, u, self.p, t)
 
@@ -133,9 +136,11 @@ class PlantModel(Generic[ParamsT]):
     loop_inputs: ClassVar[Mapping[str, str]] = {}
     #: Velocity state of the coordinate each input force acts on (friction acts there too).
     input_axes: ClassVar[Mapping[str, str]] = {}
+    #: The compiled right-hand side (:data:`~nlcx.kernel.signatures.RightHandSide`); every registered plant
+    #: sets it. Any: the checker would bind a callable class attribute to the instance, as a method.
     rhs: ClassVar[Any] = None
 
-    def __init_subclass__(cls, **kwargs: Any) -> None:
+    def __init_subclass__(cls, **kwargs: object) -> None:
         """Keep a right-hand side given as ``rhs = my_rhs`` a plain function of the class.
 
         A numba dispatcher (or a Python function) assigned as a class attribute would bind to
@@ -159,7 +164,7 @@ class PlantModel(Generic[ParamsT]):
         """The parameter vector p the right-hand side reads."""
         raise NotImplementedError
 
-    def select_rhs(self, params: ParamsT) -> Any:
+    def select_rhs(self, params: ParamsT) -> RightHandSide:
         """The compiled right-hand side for these parameters (e.g. a model variant)."""
         return self.rhs
 
@@ -309,7 +314,9 @@ def _central_differences(f: Callable[[np.ndarray], np.ndarray], at: np.ndarray, 
     return np.column_stack(columns)
 
 
-def evaluate_rhs(rhs: Any, x: Any, u: Any, p: Any, t: float = 0.0) -> np.ndarray:
+def evaluate_rhs(
+    rhs: RightHandSide, x: npt.ArrayLike, u: npt.ArrayLike, p: npt.ArrayLike, t: float = 0.0
+) -> np.ndarray:
     """Call a compiled right-hand side on one state (1-D x, u; returns 1-D) or on rows of
     states (2-D, one state a row; returns rows; p one row or one per row).
 
@@ -320,7 +327,7 @@ def evaluate_rhs(rhs: Any, x: Any, u: Any, p: Any, t: float = 0.0) -> np.ndarray
     X = np.atleast_2d(x)
     nb = X.shape[0]
 
-    def columns(a: Any) -> np.ndarray:
+    def columns(a: npt.ArrayLike) -> np.ndarray:
         a = np.atleast_2d(np.asarray(a, dtype=float))
         return np.array(np.broadcast_to(a, (nb, a.shape[1])).T, order="C")
 

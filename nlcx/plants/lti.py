@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,6 +21,9 @@ from nlcx._numba_compat import hot_njit
 from nlcx.errors import ConfigError
 from nlcx.kernel.signatures import FloatArray
 from nlcx.plants.base import Plant, PlantModel, PlantParams, Signal, divergence_bounds, initial_state
+
+if TYPE_CHECKING:
+    from control import StateSpace, TransferFunction
 
 __all__ = ["LTIPlant", "from_control", "lti_rhs"]
 
@@ -101,7 +104,7 @@ def _signals(key: str, given: Sequence[str] | Mapping[str, str] | None, labels: 
     return tuple(Signal(name, unit) for name, unit in pairs)
 
 
-def _state_space(system: Any, name: str) -> Any:
+def _state_space(system: object, name: str) -> StateSpace:
     """``system`` as a python-control state space, refused in one line unless it is a
     continuous-time, strictly proper (D = 0) StateSpace or TransferFunction."""
     import control as ct
@@ -118,7 +121,7 @@ def _state_space(system: Any, name: str) -> Any:
 
 
 def from_control(
-    system: Any,
+    system: StateSpace | TransferFunction,
     name: str,
     *,
     states: Sequence[str] | Mapping[str, str] | None = None,

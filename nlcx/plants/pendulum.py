@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 from pydantic import Field
 
-from nlcx.kernel.signatures import FloatArray, VariantEquations
+from nlcx.kernel.signatures import FloatArray, RightHandSide, VariantEquations
 from nlcx.layout import Layout
 from nlcx.plants.base import PlantModel, PlantParams, Signal
 
@@ -118,7 +118,7 @@ class PendulumModel(PlantModel[PendulumParams]):
     def parameter_vector(self, params: PendulumParams) -> np.ndarray:
         return PARAMS.pack(M=params.M, m=params.m, l=params.l, g=params.g)
 
-    def select_rhs(self, params: PendulumParams) -> Any:
+    def select_rhs(self, params: PendulumParams) -> RightHandSide:
         """The derived right-hand side, or the printed one if ``equations: printed``."""
         return self.printed_rhs if params.equations == "printed" else self.rhs
 

@@ -13,13 +13,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple, TypeVar, cast
 
 import numpy as np
 from pydantic import Field, create_model
 
 from nlcx import registry
 from nlcx.errors import ConfigError
+from nlcx.kernel.signatures import RightHandSide
 from nlcx.plants.base import PlantModel, PlantParams, Signal
 
 __all__ = ["ScalarPlant", "plant"]
@@ -28,6 +29,8 @@ __all__ = ["ScalarPlant", "plant"]
 SignalSpec = str | tuple[str, str]
 #: How a parameter may be declared: its default, or (default, unit), or (default, unit, description).
 ParamSpec = float | tuple[float, str] | tuple[float, str, str]
+#: A right-hand side for one state, ``f(t, x, u, p) -> dx`` (``p``: the parameters by name).
+ScalarFunction = TypeVar("ScalarFunction", bound=Callable[..., object])
 
 
 @dataclass(frozen=True)
@@ -70,7 +73,7 @@ def _parameters(spec: Mapping[str, ParamSpec]) -> tuple[tuple[str, float, str, s
 
 def _params_model(declared: _Declared) -> type[PlantParams]:
     """The pydantic parameter model: one float field per parameter, its unit in the schema."""
-    fields: dict[str, Any] = {
+    fields: dict[str, Any] = {  # pydantic.create_model takes its field definitions untyped
         name: (float, Field(default, description=text or None, json_schema_extra={"unit": unit}))
         for name, default, unit, text in declared.params
     }
@@ -98,7 +101,7 @@ def rhs(t, x, u, p, dx, nb):
 """
 
 
-def compile_scalar(f: Callable[..., Any], declared: _Declared) -> tuple[Any, type]:
+def compile_scalar(f: Callable[..., object], declared: _Declared) -> tuple[Callable[..., object], type]:
     """(``f`` compiled by numba, the named tuple type its parameters ``p`` have)."""
     from numba import njit
 
@@ -108,7 +111,7 @@ def compile_scalar(f: Callable[..., Any], declared: _Declared) -> tuple[Any, typ
     return scalar, params_type
 
 
-def batched_rhs(scalar: Any, params_type: type, declared: _Declared) -> Any:
+def batched_rhs(scalar: Callable[..., object], params_type: type, declared: _Declared) -> RightHandSide:
     """The right-hand side with the kernel's batched signature that calls ``scalar`` on each
     variant (:func:`_batched_source`)."""
     from numba import njit
@@ -116,17 +119,18 @@ def batched_rhs(scalar: Any, params_type: type, declared: _Declared) -> Any:
     from nlcx.kernel.abi import RHS_SIG
 
     names = [name for name, *_ in declared.params]
-    namespace: dict[str, Any] = {"np": np, "f": scalar, "Params": params_type}
+    namespace: dict[str, object] = {"np": np, "f": scalar, "Params": params_type}
     source = _batched_source(len(declared.states), len(declared.inputs), names)
     exec(compile(source, f"<nlcx plant {declared.name}>", "exec"), namespace)
-    return njit(RHS_SIG, error_model="numpy")(namespace["rhs"])
+    rhs = cast(RightHandSide, namespace["rhs"])  # the function the source defines
+    return njit(RHS_SIG, error_model="numpy")(rhs)
 
 
-class ScalarPlant(PlantModel):
+class ScalarPlant(PlantModel[PlantParams]):
     """A plant declared with :func:`plant` from a scalar right-hand side (see there)."""
 
     #: The user's function, as written (for ``nlcx list``).
-    function: ClassVar[Callable[..., Any] | None] = None
+    function: ClassVar[Callable[..., object] | None] = None
 
     def parameter_vector(self, params: PlantParams) -> np.ndarray:
         """The parameters in their declared order (the order the named tuple reads them)."""
@@ -148,7 +152,7 @@ def _not_callable(name: str, exc: Exception) -> ConfigError:
     return ConfigError("plant", name, f"its function cannot be compiled or called as f(t, x, u, p): {first}")
 
 
-def _check_scalar(scalar: Any, params_type: type, declared: _Declared) -> np.ndarray:
+def _check_scalar(scalar: Callable[..., object], params_type: type, declared: _Declared) -> np.ndarray:
     """A checker at registration: ``f(0, zeros, zeros, defaults)`` runs and returns one finite
     derivative per declared state (a wrong count or a failure is one line); its value."""
     n, m = len(declared.states), len(declared.inputs)
@@ -190,7 +194,7 @@ def plant(
     loop_inputs: Mapping[str, str] | None = None,
     velocity_states: Sequence[str] = (),
     replace: bool = True,
-) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+) -> Callable[[ScalarFunction], ScalarFunction]:
     """Register a plant written as a scalar right-hand side ``f(t, x, u, p) -> dx``.
 
     ``f`` computes dx/dt = f(t, x, u; p) for one state: ``x`` and ``u`` are 1-D float arrays in
@@ -261,14 +265,14 @@ def _registrar(
     loop_inputs: Mapping[str, str] | None,
     velocity_states: Sequence[str],
     replace: bool,
-) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+) -> Callable[[ScalarFunction], ScalarFunction]:
     """The decorator of :func:`plant`: the declaration (names, outputs, loop inputs) checked
     before ``f`` is seen, then ``f`` registered with it."""
     declared = _declared(name, states, inputs, outputs, params)
     out_names = _outputs(declared, velocity_states, bounds)
     loops = _loop_inputs(declared, out_names, loop_inputs)
 
-    def register(f: Callable[..., Any]) -> Callable[..., Any]:
+    def register(f: ScalarFunction) -> ScalarFunction:
         limits = {**dict.fromkeys((s.name for s in declared.states), DEFAULT_BOUND), **(bounds or {})}
         return _register(f, declared, out_names, loops, tuple(velocity_states), limits, replace)
 
@@ -321,14 +325,14 @@ def _loop_inputs(
 
 
 def _register(
-    f: Callable[..., Any],
+    f: ScalarFunction,
     declared: _Declared,
     out_names: tuple[str, ...],
     loops: dict[str, str],
     velocity_states: tuple[str, ...],
     bounds: dict[str, float],
     replace: bool,
-) -> Callable[..., Any]:
+) -> ScalarFunction:
     """Compile ``f``, check it, wrap it for the kernel and register its plant (see :func:`plant`)."""
     name = declared.name
     scalar, params_type = compile_scalar(f, declared)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -19,6 +19,9 @@ import nlcx.sweeps.seals as seals
 from nlcx import config as cfg
 from nlcx import manifest, plugins
 from nlcx.sweeps.planning import SweepSection, Variant
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 
 def write_manifest(
@@ -137,7 +140,7 @@ def assemble(
     out_dir: Path,
     variants: list[Variant],
     hashes: list[str],
-    base_raw: dict[str, Any],
+    base_raw: dict[str, object],
     spec: SweepSection,
     written: Collection[str] = (),
 ) -> pd.DataFrame:
@@ -185,7 +188,7 @@ def assemble(
     return index
 
 
-def write_config(out_dir: Path, base_raw: dict[str, Any], spec: SweepSection) -> None:
+def write_config(out_dir: Path, base_raw: dict[str, object], spec: SweepSection) -> None:
     """config.yaml: the base config interpolated, with its sweep section resolved."""
     import yaml
 
@@ -195,7 +198,7 @@ def write_config(out_dir: Path, base_raw: dict[str, Any], spec: SweepSection) ->
     report.write_text(out_dir / "config.yaml", yaml.safe_dump(resolved, sort_keys=False, allow_unicode=True))
 
 
-def arrow_table(frame: pd.DataFrame) -> Any:
+def arrow_table(frame: pd.DataFrame) -> pa.Table:
     """``frame`` as the Arrow table of a sweep's Parquet output: text columns as strings (a
     missing or empty text null), numbers as they are (a NaN null), as the CSV form reads back."""
     import pyarrow as pa
@@ -208,7 +211,7 @@ def arrow_table(frame: pd.DataFrame) -> Any:
     return empty_text_as_null(pa.table(columns, names=table.column_names))
 
 
-def write_dataset(directory: Path, tables: Sequence[tuple[int, Any]]) -> None:
+def write_dataset(directory: Path, tables: Sequence[tuple[int, pa.Table]]) -> None:
     """A Parquet dataset: each (first row's variant, table) as ``directory/part-<variant>.parquet``."""
     from nlcx.sweeps.columnar import write_parquet_table
 
@@ -228,7 +231,7 @@ def _fresh(directory: Path) -> None:
     directory.mkdir(parents=True)
 
 
-def _text_columns(table: Any) -> Any:
+def _text_columns(table: pa.Table) -> pa.Table:
     """``table`` with its dictionary-encoded columns as plain strings (what the CSV writer takes)."""
     import pyarrow as pa
 
@@ -262,7 +265,7 @@ def _csv_of_parts(target: Path, paths: Sequence[Path]) -> None:
 def assemble_columns(
     out_dir: Path,
     parts: Sequence[tuple[int, str]],
-    base_raw: dict[str, Any],
+    base_raw: dict[str, object],
     spec: SweepSection,
     known: Mapping[str, Mapping[str, int]] | None = None,
 ) -> dict[str, int]:

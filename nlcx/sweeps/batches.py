@@ -12,7 +12,7 @@ import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import pandas as pd
@@ -23,14 +23,14 @@ from nlcx import plugins, runtime
 from nlcx.sweeps.planning import Variant
 
 if TYPE_CHECKING:
-    pass
+    from nlcx.engine.prepared import Prepared
 
 
 @dataclass
 class Batch:
     """Variants simulated together in one task."""
 
-    base_raw: dict[str, Any]
+    base_raw: dict[str, object]
     variants: list[Variant]
     hashes: list[str]
     out_dir: Path
@@ -44,14 +44,14 @@ class BatchResult:
     """What a batch reports: its part's name, its number of variants and their statuses (status ->
     count); a per-variant batch also its rows of sweep.csv and its metrics (unless left out)."""
 
-    index: list[dict[str, Any]] = field(default_factory=list)
+    index: list[dict[str, object]] = field(default_factory=list)
     metrics: pd.DataFrame | None = None
     part: str = ""
     variants: int = 0
     statuses: dict[str, int] = field(default_factory=dict)
 
 
-def _cell(value: Any) -> Any:
+def _cell(value: object) -> object:
     """A varied value as a sweep.csv cell: a mapping or list (e.g. a whole section) as JSON."""
     return json.dumps(value, sort_keys=True) if isinstance(value, dict | list) else value
 
@@ -71,13 +71,14 @@ def run_batch(batch: Batch, return_metrics: bool = True) -> BatchResult:
 def _run_batch(batch: Batch, return_metrics: bool) -> BatchResult:
     from nlcx import engine, report
 
-    rows: list[dict[str, Any]] = []
-    prepared_of: dict[int, Any] = {}
-    plugins.load(batch.base_raw.get(plugins.IMPORTS, []))  # a worker that did not fork from the sweep's process
+    rows: list[dict[str, object]] = []
+    prepared_of: dict[int, Prepared] = {}
+    # a worker that did not fork from the sweep's process; the entries as load_config_imports resolved them
+    plugins.load(cast("list[str]", batch.base_raw.get(plugins.IMPORTS, [])))
     interpolated = cfg.Interpolated.of(batch.base_raw, allow_env=True)  # checked by planning.load
     base = cfg.build(interpolated.resolved)  # valid: sweep.load built it
     for pos, (variant, digest) in enumerate(zip(batch.variants, batch.hashes, strict=True)):
-        row: dict[str, Any] = {"variant": variant.index, "seed": variant.seed, "config_hash": digest}
+        row: dict[str, object] = {"variant": variant.index, "seed": variant.seed, "config_hash": digest}
         row.update({f"value:{k}": _cell(v) for k, v in variant.values.items()})
         try:
             prepared_of[pos] = engine.prepare(cfg.build(variant.resolve(interpolated), like=base))

@@ -24,13 +24,19 @@ directory, so on a cluster the output directory must be on a file system every n
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from nlcx import safe_yaml
 from nlcx.errors import NlcxError
 from nlcx.validation import validate_model
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from dask_jobqueue.core import JobQueueCluster
+    from distributed.deploy.spec import SpecCluster
 
 
 class ClusterSpec(BaseModel):
@@ -72,7 +78,7 @@ def load(path: Path) -> ClusterSpec:
     return validate_model(ClusterSpec, safe_yaml.load_file(path) or {}, "cluster")
 
 
-def _jobqueue_class(kind: str) -> Any:
+def _jobqueue_class(kind: str) -> Callable[..., JobQueueCluster]:
     try:
         import dask_jobqueue
     except ImportError:
@@ -80,7 +86,7 @@ def _jobqueue_class(kind: str) -> Any:
     return {"slurm": dask_jobqueue.SLURMCluster, "pbs": dask_jobqueue.PBSCluster}[kind]
 
 
-def _jobqueue_cluster(spec: ClusterSpec) -> Any:
+def _jobqueue_cluster(spec: ClusterSpec) -> JobQueueCluster:
     """A dask-jobqueue cluster of ``spec`` (no job submitted yet)."""
     return _jobqueue_class(spec.kind)(
         queue=spec.queue,
@@ -97,7 +103,7 @@ def _jobqueue_cluster(spec: ClusterSpec) -> Any:
     )
 
 
-def make(spec: ClusterSpec) -> Any:
+def make(spec: ClusterSpec) -> SpecCluster:
     """The Dask cluster of ``spec``; a batch-queue cluster has its ``jobs`` submitted."""
     if spec.kind == "local":
         from distributed import LocalCluster

@@ -29,7 +29,7 @@ import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -74,8 +74,9 @@ class Packing:
 class _Probe:
     """Templates of the sweep's base config with some values and a seed set."""
 
-    def __init__(self, base_raw: dict[str, Any]) -> None:
-        plugins.load(base_raw.get(plugins.IMPORTS, []))  # a worker that did not fork from the sweep's process
+    def __init__(self, base_raw: dict[str, object]) -> None:
+        # a worker that did not fork from the sweep's process; the entries as load_config_imports resolved them
+        plugins.load(cast("list[str]", base_raw.get(plugins.IMPORTS, [])))
         self.interpolated = cfg.Interpolated.of(base_raw, allow_env=True)  # checked by planning.load
         self.base = cfg.build(self.interpolated.resolved)
 
@@ -100,7 +101,7 @@ def _corners(columns: dict[str, np.ndarray]) -> list[dict[str, float]]:
     return [{k: r[0] for k, r in ranges.items()}, {k: r[1] for k, r in ranges.items()}]
 
 
-def packing(base_raw: dict[str, Any], spec: SweepSection, plan: ColumnPlan | None) -> Packing | str:
+def packing(base_raw: dict[str, object], spec: SweepSection, plan: ColumnPlan | None) -> Packing | str:
     """The sweep's :class:`Packing`, or why its variants need configs of their own (a text)."""
     from nlcx.engine.ensembles import corner_agrees, probed_slots, same_arrays
 
@@ -148,7 +149,7 @@ def batch_size(spec: SweepSection, n_variants: int, record_bytes: int, device: s
 class ColumnBatch:
     """Variants ``first`` .. ``first + n - 1`` of a columnar plan: their values and seeds."""
 
-    base_raw: dict[str, Any]
+    base_raw: dict[str, object]
     first: int
     columns: dict[str, np.ndarray]
     seeds: np.ndarray
@@ -174,7 +175,7 @@ class ColumnBatch:
 
 
 def column_batches(
-    base_raw: dict[str, Any], plan: ColumnPlan, found: Packing, digest: str, out: Path, size: int,
+    base_raw: dict[str, object], plan: ColumnPlan, found: Packing, digest: str, out: Path, size: int,
     metrics: tuple[str, ...] | None,
 ) -> list[ColumnBatch]:  # fmt: skip
     """The plan cut into batches of ``size`` variants."""

@@ -46,7 +46,7 @@ class Distribution(BaseModel):
     )
     mean: float | None = Field(None, description="Mean of a normal distribution.")
     std: float | None = Field(None, gt=0, description="Standard deviation of a normal distribution.")
-    values: list[Any] | None = Field(None, description="For choice: the values drawn from, each equally likely.")
+    values: list[object] | None = Field(None, description="For choice: the values drawn from, each equally likely.")
 
     @model_validator(mode="after")
     def _complete(self) -> Distribution:
@@ -80,10 +80,10 @@ class SweepSection(BaseModel):
     seed: int = Field(
         0, ge=0, description="Root of numpy.random.SeedSequence from which each variant's seed is spawned."
     )
-    grid: dict[str, list[Any]] = Field(
+    grid: dict[str, list[object]] = Field(
         default_factory=dict, description="Values of each dotted key, combined as a cartesian product."
     )
-    zip: dict[str, list[Any]] = Field(
+    zip: dict[str, list[object]] = Field(
         default_factory=dict, description="Lists of values of equal length, taken together position by position."
     )
     random: RandomSpec | None = Field(None, description="Seeded random draws of some keys.")
@@ -135,7 +135,7 @@ class Variant:
         """The variant as (key path, value) pairs for :func:`nlcx.config.set_values`."""
         return [(key.split("."), value) for key, value in self.values.items()] + [(["seed"], self.seed)]
 
-    def resolve(self, base: cfg.Interpolated) -> dict[str, Any]:
+    def resolve(self, base: cfg.Interpolated) -> dict[str, object]:
         """The variant's raw config: the base with its values and seed set, interpolated (the
         base interpolated once, :class:`nlcx.config.Interpolated`)."""
         return base.resolve(self.settings())
@@ -153,7 +153,8 @@ def _lookup(raw: Mapping[str, object], key: str) -> object:
 
 
 def _draw(dist: Distribution, base: Any, n: int, rng: np.random.Generator) -> list[object] | np.ndarray:
-    """``n`` draws of ``dist``: an array of floats, or the chosen values of a choice."""
+    """``n`` draws of ``dist``: an array of floats, or the chosen values of a choice (``base``: the
+    config's value of the key, read as a number, for a relative range)."""
     # Distribution._complete has checked that the parameters each distribution reads are set.
     if dist.dist == "uniform":
         if dist.relative is not None:
@@ -293,8 +294,8 @@ def variant_hash(base_digest: str, variant: Variant) -> str:
 
 
 def load(
-    path: str | Path | Mapping[str, Any], overrides: list[str] | None = None, *, allow_env: bool = False
-) -> tuple[dict[str, Any], SweepSection, cfg.Experiment]:
+    path: str | Path | Mapping[str, object], overrides: list[str] | None = None, *, allow_env: bool = False
+) -> tuple[dict[str, object], SweepSection, cfg.Experiment]:
     """(base raw config without ``sweep``, the sweep spec, the validated base experiment) of a
     config file, or of a raw config mapping as a file holds it (:func:`nlcx.sweep`).
 
@@ -319,7 +320,7 @@ def base_digest(base_raw: Mapping[str, object], spec: SweepSection) -> str:
     return config_hash(base_raw if spec.metrics is None else {"base": base_raw, "metrics": spec.metrics})
 
 
-def plan(base_raw: dict[str, Any], spec: SweepSection) -> tuple[list[Variant], list[str]]:
+def plan(base_raw: dict[str, object], spec: SweepSection) -> tuple[list[Variant], list[str]]:
     """The variants and the hash of each one's resolved config."""
     variants = expand(spec, cfg.interpolate(base_raw, allow_env=True))  # checked by load
     digest = base_digest(base_raw, spec)

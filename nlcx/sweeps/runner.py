@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import pandas as pd
 
@@ -34,6 +34,8 @@ from nlcx.sweeps.resuming import completed, open_column_staging, open_staging
 from nlcx.sweeps.sizing import check as check_plan_size
 
 if TYPE_CHECKING:
+    from distributed import Client, Worker
+
     from nlcx.config import Experiment
 
 #: A batch of either path: :class:`~nlcx.sweeps.batches.Batch` or :class:`~nlcx.sweeps.columnar.ColumnBatch`.
@@ -87,7 +89,7 @@ def make_executor(
     return client.get_executor(), close
 
 
-def _enter_workers(client: Any) -> None:
+def _enter_workers(client: Client) -> None:
     """Have every worker of ``client``'s cluster, present and to come, enter
     :func:`nlcx.runtime.worker` (a Dask worker plugin)."""
     from distributed import WorkerPlugin
@@ -95,7 +97,7 @@ def _enter_workers(client: Any) -> None:
     class EnterRuntime(WorkerPlugin):
         name = "nlcx-runtime"
 
-        def setup(self, worker: Any) -> None:
+        def setup(self, worker: Worker) -> None:
             runtime.worker()
 
     client.register_plugin(EnterRuntime())
@@ -161,7 +163,12 @@ def _run_batches(
 
 
 def _batches(
-    base_raw: dict[str, Any], spec: SweepSection, variants: list[Variant], hashes: list[str], todo: list[int], out: Path
+    base_raw: dict[str, object],
+    spec: SweepSection,
+    variants: list[Variant],
+    hashes: list[str],
+    todo: list[int],
+    out: Path,
 ) -> list[Batch]:
     """The variants at the plan positions ``todo`` in batches of ``spec.batch_size``, their part files into ``out``."""
     size = spec.batch_size
@@ -199,7 +206,7 @@ class _Tally:
 
 
 def run(
-    path: str | Path | Mapping[str, Any],
+    path: str | Path | Mapping[str, object],
     overrides: list[str] | None = None,
     out_dir: Path | None = None,
     executor: str = "process",
@@ -240,7 +247,7 @@ def run(
 class _Job:
     """A sweep's run, on one of its two paths (:meth:`columnar`, :meth:`per_variant`)."""
 
-    base_raw: dict[str, Any]
+    base_raw: dict[str, object]
     spec: SweepSection
     base: Experiment
     out_dir: Path

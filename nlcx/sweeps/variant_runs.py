@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol, cast
 
 from nlcx import compiled_cache, manifest, plugins, runtime, safe_yaml
 from nlcx.errors import ConfigError, NlcxError
@@ -21,6 +21,7 @@ from nlcx.errors import ConfigError, NlcxError
 if TYPE_CHECKING:
     import pandas as pd
 
+    from nlcx.config import Experiment, Interpolated
     from nlcx.results import Result
     from nlcx.sweeps.planning import Variant
 
@@ -29,8 +30,8 @@ if TYPE_CHECKING:
 class Plan:
     """A sweep directory's base config (interpolated once), its base experiment and its variants."""
 
-    interpolated: Any
-    base: Any
+    interpolated: Interpolated
+    base: Experiment
     variants: dict[int, Variant]
     timeseries: bool
 
@@ -112,7 +113,7 @@ def _plan(directory: Path, chosen: list[int]) -> Plan:
     if not isinstance(raw, dict):
         raise manifest.IntegrityError(directory / "config.yaml", "not a mapping of sections", "the config nlcx wrote")
     base_raw, spec, base = planning.load(raw, allow_env=bool(record.get("allow_env", False)))
-    plugins.load(base_raw.get(plugins.IMPORTS, []))
+    plugins.load(cast("list[str]", base_raw.get(plugins.IMPORTS, [])))  # as load_config_imports resolved them
     interpolated_raw = cfg.interpolate(base_raw, allow_env=True)
     columns = planning.expand_columns(spec, interpolated_raw) if planning.numeric(spec) else None
     if columns is not None:
@@ -123,7 +124,7 @@ def _plan(directory: Path, chosen: list[int]) -> Plan:
     return Plan(cfg.Interpolated.of(base_raw, allow_env=True), base, variants, spec.timeseries)
 
 
-def _experiment(plan: Plan, index: int) -> Any:
+def _experiment(plan: Plan, index: int) -> Experiment:
     """The variant's experiment, built as the sweep's batch built it."""
     from nlcx import config as cfg
 

@@ -30,12 +30,15 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 import pandas as pd
 
 from nlcx.errors import ConfigError
+
+if TYPE_CHECKING:
+    from nlcx.plants.base import Plant
 
 __all__ = [
     "ACCEPTABLE",
@@ -84,7 +87,16 @@ def _kind(state: str) -> str:
     raise ConfigError("plant", state, f"a pendulum's state ({', '.join(POSITIONS + ANGLES)} and their _dot)")
 
 
-def bryson(states: Sequence[str], inputs: Sequence[str], references: Sequence[str]) -> dict[str, Any]:
+class BrysonWeights(TypedDict):
+    """An LQR controller section weighted by Bryson's rule (:func:`bryson`)."""
+
+    kind: str
+    integral: list[str]
+    q: list[float]
+    r: list[float]
+
+
+def bryson(states: Sequence[str], inputs: Sequence[str], references: Sequence[str]) -> BrysonWeights:
     """The LQR section of Bryson's rule for a pendulum: q per state, then per integrator of each
     position with a step reference (``references``), r per input."""
     integral = [s for s in states if s in POSITIONS and s in references]
@@ -97,7 +109,7 @@ def _weight(acceptable: float) -> float:
     return float(f"{1.0 / acceptable**2:.12g}")
 
 
-def sliding_surface(plant: Any) -> dict[str, float]:
+def sliding_surface(plant: Plant) -> dict[str, float]:
     """(c1, c2, alpha) of the x pendulum's sliding surface: the motion on it, linearised, at the
     three slowest closed-loop poles of Bryson's LQR without its integrator (:func:`bryson`)."""
     import control as ct

@@ -22,9 +22,10 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import TypedDict, cast
 
 import numpy as np
 import pandas as pd
@@ -36,7 +37,7 @@ from nlcx import engine, manifest, runtime, safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.thesis import catalog
 from nlcx.thesis.tables import lookup_value, metric_lookup
-from nlcx.tuning.optimise import GASettings, check_search_box, evolve
+from nlcx.tuning.optimise import GASettings, OptimResult, check_search_box, evolve
 from nlcx.validation import validate_model
 
 FLOORS = {"Mp": 0.05, "tr": 0.5, "ts": 0.5, "ess": 0.01}
@@ -90,20 +91,21 @@ def target_cells(target: Target) -> pd.DataFrame:
 class CalibrationObjective:
     """Loss of a batch of candidates (rows of X); picklable for a process pool."""
 
-    def __init__(self, base_raw: dict[str, Any], spec: CalibrationSpec) -> None:
+    def __init__(self, base_raw: dict[str, object], spec: CalibrationSpec) -> None:
         self.base_raw = base_raw
         self.spec = spec
         self.keys = list(spec.parameters)
         self.cells = target_cells(spec.target)
 
-    def candidate_config(self, x: np.ndarray) -> dict[str, Any]:
+    def candidate_config(self, x: np.ndarray) -> dict[str, object]:
         overrides = [f"{k}={float(v)!r}" for k, v in zip(self.keys, x, strict=True)]
         return cfg.interpolate(cfg.apply_overrides(self.base_raw, overrides))
 
     def candidate_experiment(self, x: np.ndarray, label: str) -> cfg.Experiment:
         """The candidate's experiment with only the fitted controller, labelled ``label``."""
         raw = self.candidate_config(x)
-        raw["controllers"] = {label: raw["controllers"][self.spec.controller]}
+        controllers = cast(dict[str, object], raw["controllers"])  # validated by calibrate's first build
+        raw["controllers"] = {label: controllers[self.spec.controller]}
         return cfg.build(raw)
 
     def measure(self, X: np.ndarray) -> pd.DataFrame:
@@ -119,11 +121,11 @@ class CalibrationObjective:
         rows = table[table.controller == label]
         unstable = (rows.run_status != "ok").any()
         values = metric_lookup(rows)
-        cell: Any  # a row of the cells table: its signal, metric (str) and printed value (float)
-        for k, cell in enumerate(self.cells.itertuples(index=False)):
-            ours = lookup_value(values, label, cell.signal, cell.metric)
-            scale = max(abs(cell.value), FLOORS.get(cell.metric, 0.05))
-            out[k] = PENALTY if unstable or math.isnan(ours) else (ours - cell.value) / scale
+        # a row of the cells table: its signal, metric (str) and printed value (float)
+        for k, (signal, metric, value) in enumerate(self.cells.itertuples(index=False)):
+            ours = lookup_value(values, label, signal, metric)
+            scale = max(abs(value), FLOORS.get(metric, 0.05))
+            out[k] = PENALTY if unstable or math.isnan(ours) else (ours - value) / scale
         return out
 
     def __call__(self, X: np.ndarray) -> np.ndarray:
@@ -136,9 +138,28 @@ def load_spec(path: Path, overrides: list[str] | None = None) -> CalibrationSpec
     return validate_model(CalibrationSpec, raw, "")
 
 
+class Calibration(TypedDict):
+    """What :func:`calibrate` found."""
+
+    spec: CalibrationSpec
+    result: OptimResult
+    #: The target cells with nlcx's values and the residuals.
+    fit: pd.DataFrame
+    tuning: pd.DataFrame
+    #: The base experiment's config with the fitted values, interpolated.
+    config: dict[str, object]
+    #: The fitted keys as a nested mapping (what goes into the gains file).
+    block: dict[str, object]
+    base: Path
+
+
 def calibrate(
-    path: Path, out_dir: Path, jobs: int = 1, overrides: list[str] | None = None, progress: Any = None
-) -> dict[str, Any]:
+    path: Path,
+    out_dir: Path,
+    jobs: int = 1,
+    overrides: list[str] | None = None,
+    progress: Callable[[int, float], None] | None = None,
+) -> Calibration:
     """Run the fit of spec ``path``; write tuning.csv, fit.csv, history.csv and calibrated.yaml."""
     from nlcx import report
 
@@ -201,31 +222,34 @@ def calibrate(
     }
 
 
-def _block(base_raw: dict[str, Any], keys: list[str], values: np.ndarray, spec: CalibrationSpec) -> dict[str, Any]:
+def _block(
+    base_raw: dict[str, object], keys: list[str], values: np.ndarray, spec: CalibrationSpec
+) -> dict[str, object]:
     """The fitted keys as a nested mapping (what goes into the gains file)."""
     raw = cfg.apply_overrides(base_raw, [f"{k}={round(float(v), 4)!r}" for k, v in zip(keys, values, strict=True)])
-    out: dict[str, Any] = {}
+    out: dict[str, object] = {}
     for key in spec.write.keys if spec.write else keys:
-        node: Any = raw
+        node: object = raw
         for part in key.split("."):
-            node = node[part]
+            node = cast(dict[str, object], node)[part]  # a mapping above each part of a key the config holds
         target = out
         parts = key.split(".")
         for part in parts[:-1]:
-            target = target.setdefault(part, {})
+            target = cast(dict[str, object], target.setdefault(part, {}))  # a mapping made here
         target[parts[-1]] = node
     return out
 
 
-def write_back(spec_path: Path, outcome: dict[str, Any]) -> Path:
+def write_back(spec_path: Path, outcome: Calibration) -> Path:
     """Merge the fitted values into the spec's ``write.file``, keeping its header comments."""
-    spec: CalibrationSpec = outcome["spec"]
+    spec = outcome["spec"]
     if spec.write is None:
         raise ConfigError("write", None, "the spec names no file to write the fitted values to")
     path = (spec_path.parent / spec.write.file).resolve()
     text = path.read_text(encoding="utf-8")
     header = "".join(line + "\n" for line in text.splitlines() if line.startswith("#"))
-    data = cfg.deep_merge(safe_yaml.load_text(text, str(path)) or {}, outcome["block"])
+    gains = cast(dict[str, object], safe_yaml.load_text(text, str(path)) or {})  # a gains file: a mapping
+    data = cfg.deep_merge(gains, outcome["block"])
     from nlcx import report
 
     body = yaml.safe_dump(data, sort_keys=False, default_flow_style=None)

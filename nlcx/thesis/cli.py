@@ -11,7 +11,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -20,6 +20,10 @@ from nlcx.cli._app import NoReport, OverridesArg, checked_jobs, one_line_errors
 from nlcx.cli.experiments import DeviceOpt, checked_device
 from nlcx.errors import ConfigError, NlcxError
 from nlcx.terminal import echo
+
+if TYPE_CHECKING:
+    from nlcx.thesis import profiles
+    from nlcx.thesis.records import Record
 
 
 @one_line_errors
@@ -58,7 +62,7 @@ def reproduce(
     keys = [k for k in (only or "").split(",") if k.strip()]
     done = [0]
 
-    def progress(record: Any) -> None:
+    def progress(record: Record) -> None:
         done[0] += 1
         bad = [c for c, s in record.status.items() if s != "ok"]
         note = f" ({', '.join(bad)} unstable)" if bad else ""
@@ -137,7 +141,7 @@ def baselines(
 
 def write_reproduction_manifest(
     out: Path,
-    profile: Any,
+    profile: profiles.Profile,
     wall: float,
     jobs: int | None,
     overrides: Sequence[str] = (),

@@ -11,12 +11,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypedDict, cast
 
 import pandas as pd
 
 from nlcx import safe_yaml
 from nlcx.thesis import catalog
+
+if TYPE_CHECKING:
+    from nlcx.thesis.records import Record
 
 #: Table 5.8 column -> (nlcx metric, unit).
 CSTR_METRICS = {
@@ -38,7 +41,7 @@ def cstr_value(metrics: pd.DataFrame, controller: str, metric: str, signal: str 
     return float(rows.value.iloc[0]) if not rows.empty else math.nan
 
 
-def method_values(records: Mapping[Path, Any], root: Path) -> MethodValues:
+def method_values(records: Mapping[Path, Record], root: Path) -> MethodValues:
     """Our Table 5.8 numbers: method -> thesis column -> value."""
     out = {}
     for method, (file, label) in catalog.CSTR_METHODS.items():
@@ -47,7 +50,7 @@ def method_values(records: Mapping[Path, Any], root: Path) -> MethodValues:
     return out
 
 
-def table_5_8(records: dict[Path, Any], root: Path) -> pd.DataFrame:
+def table_5_8(records: dict[Path, Record], root: Path) -> pd.DataFrame:
     """method, metric, thesis, nlcx, delta, unit."""
     printed = catalog.cstr_table().set_index("method")
     ours = method_values(records, root)
@@ -69,11 +72,11 @@ def table_5_8(records: dict[Path, Any], root: Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _tuning(record: Any, tuner: str) -> dict[str, float]:
+def _tuning(record: Record, tuner: str) -> dict[str, float]:
     return {r["parameter"]: r["value"] for r in record.tuning if r["tuner"] == tuner}
 
 
-def table_5_1(record: Any) -> pd.DataFrame:
+def table_5_1(record: Record) -> pd.DataFrame:
     """The Ziegler-Nichols rules of Table 5.1 applied to the K_u, T_u found in the run."""
     from nlcx.tuning.ziegler_nichols import RULES, zn_gains
 
@@ -90,13 +93,13 @@ def table_5_1(record: Any) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def fuzzy_schedule(record: Any) -> dict[str, Any]:
+def fuzzy_schedule(record: Record) -> dict[str, Any]:
     """The fuzzy schedule as run (after the ZN tuner filled in its gain ranges)."""
     loops = record.built["fuzzy"]["loops"]
     return next(iter(loops.values()))["schedule"]
 
 
-def table_5_2(record: Any) -> pd.DataFrame:
+def table_5_2(record: Record) -> pd.DataFrame:
     """Universes of discourse actually used, beside Table 5.2."""
     sched = fuzzy_schedule(record)
     printed = catalog.fuzzy_universes().set_index("name")
@@ -126,7 +129,7 @@ def table_5_2(record: Any) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def table_sets(record: Any, variable: str) -> pd.DataFrame:
+def table_sets(record: Record, variable: str) -> pd.DataFrame:
     """The fuzzy sets of one variable actually used, beside Tables 5.3-5.7."""
     sched = fuzzy_schedule(record)
     printed = catalog.fuzzy_sets()
@@ -146,12 +149,26 @@ def table_sets(record: Any, variable: str) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+class _ZnVariant(TypedDict, total=False):
+    #: Overrides of the base config: key -> value.
+    set: dict[str, object]
+    description: str
+
+
+class _ZnVariants(TypedDict):
+    """``configs/thesis/ch5/zn_variants.yaml``."""
+
+    #: The base config, relative to the file.
+    base: str
+    variants: dict[str, _ZnVariant]
+
+
 def zn_variants(root: Path, out_dir: Path) -> pd.DataFrame:
     """Run the ZN loop variants of ``configs/thesis/ch5/zn_variants.yaml`` against Table 5.8's ZN row."""
     from nlcx import config as cfg
     from nlcx import engine, report
 
-    spec = safe_yaml.load_file(root / "ch5" / "zn_variants.yaml")
+    spec = cast(_ZnVariants, safe_yaml.load_file(root / "ch5" / "zn_variants.yaml"))
     printed = catalog.cstr_table().set_index("method").loc["ZN"]
     rows = []
     for name, variant in spec["variants"].items():

@@ -3,17 +3,20 @@ Tables 5.3-5.7), as ``nlcx reproduce`` draws them from the schedule a chapter 5 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from nlcx.controllers.fuzzy_config import FuzzyConfig, as_config, membership, universe
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 #: Axis labels of Figures 5.4-5.8.
 LABELS = {"e": "e", "de_dt": "de/dt", "kp1": "$k_{p1}$", "ki1": "$k_{i1}$", "kd1": "$k_{d1}$"}
 
 
-def membership_figure(cfg: FuzzyConfig | dict[str, Any], variable: str, points: int = 1001) -> Any:
+def membership_figure(cfg: FuzzyConfig | dict[str, object], variable: str, points: int = 1001) -> Figure:
     """Figures 5.4-5.8: the five membership functions of ``variable`` over its universe."""
     from matplotlib.figure import Figure
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -33,6 +33,10 @@ from nlcx.engine.gpu import Ensemble, ensemble_metrics, ensembles_metrics
 from nlcx.engine.metric_rows import MetricColumns
 from nlcx.errors import NlcxError
 from nlcx.thesis.tables import ANGLE_METRICS, ANGLES, POSITION_METRICS
+
+if TYPE_CHECKING:
+    from nlcx.config import Experiment
+    from nlcx.thesis.hypotheses import Hypothesis
 
 #: Each free value's range, by its config key.
 Box = dict[str, tuple[float, float]]
@@ -46,7 +50,7 @@ class PackedTable:
     slots: dict[str, tuple[Slot, ...]]
 
 
-def packed_table(experiment: Callable[[dict[str, float]], Any], box: Box) -> PackedTable | str:
+def packed_table(experiment: Callable[[dict[str, float]], Experiment], box: Box) -> PackedTable | str:
     """The table's :class:`PackedTable` (``experiment(values)``: its experiment with the free
     values ``values``; ``box``: each free value's range), or why its candidates need experiments
     of their own (a text). The template holds the middle of the box; each value is probed at
@@ -73,10 +77,15 @@ def packed_table(experiment: Callable[[dict[str, float]], Any], box: Box) -> Pac
     return PackedTable(base, slots)
 
 
-def packings(tables: Iterable[str], experiment: Callable[..., Any], hyp: Any, box: Box) -> dict[str, PackedTable | str]:
+def packings(
+    tables: Iterable[str],
+    experiment: Callable[[str, Hypothesis, dict[str, float]], Experiment],
+    hyp: Hypothesis,
+    box: Box,
+) -> dict[str, PackedTable | str]:
     """:func:`packed_table` of each table (``experiment(table, hyp, values)``: its experiment)."""
 
-    def of(table: str) -> Callable[[dict[str, float]], Any]:
+    def of(table: str) -> Callable[[dict[str, float]], Experiment]:
         return lambda values: experiment(table, hyp, values)
 
     return {table: packed_table(of(table), box) for table in tables}

@@ -16,11 +16,10 @@ hands it a staged directory that is renamed into place when complete (:func:`nlc
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -29,26 +28,13 @@ from nlcx import runtime
 from nlcx.errors import ConfigError, NlcxError, did_you_mean
 from nlcx.thesis import catalog, cstr, profiles, tables
 from nlcx.thesis.catalog import FigureSpec, TableSpec
+from nlcx.thesis.records import Record
+
+if TYPE_CHECKING:
+    from nlcx.engine import ExperimentResult
 
 
-@dataclass
-class Record:
-    """What one experiment run hands back to the parent process."""
-
-    config: Path
-    name: str
-    resolved: dict[str, Any]
-    metrics: pd.DataFrame
-    status: dict[str, str]
-    extras: pd.DataFrame
-    lyapunov: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
-    tuning: list[dict[str, Any]] = field(default_factory=list)
-    #: Each controller's configuration as built (after its tuners).
-    built: dict[str, dict[str, Any]] = field(default_factory=dict)
-    wall: float = 0.0
-
-
-def _extras(result: Any) -> pd.DataFrame:
+def _extras(result: ExperimentResult) -> pd.DataFrame:
     """Claim evidence not in metrics.csv: tail peak-to-peak, max |y| over the run."""
     plant = result.prepared.plant
     window = result.prepared.experiment.section.metrics.ss_window * 5
@@ -168,7 +154,7 @@ def _run_all(
     titles: dict[Path, tuple[str, str]],
     overrides: tuple[str, ...],
     jobs: int,
-    progress: Any,
+    progress: Callable[[Record], object] | None,
     profile: profiles.Profile | None = None,
 ) -> dict[Path, Record]:
     """Run every config in a process pool, in order, drawing the response figures named in ``titles``."""
@@ -215,16 +201,34 @@ def _table(spec: TableSpec, records: dict[Path, Record], root: Path) -> pd.DataF
     return cstr.table_sets(recs[0], spec.variable)
 
 
+class _Written(TypedDict):
+    #: The figures and the tables written.
+    figures: list[str]
+    tables: list[str]
+
+
+class Reproduction(_Written, total=False):
+    """What :func:`reproduce` wrote and the runs it wrote them from (``tables_data`` and
+    ``records`` always, added last)."""
+
+    #: The ZN variants of chapter 5 (when its figures were selected and nothing was left out).
+    zn_variants: pd.DataFrame
+    #: The claims table (when nothing was left out).
+    claims: pd.DataFrame
+    tables_data: dict[str, pd.DataFrame]
+    records: dict[Path, Record]
+
+
 def reproduce(
     root: Path,
     out_dir: Path,
     chapters: Iterable[int] | None = None,
     only: Iterable[str] | None = None,
     jobs: int | None = None,
-    progress: Any = None,
+    progress: Callable[[Record], object] | None = None,
     overrides: tuple[str, ...] = (),
     profile: profiles.Profile | None = None,
-) -> dict[str, Any]:
+) -> Reproduction:
     """Run what the selected figures and tables need (every experiment under ``profile``),
     then write them and the claims."""
     from nlcx import report
@@ -243,7 +247,7 @@ def reproduce(
     for table in tabs:
         written_tables[table.table] = _table(table, records, root)
         report.write_csv(out_dir / "tables" / table.filename, written_tables[table.table])
-    summary: dict[str, Any] = {"figures": [f.figure for f in figs], "tables": sorted(written_tables)}
+    summary: Reproduction = {"figures": [f.figure for f in figs], "tables": sorted(written_tables)}
     if not only and 5 in {f.chapter for f in figs}:
         summary["zn_variants"] = cstr.zn_variants(root, out_dir)
     if claims_needed:

@@ -54,8 +54,9 @@ def thesis_value(metrics: pd.DataFrame, controller: str, signal: str, metric: st
     return lookup_value(metric_lookup(metrics), controller, signal, metric)
 
 
-def _metric_row(printed: Any, metrics: pd.DataFrame, status: dict[str, str]) -> dict[str, Any]:
-    """One printed cell (signal, metric, controller) with our number beside it."""
+def _metric_row(printed: Any, metrics: pd.DataFrame, status: dict[str, str]) -> dict[str, object]:
+    """One printed cell (signal, metric, controller; a row of the thesis's metrics by itertuples) with
+    our number beside it."""
     ours = thesis_value(metrics, printed.controller, printed.signal, printed.metric)
     angle_peak = printed.signal in ANGLES and printed.metric == "Mp"
     unit = "rad" if angle_peak else ("s" if printed.metric in ("tr", "ts") else "")
@@ -101,7 +102,7 @@ def plant_table(params: dict[str, float]) -> pd.DataFrame:
     return pd.DataFrame([{"parameter": k, "nlcx": params[k], "thesis": printed[k], "unit": units[k]} for k in printed])
 
 
-def _ags_rows(table: pd.DataFrame, signal: str, schedule: dict[str, Any]) -> list[list[Any]]:
+def _ags_rows(table: pd.DataFrame, signal: str, schedule: dict[str, Any]) -> list[list[object]]:
     """One loop's min, max and rate k of each gain as run, beside the printed ones (NaN: not printed)."""
     printed = signal in table.index
     loop = table.loc[signal, "loop"] if printed else ""

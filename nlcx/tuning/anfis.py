@@ -37,12 +37,17 @@ otherwise deterministic, so the same data, options and seed give identical param
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from nlcx.layout import Layout
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
 
 N_INPUTS = 2
 #: Head of a packed model: MF kind (index in MF_KINDS), MFs per input, the inputs' ranges.
@@ -91,26 +96,26 @@ class AnfisModel:
 
     # ------------------------------------------------------------------ evaluation
 
-    def memberships(self, X: Any) -> tuple[np.ndarray, np.ndarray]:
+    def memberships(self, X: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """mu_{1,i}(x1) and mu_{2,j}(x2), each (N, n)."""
         X = _as_inputs(X)
         first, second = (_mf(self.mf, X[:, d, None], self.centres[d], self.widths[d], self.slopes[d]) for d in range(2))
         return first, second
 
-    def rule_outputs(self, X: Any) -> np.ndarray:
+    def rule_outputs(self, X: npt.ArrayLike) -> np.ndarray:
         """f_r = p_r x1 + q_r x2 + r_r, (N, n^2)."""
         X = _as_inputs(X)
         c = self.consequents
         return X[:, 0, None] * c[:, 0] + X[:, 1, None] * c[:, 1] + c[:, 2]
 
-    def predict(self, X: Any, clip: bool = False) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike, clip: bool = False) -> np.ndarray:
         """The ANFIS output at every row (x1, x2) of X, (N,). ``clip``: inputs clipped to ``ranges``."""
-        X = _as_inputs(X)
+        inputs = _as_inputs(X)
         if clip:
-            X = np.clip(X, self.ranges[:, 0], self.ranges[:, 1])
-        mu1, mu2 = self.memberships(X)
-        w = (mu1[:, :, None] * mu2[:, None, :]).reshape(len(X), -1)
-        f = self.rule_outputs(X)
+            inputs = np.clip(inputs, self.ranges[:, 0], self.ranges[:, 1])
+        mu1, mu2 = self.memberships(inputs)
+        w = (mu1[:, :, None] * mu2[:, None, :]).reshape(len(inputs), -1)
+        f = self.rule_outputs(inputs)
         den = w.sum(axis=1)
         num = (w * f).sum(axis=1)
         # no rule fires (only far outside the data): the plain mean of the rule outputs
@@ -136,7 +141,7 @@ class AnfisModel:
         )
 
     @classmethod
-    def from_vector(cls, v: Any) -> AnfisModel:
+    def from_vector(cls, v: npt.ArrayLike) -> AnfisModel:
         v = np.asarray(v, dtype=float)
         head = MODEL.unpack(v)
         n = int(head["n_mfs"])
@@ -148,7 +153,7 @@ class AnfisModel:
         ranges = [head["x1_min"], head["x1_max"], head["x2_min"], head["x2_max"]]
         return cls(MF_KINDS[int(head["mf"])], centres, widths, slopes, v[o + 3 * block :], np.array(ranges))
 
-    def to_config(self) -> dict[str, Any]:
+    def to_config(self) -> dict[str, object]:
         """The model as the ``anfis`` schedule's per-gain configuration (lists of floats)."""
         return {
             "mf": self.mf,
@@ -161,10 +166,10 @@ class AnfisModel:
         }
 
     @classmethod
-    def from_config(cls, cfg: Any) -> AnfisModel:
+    def from_config(cls, cfg: Mapping[str, object] | BaseModel) -> AnfisModel:
         """From :meth:`to_config`'s mapping (or a pydantic model with the same fields)."""
 
-        def get(key: str) -> Any:
+        def get(key: str) -> Any:  # a field of either form, of the type the model's field has
             return cfg.get(key) if isinstance(cfg, dict) else getattr(cfg, key)
 
         n = int(get("n_mfs"))
@@ -189,7 +194,7 @@ def vector_size(n_mfs: int) -> int:
     return MODEL.size + 3 * N_INPUTS * n_mfs + CONSEQUENT.size * n_mfs * n_mfs
 
 
-def _as_inputs(X: Any) -> np.ndarray:
+def _as_inputs(X: npt.ArrayLike) -> np.ndarray:
     X = np.asarray(X, dtype=float)
     if X.ndim == 1 and X.size == 2:
         X = X[None, :]
@@ -224,7 +229,9 @@ def _mf_grads(kind: str, x: np.ndarray, c: np.ndarray, a: np.ndarray, b: np.ndar
 # ------------------------------------------------------------------------------ training
 
 
-def initial_model(X: Any, n_mfs: int = 3, mf: str = "gbell", ranges: Any = None) -> AnfisModel:
+def initial_model(
+    X: npt.ArrayLike, n_mfs: int = 3, mf: str = "gbell", ranges: npt.ArrayLike | None = None
+) -> AnfisModel:
     """Premise from the data ranges (evenly spaced centres), zero consequents."""
     if mf not in MF_KINDS:
         raise ValueError(f"unknown membership function {mf!r}; allowed: {', '.join(MF_KINDS)}")
@@ -255,7 +262,7 @@ def _scales(model: AnfisModel) -> tuple[np.ndarray, np.ndarray]:
     return lo, np.where(span > 0, span, 1.0)
 
 
-def normalized_firing(model: AnfisModel, X: Any) -> np.ndarray:
+def normalized_firing(model: AnfisModel, X: npt.ArrayLike) -> np.ndarray:
     """w_r / sum w, (N, n^2)."""
     mu1, mu2 = model.memberships(X)
     w = (mu1[:, :, None] * mu2[:, None, :]).reshape(len(mu1), -1)
@@ -263,7 +270,7 @@ def normalized_firing(model: AnfisModel, X: Any) -> np.ndarray:
     return np.where(den > 0, w / np.where(den > 0, den, 1.0), 1.0 / w.shape[1])
 
 
-def fit_consequents(model: AnfisModel, X: Any, y: Any) -> AnfisModel:
+def fit_consequents(model: AnfisModel, X: npt.ArrayLike, y: npt.ArrayLike) -> AnfisModel:
     """Forward pass: the least-squares consequents with the premise of ``model`` fixed (in place)."""
     X = _as_inputs(X)
     y = np.asarray(y, dtype=float).ravel()
@@ -278,7 +285,7 @@ def fit_consequents(model: AnfisModel, X: Any, y: Any) -> AnfisModel:
     return model
 
 
-def premise_gradient(model: AnfisModel, X: Any, y: Any) -> np.ndarray:
+def premise_gradient(model: AnfisModel, X: npt.ArrayLike, y: npt.ArrayLike) -> np.ndarray:
     """dE/d(centres, widths, slopes) of E = 1/2 sum (y_hat - y)^2, consequents fixed: (3, 2, n)."""
     X = _as_inputs(X)
     y = np.asarray(y, dtype=float).ravel()
@@ -301,7 +308,7 @@ def premise_gradient(model: AnfisModel, X: Any, y: Any) -> np.ndarray:
     return grad
 
 
-def rmse(model: AnfisModel, X: Any, y: Any) -> float:
+def rmse(model: AnfisModel, X: npt.ArrayLike, y: npt.ArrayLike) -> float:
     return float(np.sqrt(np.mean((model.predict(X) - np.asarray(y, dtype=float).ravel()) ** 2)))
 
 
@@ -324,8 +331,8 @@ def _premise_step(model: AnfisModel, X: np.ndarray, y: np.ndarray, k: float) -> 
 
 
 def train_anfis(
-    X: Any,
-    y: Any,
+    X: npt.ArrayLike,
+    y: npt.ArrayLike,
     n_mfs: int = 3,
     epochs: int = 100,
     seed: int = 0,
@@ -335,7 +342,7 @@ def train_anfis(
     decrease: float = 0.9,
     safeguard: bool = True,
     batch_size: int | None = None,
-    ranges: Any = None,
+    ranges: npt.ArrayLike | None = None,
 ) -> tuple[AnfisModel, list[float]]:
     """Train a 2-input ANFIS on (X (N, 2), y (N,)) by Jang's hybrid rule.
 
@@ -391,11 +398,15 @@ def train_anfis(
 
 
 def anfis_schedule(
-    X: Any, gains: Any, clip: dict[str, Any] | None = None, clip_inputs: bool = True, **train: Any
-) -> tuple[dict[str, Any], dict[str, list[float]]]:
+    X: npt.ArrayLike,
+    gains: npt.ArrayLike,
+    clip: Mapping[str, object] | None = None,
+    clip_inputs: bool = True,
+    **train: Any,
+) -> tuple[dict[str, object], dict[str, list[float]]]:
     """Train k_p, k_i, k_d models on (e, de/dt) -> gains (N, 3): the ``anfis`` schedule config and histories."""
     gains = np.asarray(gains, dtype=float)
-    cfg: dict[str, Any] = {"kind": "anfis", "clip_inputs": clip_inputs}
+    cfg: dict[str, object] = {"kind": "anfis", "clip_inputs": clip_inputs}
     histories = {}
     for col, name in enumerate(("kp", "ki", "kd")):
         model, history = train_anfis(X, gains[:, col], **train)

@@ -21,19 +21,55 @@ import neither the engine nor the config loader.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from pydantic import BaseModel, ConfigDict
 
 from nlcx.errors import ConfigError
 from nlcx.plants.base import Plant
 
+if TYPE_CHECKING:
+    import numpy as np
+
+    from nlcx.controllers.base import ControllerInstance
+
 
 class TunerConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     kind: str
+
+
+class SimulatedRun(Protocol):
+    """What a tuner reads of one simulated run (:class:`nlcx.engine.Run`)."""
+
+    @property
+    def controller(self) -> ControllerInstance: ...
+    @property
+    def status(self) -> str: ...
+    @property
+    def t(self) -> np.ndarray: ...
+    @property
+    def x(self) -> np.ndarray: ...
+    @property
+    def r(self) -> np.ndarray: ...
+
+
+class SimulatedSetup(Protocol):
+    """What a tuner reads of a simulated experiment as prepared (:class:`nlcx.engine.Prepared`)."""
+
+    @property
+    def plant(self) -> Plant: ...
+
+
+class Simulation(Protocol):
+    """What a tuner reads of a simulation's result (:class:`nlcx.engine.ExperimentResult`)."""
+
+    @property
+    def runs(self) -> Sequence[SimulatedRun]: ...
+    @property
+    def prepared(self) -> SimulatedSetup: ...
 
 
 class Simulate(Protocol):
@@ -42,11 +78,11 @@ class Simulate(Protocol):
 
     def __call__(
         self,
-        controllers: Mapping[str, Mapping[str, Any]],
-        simulation: Mapping[str, Any] | None = None,
-        uncertainty: Mapping[str, Any] | None = None,
+        controllers: Mapping[str, Mapping[str, object]],
+        simulation: Mapping[str, object] | None = None,
+        uncertainty: Mapping[str, object] | None = None,
         measure: bool = True,
-    ) -> Any: ...
+    ) -> Simulation: ...
 
 
 @dataclass
@@ -59,10 +95,12 @@ class TuneContext:
     path: str
     dt: float
     simulate: Simulate
-    shared: dict[str, Any] = field(default_factory=dict)
-    rows: list[dict[str, Any]] = field(default_factory=list)
+    #: Named numbers an earlier tuner found, by its name for them (``zn``: K_u, T_u and the gains).
+    shared: dict[str, dict[str, float]] = field(default_factory=dict)
+    #: Rows of tuning.csv: controller, tuner, parameter, value.
+    rows: list[dict[str, object]] = field(default_factory=list)
 
-    def record(self, tuner: str, parameter: str, value: Any) -> None:
+    def record(self, tuner: str, parameter: str, value: object) -> None:
         self.rows.append({"controller": self.label, "tuner": tuner, "parameter": parameter, "value": value})
 
 

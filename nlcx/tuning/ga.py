@@ -8,8 +8,9 @@ result serial or parallel.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -17,6 +18,10 @@ from pydantic import Field, field_validator
 from nlcx import runtime
 from nlcx.tuning.base import Simulate, TuneContext, TunerConfig, TunerModel, single_loop
 from nlcx.tuning.optimise import GASettings, evolve, require_pymoo
+
+if TYPE_CHECKING:
+    from nlcx.config.building import PluginSection
+    from nlcx.protocols import ControllerPlugin
 
 PENALTY = 1e6
 
@@ -112,7 +117,7 @@ class GATuner(TunerModel):
         return {**controller, "loops": {key: {**loop, "schedule": schedule}}}
 
 
-def require_tuning_extra(controllers: Any, where: str = "") -> None:
+def require_tuning_extra(controllers: Iterable[PluginSection[ControllerPlugin]], where: str = "") -> None:
     """Fail before any run, in one line, where one of ``controllers`` (an experiment's controller
     sections, with their tuners) is GA-tuned and pymoo is not installed; ``where`` (a config's
     path) prefixes the message."""

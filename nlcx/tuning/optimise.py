@@ -14,12 +14,15 @@ from __future__ import annotations
 from collections.abc import Callable, Generator
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from nlcx.errors import NlcxError
+
+if TYPE_CHECKING:
+    from pymoo.core.algorithm import Algorithm
 
 Objective = Callable[[np.ndarray], np.ndarray]
 #: The command that installs pymoo with nlcx.
@@ -139,14 +142,14 @@ def evolution(
         def __init__(self) -> None:
             super().__init__(n_var=len(lower), n_obj=1, xl=np.asarray(lower), xu=np.asarray(upper))
 
-        def _evaluate(self, X: np.ndarray, out: dict[str, Any], *args: Any, **kwargs: Any) -> None:
+        def _evaluate(self, X: np.ndarray, out: dict[str, object], *args: object, **kwargs: object) -> None:
             asked, f = given.pop()
             if not np.array_equal(X, asked):
                 raise RuntimeError("the GA evaluated another population than the one it asked for")
             count[0] += len(X)
             out["F"] = f[:, None]
 
-    def record(algorithm: Any) -> None:
+    def record(algorithm: Algorithm) -> None:
         best = float(algorithm.opt.get("F").min())
         history.append((algorithm.n_gen, count[0], best))
         if callback is not None:

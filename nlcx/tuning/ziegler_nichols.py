@@ -95,7 +95,7 @@ def zn_gains(ku: float, tu: float, rule: str) -> tuple[float, float, float]:
 def p_loop(controller: dict[str, Any], key: str, gain: float) -> dict[str, Any]:
     """The P-only loop at ``gain`` of a SISO PID (its feed-forward and bias kept)."""
     loop = {**controller["loops"][key], "schedule": {"kind": "constant", "kp": gain}}
-    keep: dict[str, Any] = {k: controller[k] for k in ("feedforward", "bias") if k in controller}
+    keep: dict[str, object] = {k: controller[k] for k in ("feedforward", "bias") if k in controller}
     return {"kind": "pid", "loops": {key: loop}, **keep}
 
 

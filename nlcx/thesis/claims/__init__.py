@@ -37,7 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import pandas as pd
 from matplotlib.figure import Figure
@@ -47,6 +47,9 @@ from nlcx.thesis import cstr
 from nlcx.thesis.catalog import FigureSpec, TableSpec
 from nlcx.thesis.claims.checks import KINDS, Check, ClaimRun
 from nlcx.thesis.claims.table import CHAPTER_PLANTS, Claim, ClaimTable, Threshold, claim_table, parse, thesis_runs
+
+if TYPE_CHECKING:
+    from nlcx.thesis.records import Record
 
 __all__ = [
     "CHAPTER_PLANTS",
@@ -91,7 +94,7 @@ def judge(claim: Claim, runs: Mapping[str, ClaimRun], table: ClaimTable) -> tupl
     return verdict, " | ".join(text for check, (_, text) in zip(claim.checks, results, strict=True) if check.shown)
 
 
-def _runs(root: Path, records: Mapping[Path, Any]) -> dict[str, ClaimRun]:
+def _runs(root: Path, records: Mapping[Path, Record]) -> dict[str, ClaimRun]:
     """Every thesis table and figure the claims read whose runs are all among ``records``."""
     runs = {}
     for ref, spec in thesis_runs().items():
@@ -105,7 +108,7 @@ def _runs(root: Path, records: Mapping[Path, Any]) -> dict[str, ClaimRun]:
     return runs
 
 
-def evaluate(root: Path, records: dict[Path, Any], chapters: set[int]) -> pd.DataFrame:
+def evaluate(root: Path, records: dict[Path, Record], chapters: set[int]) -> pd.DataFrame:
     """claims.csv: chapter, pendulum, id, source, claim, reproduced, evidence."""
     table = claim_table()
     runs = _runs(root, records)
@@ -127,7 +130,7 @@ def evaluate(root: Path, records: dict[Path, Any], chapters: set[int]) -> pd.Dat
     return pd.DataFrame(rows)
 
 
-def lyapunov_figure(spec: FigureSpec, records: list[Any]) -> Figure:
+def lyapunov_figure(spec: FigureSpec, records: list[Record]) -> Figure:
     """V̇ from the stored trajectory beside sum F v, for time-AGS (a) and error-AGS (b)."""
     fig, axes = new_figure(len(records), 1, (7.5, 2.9 * len(records)))
     for k, (ax, rec, name) in enumerate(zip(axes[:, 0], records, ("Time", "Error"), strict=False)):

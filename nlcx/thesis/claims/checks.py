@@ -21,12 +21,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from nlcx.thesis.catalog import CSTR_METHODS
 from nlcx.thesis.tables import thesis_value
+
+if TYPE_CHECKING:
+    from nlcx.thesis.records import Record
 
 #: The two controllers of every pendulum experiment: the literature's PID and the AGS PID.
 CONTROLLERS = ("conventional", "proposed")
@@ -74,7 +77,7 @@ class Check:
 class ClaimRun:
     """The run behind one thesis table or figure, as a check reads it.
 
-    ``record`` is what the reproduction keeps of the run (:class:`nlcx.thesis.reproduce.Record`:
+    ``record`` is what the reproduction keeps of the run (:class:`nlcx.thesis.records.Record`:
     ``metrics``, ``extras``, ``status``, ``resolved``, ``lyapunov``) or, for Table 5.8, whose
     five runs are one per tuning method, our values of the table (method -> column -> value,
     :func:`nlcx.thesis.cstr.method_values`); ``uncertainty`` is the figure's, as the figure
@@ -133,7 +136,7 @@ def kind(name: str, **reads: Any) -> Callable[[Evaluator], Evaluator]:
     return register
 
 
-def metric_value(record: Any, controller: str, signal: str, metric: str) -> float:
+def metric_value(record: Record, controller: str, signal: str, metric: str) -> float:
     """A table metric (M_p, t_r, t_s, e_ss as the thesis defines them) or any other metric of a
     run (its metrics, then its extras); NaN where the run has none."""
     if metric in TABLE_METRICS:

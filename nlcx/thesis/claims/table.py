@@ -33,7 +33,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import Any
 
 import yaml
 
@@ -130,7 +129,7 @@ def parse(text: str, origin: str = FILENAME) -> ClaimTable:
     return ClaimTable(thresholds, claims)
 
 
-def _fields(path: str, raw: Any, required: tuple[str, ...], optional: tuple[str, ...]) -> dict[str, Any]:
+def _fields(path: str, raw: object, required: tuple[str, ...], optional: tuple[str, ...]) -> dict[str, object]:
     """The keys of a mapping, every ``required`` one present and none but these."""
     raw = _mapping(path, raw)
     for key in raw:
@@ -142,27 +141,27 @@ def _fields(path: str, raw: Any, required: tuple[str, ...], optional: tuple[str,
     return raw
 
 
-def _mapping(path: str, raw: Any) -> dict[str, Any]:
+def _mapping(path: str, raw: object) -> dict[str, object]:
     if not isinstance(raw, dict) or not raw:
         raise ConfigError(path, raw, "a non-empty mapping")
     return raw
 
 
-def _text(path: str, value: Any) -> str:
+def _text(path: str, value: object) -> str:
     """A non-empty text."""
     if not isinstance(value, str) or not value.strip():
         raise ConfigError(path, value, "a non-empty text")
     return value
 
 
-def _names(path: str, value: Any) -> tuple[str, ...]:
+def _names(path: str, value: object) -> tuple[str, ...]:
     """A non-empty list of non-empty names."""
     if not isinstance(value, list) or not value or not all(isinstance(v, str) and v for v in value):
         raise ConfigError(path, value, "a non-empty list of names")
     return tuple(value)
 
 
-def _threshold(path: str, name: str, raw: Any) -> Threshold:
+def _threshold(path: str, name: str, raw: object) -> Threshold:
     fields = _fields(path, raw, ("value", "description"), ("unit",))
     value = fields["value"]
     if isinstance(value, bool) or not isinstance(value, int | float):
@@ -173,7 +172,7 @@ def _threshold(path: str, name: str, raw: Any) -> Threshold:
     return Threshold(name, float(value), unit, _text(f"{path}.description", fields["description"]))
 
 
-def _claim(path: str, raw: Any, thresholds: Mapping[str, Threshold]) -> Claim:
+def _claim(path: str, raw: object, thresholds: Mapping[str, Threshold]) -> Claim:
     fields = _fields(path, raw, CLAIM_KEYS[:-1], CLAIM_KEYS[-1:])
     claim_id = _text(f"{path}.id", fields["id"])
     path = f"{path.rsplit('[', 1)[0]}[{claim_id}]"
@@ -202,7 +201,7 @@ def _claim(path: str, raw: Any, thresholds: Mapping[str, Threshold]) -> Claim:
     )
 
 
-def _check(path: str, raw: Any, chapter: int, pendulum: str, thresholds: Mapping[str, Threshold]) -> Check:
+def _check(path: str, raw: object, chapter: int, pendulum: str, thresholds: Mapping[str, Threshold]) -> Check:
     fields = _fields(path, raw, ("kind", "run"), CHECK_KEYS[2:])
     name = fields["kind"]
     if name not in KINDS:
@@ -227,7 +226,7 @@ def _plant_words(plant: str) -> str:
     return "the CSTR" if plant == "cstr" else f"the {plant} pendulum"
 
 
-def _runs(path: str, value: Any, kind: Kind, chapter: int, pendulum: str) -> tuple[str, ...]:
+def _runs(path: str, value: object, kind: Kind, chapter: int, pendulum: str) -> tuple[str, ...]:
     """The thesis tables and figures a check reads: one per schedule its kind compares, each a
     run of the claim's plant and chapter that its kind reads."""
     refs = tuple(value) if isinstance(value, list) else (value,)
@@ -251,7 +250,7 @@ def _runs(path: str, value: Any, kind: Kind, chapter: int, pendulum: str) -> tup
     return refs
 
 
-def _controllers(path: str, value: Any, kind: Kind) -> tuple[str, ...]:
+def _controllers(path: str, value: object, kind: Kind) -> tuple[str, ...]:
     """The controllers a check reads: its kind's, or (kinds that leave them open) those it names."""
     if kind.controllers is not None:
         if value is not None:
@@ -263,7 +262,7 @@ def _controllers(path: str, value: Any, kind: Kind) -> tuple[str, ...]:
     return names
 
 
-def _than(path: str, value: Any, kind: Kind, controllers: tuple[str, ...]) -> tuple[str, ...]:
+def _than(path: str, value: object, kind: Kind, controllers: tuple[str, ...]) -> tuple[str, ...]:
     """The controllers a check compares its own with: none, or (kinds that compare) others it names."""
     if not kind.rivals:
         if value is not None:
@@ -278,14 +277,14 @@ def _than(path: str, value: Any, kind: Kind, controllers: tuple[str, ...]) -> tu
     return names
 
 
-def _flag(path: str, value: Any) -> bool:
+def _flag(path: str, value: object) -> bool:
     """A yes/no key: true or false."""
     if not isinstance(value, bool):
         raise ConfigError(path, value, "true or false")
     return value
 
 
-def _signals(path: str, value: Any, kind: Kind) -> tuple[str, ...]:
+def _signals(path: str, value: object, kind: Kind) -> tuple[str, ...]:
     if not kind.signals:
         if value is not None:
             raise ConfigError(path, value, f"{kind.name} reads no signals; name none")
@@ -293,7 +292,7 @@ def _signals(path: str, value: Any, kind: Kind) -> tuple[str, ...]:
     return _names(path, value)
 
 
-def _metric(path: str, value: Any, kind: Kind) -> str:
+def _metric(path: str, value: object, kind: Kind) -> str:
     """The metric a check reads: its kind's, or (kinds that leave it open) the one it names."""
     if kind.metric is not None:
         if value is not None:
@@ -305,7 +304,7 @@ def _metric(path: str, value: Any, kind: Kind) -> str:
     return metric
 
 
-def _threshold_names(path: str, value: Any, kind: Kind, thresholds: Mapping[str, Threshold]) -> tuple[str, ...]:
+def _threshold_names(path: str, value: object, kind: Kind, thresholds: Mapping[str, Threshold]) -> tuple[str, ...]:
     """Declared thresholds, one for each role of the kind."""
     names = tuple(value) if isinstance(value, list) else (value,)
     if len(names) != len(kind.thresholds):

@@ -20,14 +20,14 @@ SHOWN = ("overshoot", "rise_time", "settling_time", "peak_deviation", "ise", "co
 SPREAD = ("overshoot", "settling_time", "peak_deviation")
 
 
-def _value(value: Any, status: str) -> str:
+def _value(value: object, status: str) -> str:
     """A cell: the number, a dash where undefined, or the run's status where it did not run to the end."""
     if status != "ok":
         return status
     return "—" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.4g}"
 
 
-def _scenario_table(rows: pd.DataFrame) -> dict[str, Any]:
+def _scenario_table(rows: pd.DataFrame) -> dict[str, object]:
     """One pendulum's scenario: the controllers as columns, a row per (signal, metric) shown."""
     controllers = list(dict.fromkeys(rows.controller))
     shown = rows[rows.metric.isin(SHOWN)]
@@ -41,7 +41,7 @@ def _scenario_table(rows: pd.DataFrame) -> dict[str, Any]:
     return {"controllers": controllers, "rows": body, "stopped": stopped}
 
 
-def _robustness_table(rows: pd.DataFrame) -> dict[str, Any]:
+def _robustness_table(rows: pd.DataFrame) -> dict[str, object]:
     """One pendulum's sweep: per controller, the share of stable variants and each metric's
     median and interquartile range."""
     controllers = list(dict.fromkeys(rows.controller))
@@ -55,13 +55,13 @@ def _robustness_table(rows: pd.DataFrame) -> dict[str, Any]:
     return {"controllers": controllers, "share": share, "rows": body, "variants": variants}
 
 
-def _spread(row: Any) -> str:
+def _spread(row: Any) -> str:  # a row of itertuples (its fields: the columns), or None
     if row is None or not isinstance(row.median, float) or math.isnan(row.median):
         return "—"
     return f"{row.median:.4g} ({row.q25:.4g} to {row.q75:.4g})"
 
 
-def context(directory: Path) -> dict[str, Any]:
+def context(directory: Path) -> dict[str, object]:
     """Everything the baselines page shows."""
     comparison = pd.read_csv(directory / "tables" / "comparison.csv", keep_default_na=False, na_values={"value": [""]})
     numbers = {c: [""] for c in ("median", "q25", "q75", "min", "max", "stable_share")}
@@ -82,7 +82,7 @@ def context(directory: Path) -> dict[str, Any]:
     }
 
 
-def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, Any]:
+def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, object]:
     """The page's :func:`context` (it reads only the directory's tables)."""
     return context(directory)
 

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict, cast
 
 import pandas as pd
 from markdown_it import MarkdownIt
@@ -26,6 +27,11 @@ from nlcx.thesis.pages import bars
 from nlcx.thesis.pages.tables import TableComparison, compare
 from nlcx.thesis.pages.tolerances import ReproductionTolerances
 from nlcx.thesis.pages.tolerances import load as load_tolerances
+
+if TYPE_CHECKING:
+    from markdown_it.token import Token
+
+    from nlcx.thesis.catalog import FigureSpec
 
 CITATION = (
     '"Conventional and Intelligent Control of Nonlinear Systems", PhD thesis, Thapar University '
@@ -53,14 +59,16 @@ class GalleryItem:
     generated: bool
 
 
-def asked(spec: Any, manifest: dict[str, Any]) -> bool:
+def asked(spec: FigureSpec, manifest: Mapping[str, object]) -> bool:
     """Whether the reproduction asked for a figure: its key among ``--only``'s and its chapter
     among ``--chapter``'s, as the manifest records them (every figure where it records none)."""
-    only, chapters = manifest.get("only") or [], manifest.get("chapters") or []
+    # lists, as ``nlcx reproduce`` records them
+    only = cast("list[str]", manifest.get("only") or [])
+    chapters = cast("list[int]", manifest.get("chapters") or [])
     return (not only or spec.key in only) and (not chapters or spec.chapter in chapters)
 
 
-def gallery(directory: Path, root: Path, manifest: dict[str, Any] | None = None) -> list[GalleryItem]:
+def gallery(directory: Path, root: Path, manifest: Mapping[str, object] | None = None) -> list[GalleryItem]:
     """Every result figure of the thesis that the reproduction asked for (:func:`asked`, from
     its ``manifest``), with its caption and whether nlcx drew it."""
     return [
@@ -77,9 +85,18 @@ def gallery(directory: Path, root: Path, manifest: dict[str, Any] | None = None)
     ]
 
 
-def claims(directory: Path) -> list[dict[str, Any]]:
+def claims(directory: Path) -> list[dict[str, object]]:
     path = directory / "claims.csv"
     return pd.read_csv(path).fillna("").to_dict("records") if path.is_file() else []
+
+
+class DocumentSection(TypedDict):
+    """A ``## `` section of a Markdown document (:func:`sections`)."""
+
+    heading: str
+    #: The document, relative to the page.
+    href: str
+    html: Markup
 
 
 def docs_links(directory: Path, repo: Path | None) -> list[dict[str, str]]:
@@ -93,20 +110,20 @@ def docs_links(directory: Path, repo: Path | None) -> list[dict[str, str]]:
     ]
 
 
-def _relative_links(tokens: list[Any], document: Path, directory: Path) -> None:
+def _relative_links(tokens: Sequence[Token], document: Path, directory: Path) -> None:
     """Point the relative links of a document's tokens (e.g. ``metrics.md``) from the page
     in ``directory`` to the file beside the document; anchors and absolute links unchanged."""
     for token in tokens:
         if token.children:
             _relative_links(token.children, document, directory)
         href = token.attrGet("href") if token.type == "link_open" else None
-        if href and not href.startswith("#") and ":" not in href:
+        if href and isinstance(href, str) and not href.startswith("#") and ":" not in href:  # a link's is text
             target, _, fragment = href.partition("#")
             relative = Path(os.path.relpath(document.parent / target, directory)).as_posix()
             token.attrSet("href", relative + (f"#{fragment}" if fragment else ""))
 
 
-def sections(path: Path, directory: Path) -> list[dict[str, Any]]:
+def sections(path: Path, directory: Path) -> list[DocumentSection]:
     """The ``## `` sections of a Markdown document: heading, a link to the document and the
     body as HTML (markdown-it-py, CommonMark with tables; raw HTML escaped and javascript:,
     vbscript:, file: and data: links left as text, so the page prints it as it is), its
@@ -115,7 +132,7 @@ def sections(path: Path, directory: Path) -> list[dict[str, Any]]:
         return []
     md = MarkdownIt("commonmark", {"html": False}).enable("table")
     href = Path(os.path.relpath(path, directory)).as_posix()
-    out: list[dict[str, Any]] = []
+    out: list[DocumentSection] = []
     for block in path.read_text(encoding="utf-8").split("\n## ")[1:]:
         heading, _, body = block.partition("\n")
         tokens = md.parse(body)
@@ -125,7 +142,7 @@ def sections(path: Path, directory: Path) -> list[dict[str, Any]]:
     return out
 
 
-def deviations(directory: Path, repo: Path | None) -> dict[str, list[dict[str, Any]]]:
+def deviations(directory: Path, repo: Path | None) -> dict[str, list[DocumentSection]]:
     """What the deviations section shows: every documented assumption (unprinted parameters
     and choices), the errata of the printed equations, the calibration's findings, and what
     was difficult (the identification study's findings and conclusion)."""
@@ -141,7 +158,7 @@ def deviations(directory: Path, repo: Path | None) -> dict[str, list[dict[str, A
     }
 
 
-def context(directory: Path, configs: Path, repo: Path | None) -> dict[str, Any]:
+def context(directory: Path, configs: Path, repo: Path | None) -> ReproductionPage:
     """Everything the reproduction page shows."""
     tolerances: ReproductionTolerances = load_tolerances(configs / "tolerances.yaml")
     tables: list[TableComparison] = compare(directory, tolerances)
@@ -171,7 +188,29 @@ def context(directory: Path, configs: Path, repo: Path | None) -> dict[str, Any]
     }
 
 
-def summary_frame(ctx: dict[str, Any]) -> pd.DataFrame:
+class ReproductionPage(TypedDict):
+    """Everything the reproduction page shows (:func:`context`)."""
+
+    kind: str
+    title: str
+    citation: str
+    #: The directory's manifest.json (empty without one).
+    manifest: dict[str, object]
+    tolerances: ReproductionTolerances
+    tables: list[TableComparison]
+    bars: dict[str, Markup]
+    legend: Markup
+    table_verdicts: dict[str, int]
+    claims: list[dict[str, object]]
+    claim_counts: dict[str, int]
+    figures: list[GalleryItem]
+    chapters: list[int]
+    figure_counts: dict[str, int]
+    docs: list[dict[str, str]]
+    deviations: dict[str, list[DocumentSection]]
+
+
+def summary_frame(ctx: ReproductionPage) -> pd.DataFrame:
     """report_summary.csv: one row per table (cells, within tolerance, verdict), for `nlcx diff`."""
     return pd.DataFrame(
         [
@@ -181,7 +220,7 @@ def summary_frame(ctx: dict[str, Any]) -> pd.DataFrame:
     )
 
 
-def page_context(directory: Path, configs: Path | None, repo: Path | None) -> dict[str, Any]:
+def page_context(directory: Path, configs: Path | None, repo: Path | None) -> ReproductionPage:
     """The page's :func:`context`, the thesis's configs (tolerances.yaml, the figures' catalogue)
     read from ``configs`` (default: configs/thesis of the checkout, else of the working
     directory); report_summary.csv written beside it (:func:`summary_frame`)."""
