@@ -311,6 +311,44 @@ def test_the_test_tables_change_no_fit_no_screen_no_ranking_and_no_profile(
     assert not first.test_median_rel_error.equals(second.test_median_rel_error)  # the doubling was seen
 
 
+@pytest.mark.slow
+def test_the_test_tables_change_nothing_the_final_round_decides(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The final round's own spec (configs/identify/final_round.yaml) with a tiny GA and four of
+    its hypotheses: with every printed value of the test tables doubled, its fits, its ranking
+    and its rule's decision are those of the thesis's values; only the test scores move."""
+    raw = yaml.safe_load((ROOT / "configs" / "identify" / "final_round.yaml").read_text())
+    first = "theta_settling=absolute+z_loop=no_feedforward_printed+integrator_limit=position"
+    raw |= {"split": str(SPLIT), "claims_top": None, "only": ["literal", first, "conventional_gains=own_with_z",
+            f"{first}+z_schedule=rate_free"], "warm_start": {"kind": "ga", "pop_size": 4, "generations": 1, "seed": 1},
+            "optimiser": {"kind": "ga", "pop_size": 4, "generations": 1, "seed": 1}}  # fmt: skip
+    spec = tmp_path / "final_round.yaml"
+    spec.write_text(yaml.safe_dump(raw))
+    test_tables = split.load(SPLIT).pendulum.test
+    printed = catalog.thesis_metrics()
+    doubled = printed.assign(value=printed.value.where(~printed.table.isin(test_tables), 2 * printed.value))
+    runs = {}
+    for name, table in (("printed", printed), ("doubled", doubled)):
+        monkeypatch.setattr(catalog, "thesis_metrics", lambda table=table: table)
+        runs[name] = identify_module.identify(spec, tmp_path / name / "out", root=THESIS)
+    a, b = (tmp_path / name / "out" for name in runs)
+    for path in (a / "fits").glob("*.json"):
+        ours, theirs = json.loads(path.read_text()), json.loads((b / "fits" / path.name).read_text())
+        assert (ours["values"], ours["train_loss"]) == (theirs["values"], theirs["train_loss"]), path.stem
+    first_run, second_run = runs["printed"], runs["doubled"]
+    assert list(first_run.hypothesis) == list(second_run.hypothesis)
+    for column in [c for c in first_run.columns if c.startswith(("train_", "validation_"))]:
+        assert first_run[column].equals(second_run[column]), column
+
+    def decision(ranking: pd.DataFrame) -> bool:
+        return profiles.final_round_selects(ranking.iloc[0], ranking[ranking.hypothesis == first].iloc[0])
+
+    assert decision(first_run) == decision(second_run)
+    assert (a / "profile.yaml").read_bytes() == (b / "profile.yaml").read_bytes()
+    assert not first_run.test_median_rel_error.equals(second_run.test_median_rel_error)  # the doubling was seen
+
+
 def test_a_diverged_cell_counts_as_a_failure_not_as_missing() -> None:
     from nlcx.thesis.fitting import scores
 
