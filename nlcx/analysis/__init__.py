@@ -9,7 +9,8 @@ python-control is imported with this package, never by ``import nlcx``.
 from __future__ import annotations
 
 from nlcx.analysis.frozen import FrozenLoop, FrozenPoint
-from nlcx.analysis.linearization import FrozenSweep, Linearization, linearize, linearize_along
+from nlcx.analysis.frozen_results import FrozenSweep, Linearization
+from nlcx.analysis.linearization import linearize, linearize_along
 from nlcx.analysis.output import save_analysis
 
 __all__ = ["FrozenLoop", "FrozenPoint", "FrozenSweep", "Linearization", "linearize", "linearize_along", "save_analysis"]

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.axes import Axes
 
-    from nlcx.analysis.linearization import FrozenSweep, Linearization
+    from nlcx.analysis.frozen_results import FrozenSweep, Linearization
 
 #: The ``nlcx_output`` kind its manifest names.
 KIND = "linearize"
