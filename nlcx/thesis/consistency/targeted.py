@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -134,25 +135,44 @@ class CellSet:
 
 
 def chosen_sets(spec: TargetedSpec, cells_of: Callable[[Column], pd.DataFrame]) -> list[CellSet]:
-    """The sets searched (:class:`SetChoice`), from the consistency study's subsets.csv."""
+    """The sets searched (:class:`SetChoice`), from the consistency study's subsets.csv. A set of
+    ``first`` that is not among the study's minimal unreachable sets (some loop of the study
+    hits it, or a smaller set is already unreachable) is searched all the same, its study miss
+    NaN."""
     subsets = pd.read_csv(Path(spec.study) / "subsets.csv", dtype={"table": str})
-    rows = []
-    for row in subsets.itertuples(index=False):
-        column = (str(row.table), str(row.controller))
-        groups = twins(cells_of(column))
-        label = {" = ".join(cells_of(column).cell.iloc[m] for m in g): tuple(g) for g in groups}
-        members = tuple(label[part] for part in str(row.cells).split(" & "))
-        rows.append(CellSet(column, str(row.cells), members, float(str(row.least_miss))))
+    rows = [
+        cell_set((str(r.table), str(r.controller)), str(r.cells), float(str(r.least_miss)), cells_of)
+        for r in subsets.itertuples(index=False)
+    ]
     by_key = {s.key: s for s in rows}
-    unknown = [k for k in spec.sets.first if k not in by_key]
-    if unknown:
-        raise ConfigError(
-            "sets.first", unknown[0], f"a set of {spec.study}/subsets.csv (its table, controller and cells)"
-        )
-    first = [by_key[k] for k in spec.sets.first]
+    first = [by_key.get(k) or named_set(k, cells_of) for k in spec.sets.first]
     rest = sorted((s for s in rows if s.least_miss >= spec.sets.least_miss and s.key not in spec.sets.first),
                   key=lambda s: (s.least_miss, s.key))  # fmt: skip
     return (first + rest)[: spec.sets.cap]
+
+
+def cell_set(column: Column, label: str, least_miss: float, cells_of: Callable[[Column], pd.DataFrame]) -> CellSet:
+    """The set of ``column``'s cells that ``label`` names ("x.Mp & theta.Mp = phi.Mp": mirror
+    twins joined by " = ", as subsets.csv writes them)."""
+    groups = twins(cells_of(column))
+    by_label = {" = ".join(cells_of(column).cell.iloc[m] for m in g): tuple(g) for g in groups}
+    parts = label.split(" & ")
+    if any(part not in by_label for part in parts):
+        allowed = ", ".join(by_label)
+        raise ConfigError("sets.first", f"{column[0]} {column[1]}: {label}", f"cells of the column: {allowed}")
+    return CellSet(column, label, tuple(by_label[part] for part in parts), least_miss)
+
+
+def named_set(key: str, cells_of: Callable[[Column], pd.DataFrame]) -> CellSet:
+    """A set written "<table> <controller>: <cells>" (:attr:`CellSet.key`)."""
+    head, _, label = key.partition(": ")
+    table, _, controller = head.partition(" ")
+    if controller not in ("conventional", "proposed") or not label:
+        raise ConfigError("sets.first", key, '"<table> <conventional|proposed>: <cell> & <cell> ..."')
+    try:
+        return cell_set((table, controller), label, math.nan, cells_of)
+    except (KeyError, IndexError):
+        raise ConfigError("sets.first", key, "a printed table of the thesis") from None
 
 
 def candidates(
@@ -273,8 +293,10 @@ def search_set(
     store = Store(Path(spec.study), digest(consistency))
     fitted = [h.name for h in consistency.family() if store.fit_path(chosen.column, h.name).is_file()]
     studied = {d: store.loops(chosen.column, d, fitted) for d in consistency.definitions}
-    judged = [(loops.hypothesis.to_numpy(), judge.judge(loops[list(cells.cell)].to_numpy(float))[0])
-              for loops in studied.values()]  # fmt: skip
+    measured = [judge.judge(loops[list(cells.cell)].to_numpy(float)) for loops in studied.values()]
+    judged = [(loops.hypothesis.to_numpy(), miss) for loops, (miss, _) in zip(studied.values(), measured, strict=True)]
+    study = {"study_miss": min(float(miss.min()) for miss, _ in measured),
+             "study_hit": any(bool(hit.any()) for _, hit in measured)}  # fmt: skip
     near = nearest_hypotheses(judged, spec.nearest)
     ours = next(iter(studied.values()))  # nlcx's definition: the cloud and every fitted loop
     literal_fit = store.fit(chosen.column, "literal")["values"] if chosen.column[1] == "conventional" else {}
@@ -289,7 +311,7 @@ def search_set(
         if frame.hit.any():
             break
     loops = pd.concat(frames, ignore_index=True)
-    return summarise(spec, chosen, loops, consistency.definitions), loops
+    return summarise(spec, chosen, loops, consistency.definitions) | study, loops
 
 
 def summarise(spec: TargetedSpec, chosen: CellSet, loops: pd.DataFrame, definitions: list[str]) -> dict[str, object]:
