@@ -13,6 +13,8 @@ relative miss directly, with CMA-ES (the ``cma`` package, seeded) inside each hy
   measurement, ...), the ``nearest`` hypotheses of the consistency study (those whose loops
   came nearest the set) alone and combined with the spec's ``combine_with``, and on a
   proposed column the AGS-structure options alone and combined;
+- a hypothesis with one free parameter gets an even grid of the same budget instead (CMA-ES
+  needs two dimensions);
 - a hypothesis's search stops at its first loop that hits the set (every cell inside the
   interval its printed text covers) or after ``budget.loops`` loops; a set's search stops at
   its first hit.
@@ -267,6 +269,12 @@ def search_hypothesis(
     options = {"bounds": [0.0, 1.0], "popsize": spec.budget.popsize, "seed": seed, "verbose": -9,
                "maxfevals": spec.budget.loops, "tolfun": 0.0, "tolx": 1e-9}  # fmt: skip
     limit = min(spec.budget.loops, spec.budget.per_parameter * (len(keys) + 1))
+    if len(keys) == 1:  # CMA-ES needs two dimensions: one parameter gets an even grid of the same budget
+        grid = np.linspace(0.0, 1.0, limit)[:, None]
+        for first in range(0, limit, spec.budget.popsize):
+            if evaluate(grid[first : first + spec.budget.popsize]).hit.any():
+                break
+        return pd.concat(frames, ignore_index=True)
     options["maxfevals"] = limit
     es = cma.CMAEvolutionStrategy(x0, spec.budget.sigma, options)
     used = 0
