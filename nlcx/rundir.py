@@ -36,6 +36,7 @@ file behind; the check is made again under the lock.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import errno
 import functools
@@ -267,14 +268,27 @@ def claim(target: Path) -> Iterator[None]:
 def claim_in_place(target: Path, kind: str, key: str = "--out") -> Iterator[None]:
     """Make ``target`` this process's to write into and resume in place (an identification or
     a calibration): refused as :func:`check_target` refuses, locked; a new or empty directory
-    gets its mark and a first manifest (kind ``kind``), which its writer completes."""
+    gets its mark and a first manifest (kind ``kind``). When the work ends, finished or stopped
+    part-way by an error or Ctrl-C, the manifest lists every file then in ``target`` (hashed
+    anew), so a rerun resumes from what this process wrote instead of refusing it."""
     check_target(target, key)
     with locked(target, key):
         check_target(target, key)
         if not written_by_nlcx(target):
             target.mkdir(parents=True, exist_ok=True)
             manifest.write(target, {"name": target.name, MARKER: kind})
-        yield
+        try:
+            yield
+        except BaseException:
+            with contextlib.suppress(manifest.IntegrityError, OSError):
+                _list_written(target)
+            raise
+        _list_written(target)
+
+
+def _list_written(target: Path) -> None:
+    """``target``'s manifest listing every file in it, each hashed anew."""
+    manifest.update(target, manifest.load(target).get("checksums", {}))
 
 
 def check_marked(directory: Path, key: str = "DIR") -> None:

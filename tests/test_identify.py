@@ -174,6 +174,33 @@ def _spec(tmp_path: Path, split: Path) -> Path:
 
 
 @pytest.mark.slow
+def test_a_study_stopped_part_way_resumes_in_its_own_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A study that stops after its first fit (an error, as Ctrl-C would) leaves its directory
+    listed in its manifest: the rerun resumes there, fitting only what is left, and refuses
+    nothing it wrote itself."""
+    spec, out = _spec(tmp_path, SPLIT), tmp_path / "out"
+    real = identify_module.save_fit
+    saved: list[str] = []
+
+    def save_then_stop(fits: Path, digest: str, summary: dict[str, Any], fit: pd.DataFrame) -> None:
+        real(fits, digest, summary, fit)
+        saved.append(summary["hypothesis"])
+        raise RuntimeError("stopped")
+
+    monkeypatch.setattr(identify_module, "save_fit", save_then_stop)
+    stopped = runner.invoke(app, ["identify", str(spec), "--out", str(out)])
+    assert stopped.exit_code != 0 and len(saved) == 1
+    monkeypatch.setattr(identify_module, "save_fit", real)
+    fitted = _counting_fits(monkeypatch)
+    resumed = runner.invoke(app, ["identify", str(spec), "--out", str(out)])
+    assert resumed.exit_code == 0, resumed.output
+    assert saved[0] not in fitted and len(fitted) == 1  # the stopped run's fit is kept
+    (out / "foreign.txt").write_text("not nlcx's")
+    refused = runner.invoke(app, ["identify", str(spec), "--out", str(out)])
+    assert refused.exit_code != 0 and "foreign.txt" in refused.output  # someone else's file still refused
+
+
+@pytest.mark.slow
 def test_identify_fits_on_train_only_ranks_on_validation_and_resumes(tmp_path: Path) -> None:
     out = tmp_path / "out"
     result = runner.invoke(app, ["identify", str(_spec(tmp_path, SPLIT)), "--out", str(out)])

@@ -224,7 +224,7 @@ def identify(
     "kind: consistency" asks of each printed column whether any loop gives it; one with
     "kind: targeted" searches the sets of printed cells that study found unreachable."""
 
-    from nlcx import manifest, rundir
+    from nlcx import rundir
     from nlcx.thesis.consistency import consistency
     from nlcx.thesis.consistency.targeted import targeted
     from nlcx.thesis.identify import identify as run_identify
@@ -254,7 +254,6 @@ def identify(
             table = identify_cstr(spec, out_dir, jobs=jobs, progress=progress)
         else:
             table = run_identify(spec, out_dir, jobs=jobs, progress=progress, device=checked_device(device))
-        manifest.update(out_dir, manifest.load(out_dir).get("checksums", {}))  # every file's checksum, anew
     if raw.get("kind") == "targeted":
         echo(table[["table", "controller", "cells", "smallest_miss", "loops", "verdict"]].to_string(index=False))
         echo(f"results in {out_dir}/")
