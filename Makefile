@@ -138,7 +138,7 @@ identify: tuning-install
 	cp results/identify/pendulum_all/ranking.png docs/img/identify_ranking.png
 
 ## consistency: the targeted search of the sets of printed cells the consistency study could not hit together
-## (CMA-ES per set and hypothesis, every loop under the four definitions of t_r and t_s; capped at 100 sets, within
+## (CMA-ES per set and hypothesis, every loop under the four definitions of t_r and t_s; capped at 61 sets, within
 ## an hour on 2 cores), then docs/fidelity.md again; needs `make identify`'s results
 consistency: tuning-install
 	$(BIN)/nlcx identify configs/identify/targeted.yaml --jobs $(JOBS) --out results/identify/targeted
