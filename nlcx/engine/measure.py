@@ -30,13 +30,27 @@ def signal_values(
 ) -> np.ndarray:
     """The metric values (rows, len(signal.metrics)) of ``signal`` measured over the rows
     ``rows`` (default: all) of ``y`` (runs, samples) against the reference rows ``r`` (one
-    shared row, or one a row of ``y``)."""
-    picked = np.arange(y.shape[0]) if rows is None else np.asarray(rows, dtype=np.int64)
+    shared row, or one a row of ``y``).
+
+    The kernel gets its arrays C-contiguous and writable (:func:`compiled_form`), whatever
+    they are here (a view of a column of the records, a read-only reference), so that one
+    compiled :func:`~nlcx.metrics.batch.measure_rows` serves every call."""
+    picked = compiled_form(np.arange(y.shape[0]) if rows is None else rows, np.int64)
     out = np.empty((picked.size, len(signal.metrics)))
     if picked.size:
-        reference = r if r.ndim == 2 else r[np.newaxis, :]
-        measure_rows(signal.kind, t, y, reference, picked, signal.timing, signal.final, out)
+        reference = compiled_form(r if r.ndim == 2 else r[np.newaxis, :])
+        measure_rows(signal.kind, compiled_form(t), compiled_form(y), reference, picked, signal.timing,
+                     signal.final, out)  # fmt: skip
     return out
+
+
+def compiled_form(a: np.ndarray, dtype: type = np.float64) -> np.ndarray:
+    """``a`` as the metric kernels are compiled for: a C-contiguous, writable array of ``dtype``
+    (``a`` itself if it is one, else a copy). numba types an array by its layout and by whether
+    it is writable, and compiles a kernel once for each such type it is called with."""
+    if a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable:
+        return a
+    return np.array(a, dtype=dtype, order="C")
 
 
 def source_rows(xs: Sequence[np.ndarray], us: Sequence[np.ndarray], signal: MeasuredSignal, plant: Plant) -> np.ndarray:
