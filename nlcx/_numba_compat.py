@@ -4,6 +4,9 @@ nlcx relies on things numba does not document as public:
 
 - ``_nrt=False``: a function compiled without numba's reference counting (the hot-loop rule
   of :mod:`nlcx.kernel.abi`); :func:`hot_njit` is ``numba.njit`` with it;
+- ``no_cpython_wrapper=True`` and ``no_cfunc_wrapper=True``: a function compiled without the
+  wrappers that let Python call it and make it a first-class function value;
+  :func:`inner_njit` is ``numba.njit`` with them;
 - ``numba.core.typing.typeof.typeof_impl``: how a Python object is typed when the kernel is
   called (:func:`register_typeof`);
 - ``numba.core.caching.IndexDataCacheFile`` and its ``_index_path``: the disk cache's index
@@ -76,6 +79,26 @@ def hot_njit(*args: object, **kwargs: object) -> Any:
 
     private: Any = njit  # _nrt is not in numba's public signature
     return private(*args, _nrt=False, **kwargs)
+
+
+def inner_njit(*args: object, **kwargs: object) -> Any:
+    """``numba.njit`` without the wrappers a function needs only when Python calls it or when it
+    is handed over as a first-class function value (numba's private ``no_cpython_wrapper`` and
+    ``no_cfunc_wrapper``; its own ``overload`` implementations are compiled without the first):
+    for a function that only compiled code calls by name, such as the kernel's parts.
+
+    The Python wrapper converts every argument from its Python object and the result back. For
+    the kernel's parts, which take and return structures of arrays
+    (:mod:`nlcx.kernel.structures`), generating and compiling those wrappers is a sizeable part
+    of compiling them, and no process ever runs them; the function itself compiles to the same
+    machine code. Called from Python, such a function crashes the interpreter: call it from a
+    compiled function.
+
+    Takes what ``numba.njit`` takes, as a decorator with or without arguments."""
+    from numba import njit
+
+    private: Any = njit  # the two options are not in numba's public signature
+    return private(*args, no_cpython_wrapper=True, no_cfunc_wrapper=True, **kwargs)
 
 
 def is_numba_function(value: object) -> TypeGuard[Dispatcher]:
