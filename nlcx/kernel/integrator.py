@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from nlcx._numba_compat import inner_njit
 from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, shared_row
 from nlcx.kernel.signatures import BoolArray, ElementFunctions, FloatArray, IntArray
 from nlcx.kernel.stepping import (
@@ -97,7 +98,7 @@ def _apply_elements(
             )  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _hook_counts(table: FloatArray) -> tuple[int, int]:  # pragma: no cover - compiled
     """(number of sensor elements, number of actuator elements) in the element table."""
     n_sensor = 0
@@ -217,7 +218,7 @@ def _no_friction_recorded(
             FRICTION[vid[b], k, j] = 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _step_batch(integration: Integration, plant: PlantCall, controller: ControllerCall, elements: LoopElements,
                 forces: PlantForces, records: Records, outcome: Outcome, friction_path: FrictionPath, slots: Slots,
                 n_free: int, signals: Signals, stages: StageColumns,
