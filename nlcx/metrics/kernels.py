@@ -260,7 +260,7 @@ def input_effort(
     out[o + 2] = variation
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def measure(
     kind: int,
     t: FloatArray,
@@ -277,7 +277,11 @@ def measure(
     the order of :data:`nlcx.metrics.names.MEASURED`: a step response (from y(t_step) to
     ``final``) or a regulation to ``final``, each followed by the error integrals of
     ref - y from the step; the error integrals alone (tracking); the step characteristics
-    against the row's last sample (an output no loop follows); an input's effort."""
+    against the row's last sample (an output no loop follows); an input's effort.
+
+    Inlined into its one caller on the CPU, :func:`nlcx.metrics.batch.measure_rows`: a compiled
+    function of its own would have every metric kernel optimised and compiled into its machine
+    code, and then again into the caller's. The GPU compiles it from its source."""
     if kind == STEP:
         step_response(t, y, m, value_at_step(y, m), final, out, o, ranges, partial)
         error_integrals(t, y, ref, m.first, m.t_step, out, o + 7, ranges, partial)
