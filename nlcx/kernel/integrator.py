@@ -59,16 +59,13 @@ if TYPE_CHECKING:
     from nlcx.kernel.structures import (
         ControllerCall,
         FrictionPath,
-        FrictionWork,
         Integration,
         LoopElements,
         Outcome,
         PlantCall,
         PlantForces,
         Records,
-        Slots,
     )
-    from nlcx.kernel.working_storage import Signals, StageColumns
 
 EE = ELEMENT_ENTRY.at
 
@@ -218,13 +215,42 @@ def _no_friction_recorded(
             FRICTION[vid[b], k, j] = 0.0
 
 
-@inner_njit(cache=True, error_model="numpy")
-def _step_batch(integration: Integration, plant: PlantCall, controller: ControllerCall, elements: LoopElements,
-                forces: PlantForces, records: Records, outcome: Outcome, friction_path: FrictionPath, slots: Slots,
-                n_free: int, signals: Signals, stages: StageColumns,
-                work: FrictionWork) -> None:  # pragma: no cover - compiled  # fmt: skip
-    """The sampling steps of :func:`simulate` over its working slots, signals, stage columns and
-    friction work space, until every variant stopped or reached t_K."""
+@njit(SIMULATE_SIG, cache=True, error_model="numpy")
+def simulate(
+    integration: Integration,
+    plant: PlantCall,
+    controller: ControllerCall,
+    elements: LoopElements,
+    forces: PlantForces,
+    records: Records,
+    outcome: Outcome,
+    friction_path: FrictionPath,
+) -> None:  # pragma: no cover
+    """Integrate a batch of closed loops in lock step (see the module docstring): at t_k = k dt
+    y_k = C x_k, SENSOR elements, controller -> u_k, ACTUATOR elements; u_k held while the
+    method of ``integration`` integrates to t_{k+1}, disturbances at the stage times, friction
+    on each input's axis. A variant that goes non-finite or out of bounds stops and leaves the
+    batch (active variants lead the working slots; ``slots.vid`` maps a slot to its variant).
+    The arguments are the structures of :mod:`nlcx.kernel.structures`; the kernel writes
+    ``records`` and ``outcome``.
+
+    One compiled function: the working storage (:mod:`nlcx.kernel.working_storage`), then the
+    sampling steps until every variant stopped or reached t_K. numba compiles a function called
+    by another into a module of its own and then again into its caller's, so the steps, the
+    bulk of the kernel, written as a function of their own would be optimised and compiled
+    twice."""
+    # the working storage: slots, signals, stage columns and the friction work space
+    n_batch, n = plant.x0.shape
+    n_u = records.U.shape[2]
+    rows, n_free = working_rows(plant, controller, forces.friction, n_u)
+    signals = signal_rows(rows.xrow, plant.C.shape[0], controller.ref.shape[2], n_u, records.LOG.shape[2])
+    stages = stage_columns(n_batch, n)
+    modes = friction_modes(rows.axes, rows.xrow)
+    init_outcome(records.X.shape[1] - 1, outcome)
+    work = friction_work(n, n_u, plant.p.shape[1], integration.rk_b.shape[0], forces.dist.shape[3])
+    slots = working_slots(rows, modes, signals.log)
+
+    # the sampling steps
     rhs, C, ref, step, callbacks = plant.rhs, plant.C, controller.ref, controller.step, controller.callbacks
     X, U, LOG, FRICTION = records.X, records.U, records.LOG, records.FRICTION
     dist, dist_map, dt = forces.dist, forces.dist_map, integration.dt
@@ -289,33 +315,3 @@ def _step_batch(integration: Integration, plant: PlantCall, controller: Controll
             if nb == 0:
                 break
             yv, rv, uv, xv, cpv, csv, logv = y[:nb], r[:nb], u[:nb], xrow[:nb], cpw[:nb], cs[:nb], log[:nb]
-
-
-@njit(SIMULATE_SIG, cache=True, error_model="numpy")
-def simulate(
-    integration: Integration,
-    plant: PlantCall,
-    controller: ControllerCall,
-    elements: LoopElements,
-    forces: PlantForces,
-    records: Records,
-    outcome: Outcome,
-    friction_path: FrictionPath,
-) -> None:  # pragma: no cover
-    """Integrate a batch of closed loops in lock step (see the module docstring): at t_k = k dt
-    y_k = C x_k, SENSOR elements, controller -> u_k, ACTUATOR elements; u_k held while the
-    method of ``integration`` integrates to t_{k+1}, disturbances at the stage times, friction
-    on each input's axis. A variant that goes non-finite or out of bounds stops and leaves the
-    batch (active variants lead the working slots; ``slots.vid`` maps a slot to its variant).
-    The arguments are the structures of :mod:`nlcx.kernel.structures`; the kernel writes
-    ``records`` and ``outcome``."""
-    n_batch, n = plant.x0.shape
-    n_u = records.U.shape[2]
-    rows, n_free = working_rows(plant, controller, forces.friction, n_u)
-    signals = signal_rows(rows.xrow, plant.C.shape[0], controller.ref.shape[2], n_u, records.LOG.shape[2])
-    stages = stage_columns(n_batch, n)
-    modes = friction_modes(rows.axes, rows.xrow)
-    init_outcome(records.X.shape[1] - 1, outcome)
-    work = friction_work(n, n_u, plant.p.shape[1], integration.rk_b.shape[0], forces.dist.shape[3])
-    _step_batch(integration, plant, controller, elements, forces, records, outcome, friction_path,
-                working_slots(rows, modes, signals.log), n_free, signals, stages, work)  # fmt: skip
