@@ -200,6 +200,21 @@ def test_the_helper_starts_only_when_numba_compiles_in_the_watched_step(tmp_path
     assert slow.process is not None and slow.process.returncode == 0 and marker.exists()
 
 
+def test_measuring_waits_for_a_running_helper_and_for_nothing_else(tmp_path: Path) -> None:
+    """wait_for_helpers (called before the metric functions are first used) returns once the
+    helpers this process started have finished, and at once when there are none."""
+    marker = tmp_path / "done"
+    command = [sys.executable, "-c", f"import time; time.sleep(0.5); open({str(marker)!r}, 'w').close()"]
+    compiled_cache.wait_for_helpers()  # none started: returns at once
+    helper = compiled_cache.CompileHelper(command)
+    with helper.watching():
+        _compiled_now()
+    assert helper.process is not None
+    compiled_cache.wait_for_helpers()
+    assert marker.exists() and helper.process.returncode == 0
+    helper.close()  # the command's own close afterwards: nothing left to wait for
+
+
 def test_the_compiling_notice_is_given_once_when_numba_compiles_and_never_on_a_cached_load(tmp_path: Path) -> None:
     marker = tmp_path / "started"
     command = [sys.executable, "-c", f"open({str(marker)!r}, 'w').close()"]

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from nlcx.compiled_cache import wait_for_helpers
 from nlcx.engine.plan import LoopPlan, MeasuredSignal, MetricPlan
 from nlcx.engine.prepared import Prepared
 from nlcx.engine.results import MetricBlock, MetricTable, Run
@@ -155,7 +156,12 @@ def measure_experiments(prepared: list[Prepared], runs: list[list[Run]]) -> list
     """Metrics of every experiment's runs as a block of a shared table; experiments
     with the same plant signals and metric definitions are measured together (vectorised
     over all their runs). A shared table has the column ``experiment``, the position in
-    ``prepared``; each experiment's rows are contiguous."""
+    ``prepared``; each experiment's rows are contiguous.
+
+    A process whose numba cache was empty compiles the metric functions in its helper
+    (:class:`nlcx.compiled_cache.CompileHelper`, ``nlcx run``): it waits for the helper first
+    (:func:`nlcx.compiled_cache.wait_for_helpers`) and then loads them."""
+    wait_for_helpers()
     groups: dict[tuple[Any, ...], list[int]] = {}
     for e, p in enumerate(prepared):
         groups.setdefault(_group_key(p), []).append(e)
