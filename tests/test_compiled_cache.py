@@ -248,23 +248,24 @@ def _cache_index(cache: Path) -> set[str]:
 
 
 @pytest.mark.slow
-def test_prewarm_compiles_what_a_run_needs_except_the_kernel(tmp_path: Path) -> None:
+def test_prewarm_compiles_what_a_run_needs_except_the_kernel_and_the_plant(tmp_path: Path) -> None:
     """`nlcx prewarm` (what `nlcx run` starts beside itself on an empty cache) fills the cache
-    with the run's plugin and metric functions, but not the kernel; a run on that cache then
-    compiles the kernel alone, and its files equal those of a run on the warm cache."""
+    with the run's controller and metric functions, but not the kernel nor the plant's
+    right-hand side (the run compiles those); a run on that cache then compiles them, and its
+    files equal those of a run on the warm cache."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     overrides = ["simulation.t_end=2"]
     nlcx = [sys.executable, "-m", "nlcx.cli"]
     done = subprocess.run([*nlcx, "prewarm", str(CONFIG), *overrides], env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     index = _cache_index(tmp_path / "cache")
-    assert {"pid_step.pid_step", "pendulums.x_derived_rhs", "batch.measure_rows", "kernels.measure"} <= index
-    assert not any(name.startswith("integrator.") for name in index)
+    assert {"pid_step.pid_step", "schedules.error_ags_gains", "batch.measure_rows", "kernels.step_response"} <= index
+    assert not any(name.startswith(("integrator.", "pendulums.")) for name in index)
     for out, run_env in ((tmp_path / "cold", env), (tmp_path / "warm", None)):
         run = [*nlcx, "run", str(CONFIG), *overrides, "--out", str(out), "--no-report", "-q"]
         done = subprocess.run(run, env=run_env, capture_output=True, text=True)
         assert done.returncode == 0, done.stderr
-    assert "integrator.simulate" in _cache_index(tmp_path / "cache")
+    assert {"integrator.simulate", "pendulums.x_derived_rhs"} <= _cache_index(tmp_path / "cache")
     for name in ("metrics.csv", "timeseries.csv"):
         assert (tmp_path / "cold" / name).read_bytes() == (tmp_path / "warm" / name).read_bytes()
 

@@ -13,7 +13,6 @@ from nlcx.engine.pipeline import prepare
 from nlcx.engine.prepared import items_of
 from nlcx.engine.results import Run
 from nlcx.kernel.abi import CALLBACK_SIG, CONTROLLER_SIG, ELEMENT_SIG
-from nlcx.plants.base import check_rows
 
 
 def load_kernel() -> None:
@@ -25,10 +24,11 @@ def load_kernel() -> None:
 
 def prewarm(exp: Experiment) -> None:
     """Compile into numba's disk cache (or load from it) what :func:`~nlcx.engine.evaluate` of ``exp`` needs
-    besides the kernel, each function as the run compiles it, and nothing the run does not call:
+    besides the kernel and the plant's right-hand side, each function as the run compiles it,
+    and nothing the run does not call:
 
-    - each plant's right-hand side as the run first calls it, from Python
-      (:func:`nlcx.plants.base.check_rows`; the kernel then finds it compiled);
+    - the controllers' modules, which compile their general steps and the built-in gain
+      schedules when they are imported (preparing the experiment imports them);
     - the controller step each kernel call runs (:func:`nlcx.engine.batching.kernel_calls`: the
       step made for a loop structure, or the general step that serves a call of several),
       its callbacks and its loop elements, for the kernel's signatures, as the kernel looks
@@ -37,15 +37,16 @@ def prewarm(exp: Experiment) -> None:
     - the metric functions, run on zero trajectories of the run's shapes.
 
     ``nlcx run`` starts this in a second process when loading the kernel takes long (an empty
-    or stale cache), so that the two compile side by side and the run then loads these from the
-    cache (:class:`nlcx.compiled_cache.CompileHelper`). Nothing is simulated, so an experiment
-    with tuners, which simulate while preparing, is left alone."""
+    or stale cache), so that the two compile side by side; the run compiles the right-hand side
+    itself once the kernel is done (:func:`nlcx.plants.base.check_rows`, before the first
+    kernel call), which keeps the two processes' shares of the work about even, and waits for
+    this one before it measures (:func:`nlcx.compiled_cache.wait_for_helpers`), then loads what
+    it compiled from the cache (:class:`nlcx.compiled_cache.CompileHelper`). Nothing is
+    simulated, so an experiment with tuners, which simulate while preparing, is left alone."""
     if any(c.tuners for c in exp.controllers):
         return
     prepared = prepare(exp)
     items = items_of(prepared)
-    for plant in {id(item.plant.rhs): item.plant for item in items}.values():
-        check_rows(plant)
     for call in kernel_calls(groups_of([group_key(item) for item in items]), items):
         first = items[call.indices[0]]
         for function, signature in (
