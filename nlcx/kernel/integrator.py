@@ -239,9 +239,7 @@ def simulate(
     by another into a module of its own and then again into its caller's, so the steps, the
     bulk of the kernel, written as a function of their own would be optimised and compiled
     twice."""
-    # the working storage: slots, signals, stage columns and the friction work space
-    n_batch, n = plant.x0.shape
-    n_u = records.U.shape[2]
+    (n_batch, n), n_u = plant.x0.shape, records.U.shape[2]
     rows, n_free = working_rows(plant, controller, forces.friction, n_u)
     signals = signal_rows(rows.xrow, plant.C.shape[0], controller.ref.shape[2], n_u, records.LOG.shape[2])
     stages = stage_columns(n_batch, n)
@@ -249,8 +247,6 @@ def simulate(
     init_outcome(records.X.shape[1] - 1, outcome)
     work = friction_work(n, n_u, plant.p.shape[1], integration.rk_b.shape[0], forces.dist.shape[3])
     slots = working_slots(rows, modes, signals.log)
-
-    # the sampling steps
     rhs, C, ref, step, callbacks = plant.rhs, plant.C, controller.ref, controller.step, controller.callbacks
     X, U, LOG, FRICTION = records.X, records.U, records.LOG, records.FRICTION
     dist, dist_map, dt = forces.dist, forces.dist_map, integration.dt
@@ -301,10 +297,8 @@ def simulate(
                 for q in range(m):
                     xnf[q] = xf[q] + dt / 6.0 * (k1f[q] + 2.0 * (k2f[q] + k3f[q]) + k4f[q])
             elif n_free > 0:
-                rk_step(
-                    rhs, t, dt, n_free, x, x_new, uc, pw, ks, xs, rk_a, rk_b, c, SEQUENTIAL, dist, vid, kd, dist_map,
-                    None,
-                )  # fmt: skip
+                rk_step(rhs, t, dt, n_free, x, x_new, uc, pw, ks, xs, rk_a, rk_b, c, SEQUENTIAL, dist, vid, kd,
+                        dist_map, None)  # fmt: skip
             if nb > n_free:
                 friction_path.step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c)
             n_stop += _accept_states(k, nb, vid, x, bw, xf, xnf, bwf, stopped, status, n_valid, fail_index)
