@@ -26,7 +26,6 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numba import njit
 
-from nlcx._numba_compat import inner_njit
 from nlcx.kernel.abi import shared_row
 from nlcx.kernel.friction import disturbance_at, friction_forces
 from nlcx.kernel.signatures import FloatArray, IntArray, RightHandSide
@@ -51,7 +50,7 @@ def stage_nodes(rk_a: FloatArray) -> FloatArray:  # pragma: no cover - compiled
     return c
 
 
-@inner_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def output_picks(C: FloatArray) -> IntArray:  # pragma: no cover - compiled
     """picked[i] = j where row i of C is the unit vector e_j (y_i = x_j exactly), else -1."""
     n_y, n = C.shape
