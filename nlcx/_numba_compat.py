@@ -91,14 +91,40 @@ def inner_njit(*args: object, **kwargs: object) -> Any:
     the kernel's parts, which take and return structures of arrays
     (:mod:`nlcx.kernel.structures`), generating and compiling those wrappers is a sizeable part
     of compiling them, and no process ever runs them; the function itself compiles to the same
-    machine code. Called from Python, such a function crashes the interpreter: call it from a
-    compiled function.
+    machine code. Called from Python, such a function raises a TypeError (numba would call
+    through the missing wrapper's null address): its dispatcher is of a subclass of numba's
+    ``Dispatcher`` that refuses the call (:func:`_compiled_only`).
 
     Takes what ``numba.njit`` takes, as a decorator with or without arguments."""
     from numba import njit
 
     private: Any = njit  # the two options are not in numba's public signature
-    return private(*args, no_cpython_wrapper=True, no_cfunc_wrapper=True, **kwargs)
+    made = private(*args, no_cpython_wrapper=True, no_cfunc_wrapper=True, **kwargs)
+    if is_numba_function(made):
+        return _compiled_only(made)
+    return lambda function: _compiled_only(made(function))
+
+
+def _compiled_only(dispatcher: Dispatcher) -> Dispatcher:
+    """``dispatcher`` made to refuse a call from Python (a TypeError), compiled code calling it
+    as before: its class swapped for a subclass of numba's ``Dispatcher`` that overrides
+    ``__call__`` alone (:func:`inner_njit`)."""
+    dispatcher.__class__ = _compiled_only_class()
+    return dispatcher
+
+
+@functools.cache
+def _compiled_only_class() -> type[Dispatcher]:
+    from numba.core.dispatcher import Dispatcher
+
+    class CompiledOnly(Dispatcher):
+        """A compiled function without a Python wrapper (:func:`inner_njit`)."""
+
+        def __call__(self, *args: object, **kwargs: object) -> None:
+            name = f"{self.py_func.__module__}.{self.py_func.__qualname__}"
+            raise TypeError(f"{name} is compiled for compiled code only (nlcx._numba_compat.inner_njit)")
+
+    return CompiledOnly
 
 
 def is_numba_function(value: object) -> TypeGuard[Dispatcher]:

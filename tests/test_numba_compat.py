@@ -178,6 +178,8 @@ def test_inner_njit_compiles_a_function_that_compiled_code_calls_without_its_wra
     assert a.tolist() == [0.0, 2.0, 4.0]
     assert inner.targetoptions["no_cpython_wrapper"] is True
     assert inner.targetoptions["no_cfunc_wrapper"] is True
+    with pytest.raises(TypeError, match="compiled code only"):
+        inner(a)  # from Python: refused, not a call through the missing wrapper
 
 
 def test_register_typeof_types_a_class_when_a_compiled_function_is_called() -> None:
