@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import re
+import types
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -100,17 +101,19 @@ def inner_njit(*args: object, **kwargs: object) -> Any:
 
     private: Any = njit  # the two options are not in numba's public signature
     made = private(*args, no_cpython_wrapper=True, no_cfunc_wrapper=True, **kwargs)
-    if is_numba_function(made):
+    if len(args) == 1 and isinstance(args[0], types.FunctionType):  # used as @inner_njit
         return _compiled_only(made)
     return lambda function: _compiled_only(made(function))
 
 
-def _compiled_only(dispatcher: Dispatcher) -> Dispatcher:
-    """``dispatcher`` made to refuse a call from Python (a TypeError), compiled code calling it
-    as before: its class swapped for a subclass of numba's ``Dispatcher`` that overrides
-    ``__call__`` alone (:func:`inner_njit`)."""
-    dispatcher.__class__ = _compiled_only_class()
-    return dispatcher
+def _compiled_only(compiled: T) -> T:
+    """``compiled`` (a dispatcher) made to refuse a call from Python (a TypeError), compiled code
+    calling it as before: its class swapped for a subclass of numba's ``Dispatcher`` that
+    overrides ``__call__`` alone (:func:`inner_njit`). With numba's JIT disabled
+    (``NUMBA_DISABLE_JIT=1``) it is the Python function, returned as it is."""
+    if is_numba_function(compiled):
+        compiled.__class__ = _compiled_only_class()
+    return compiled
 
 
 @functools.cache
