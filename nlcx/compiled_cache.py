@@ -90,7 +90,7 @@ def ready() -> None:
 #: What ``nlcx run`` prints on stderr when it finds numba's cache empty or stale (:class:`CompileHelper`).
 COMPILING = (
     "compiling nlcx's simulation kernel and this run's functions into numba's disk cache: once per install "
-    "(and after nlcx's source changes), about 30-60 s on 2 cores; later runs load them in under a second"
+    "(and after nlcx's source changes), about 10-25 s on 2 cores; later runs load them in under a second"
 )
 
 
