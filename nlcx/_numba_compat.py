@@ -4,6 +4,9 @@ nlcx relies on things numba does not document as public:
 
 - ``_nrt=False``: a function compiled without numba's reference counting (the hot-loop rule
   of :mod:`nlcx.kernel.abi`); :func:`hot_njit` is ``numba.njit`` with it;
+- ``no_cpython_wrapper=True`` and ``no_cfunc_wrapper=True``: a function compiled without the
+  wrappers that let Python call it and make it a first-class function value;
+  :func:`inner_njit` is ``numba.njit`` with them;
 - ``numba.core.typing.typeof.typeof_impl``: how a Python object is typed when the kernel is
   called (:func:`register_typeof`);
 - ``numba.core.caching.IndexDataCacheFile`` and its ``_index_path``: the disk cache's index
@@ -23,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import re
+import types
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -76,6 +80,54 @@ def hot_njit(*args: object, **kwargs: object) -> Any:
 
     private: Any = njit  # _nrt is not in numba's public signature
     return private(*args, _nrt=False, **kwargs)
+
+
+def inner_njit(*args: object, **kwargs: object) -> Any:
+    """``numba.njit`` without the wrappers a function needs only when Python calls it or when it
+    is handed over as a first-class function value (numba's private ``no_cpython_wrapper`` and
+    ``no_cfunc_wrapper``; its own ``overload`` implementations are compiled without the first):
+    for a function that only compiled code calls by name, such as the kernel's parts.
+
+    The Python wrapper converts every argument from its Python object and the result back. For
+    the kernel's parts, which take and return structures of arrays
+    (:mod:`nlcx.kernel.structures`), generating and compiling those wrappers is a sizeable part
+    of compiling them, and no process ever runs them; the function itself compiles to the same
+    machine code. Called from Python, such a function raises a TypeError (numba would call
+    through the missing wrapper's null address): its dispatcher is of a subclass of numba's
+    ``Dispatcher`` that refuses the call (:func:`_compiled_only`).
+
+    Takes what ``numba.njit`` takes, as a decorator with or without arguments."""
+    from numba import njit
+
+    private: Any = njit  # the two options are not in numba's public signature
+    made = private(*args, no_cpython_wrapper=True, no_cfunc_wrapper=True, **kwargs)
+    if len(args) == 1 and isinstance(args[0], types.FunctionType):  # used as @inner_njit
+        return _compiled_only(made)
+    return lambda function: _compiled_only(made(function))
+
+
+def _compiled_only(compiled: T) -> T:
+    """``compiled`` (a dispatcher) made to refuse a call from Python (a TypeError), compiled code
+    calling it as before: its class swapped for a subclass of numba's ``Dispatcher`` that
+    overrides ``__call__`` alone (:func:`inner_njit`). With numba's JIT disabled
+    (``NUMBA_DISABLE_JIT=1``) it is the Python function, returned as it is."""
+    if is_numba_function(compiled):
+        compiled.__class__ = _compiled_only_class()
+    return compiled
+
+
+@functools.cache
+def _compiled_only_class() -> type[Dispatcher]:
+    from numba.core.dispatcher import Dispatcher
+
+    class CompiledOnly(Dispatcher):
+        """A compiled function without a Python wrapper (:func:`inner_njit`)."""
+
+        def __call__(self, *args: object, **kwargs: object) -> None:
+            name = f"{self.py_func.__module__}.{self.py_func.__qualname__}"
+            raise TypeError(f"{name} is compiled for compiled code only (nlcx._numba_compat.inner_njit)")
+
+    return CompiledOnly
 
 
 def is_numba_function(value: object) -> TypeGuard[Dispatcher]:

@@ -13,9 +13,11 @@ simulates an experiment. Importing ``nlcx`` reads and removes nothing.
 
 Rebuilding takes a while: the kernel alone compiles for seconds, in the process that needs it.
 :class:`CompileHelper` lets ``nlcx run`` compile the rest of what the run needs (its plugins'
-functions, the metric functions) in a second process meanwhile. Processes that share the
-cache (that helper, a sweep's or a reproduction's workers) read and write a function's cache
-files one at a time (:func:`nlcx._numba_compat.serialize_cache_access`).
+functions, the metric functions) in a second process meanwhile, and the run waits for it
+before it measures (:func:`wait_for_helpers`) rather than compile the same functions a second
+time. Processes that share the cache (that helper, a sweep's or a reproduction's workers) read
+and write a function's cache files one at a time
+(:func:`nlcx._numba_compat.serialize_cache_access`).
 """
 
 from __future__ import annotations
@@ -88,7 +90,7 @@ def ready() -> None:
 #: What ``nlcx run`` prints on stderr when it finds numba's cache empty or stale (:class:`CompileHelper`).
 COMPILING = (
     "compiling nlcx's simulation kernel and this run's functions into numba's disk cache: once per install "
-    "(and after nlcx's source changes), about 30-60 s on 2 cores; later runs load them in under a second"
+    "(and after nlcx's source changes), about 10-25 s on 2 cores; later runs load them in under a second"
 )
 
 
@@ -114,6 +116,7 @@ class CompileHelper:
         self.process = subprocess.Popen(
             self.command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
         )
+        _RUNNING.append(self)
 
     @contextlib.contextmanager
     def watching(self) -> Iterator[None]:
@@ -132,3 +135,21 @@ class CompileHelper:
         except subprocess.TimeoutExpired:
             self.process.kill()
             self.process.wait()
+        finally:
+            if self in _RUNNING:
+                _RUNNING.remove(self)
+
+
+#: The helpers this process started that may still run (:func:`wait_for_helpers`).
+_RUNNING: list[CompileHelper] = []
+
+
+def wait_for_helpers(timeout: float = 120.0) -> None:
+    """Wait for every :class:`CompileHelper` this process started and has not closed (each
+    killed after ``timeout`` seconds); at once if there is none.
+
+    A process about to call functions that its helper compiles (``nlcx run`` measuring its runs
+    with the metric functions) waits here: loading them from the cache once the helper is done
+    is quicker than compiling them a second time beside it, on the same cores."""
+    for helper in list(_RUNNING):
+        helper.close(timeout)

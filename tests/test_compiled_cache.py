@@ -200,6 +200,21 @@ def test_the_helper_starts_only_when_numba_compiles_in_the_watched_step(tmp_path
     assert slow.process is not None and slow.process.returncode == 0 and marker.exists()
 
 
+def test_measuring_waits_for_a_running_helper_and_for_nothing_else(tmp_path: Path) -> None:
+    """wait_for_helpers (called before the metric functions are first used) returns once the
+    helpers this process started have finished, and at once when there are none."""
+    marker = tmp_path / "done"
+    command = [sys.executable, "-c", f"import time; time.sleep(0.5); open({str(marker)!r}, 'w').close()"]
+    compiled_cache.wait_for_helpers()  # none started: returns at once
+    helper = compiled_cache.CompileHelper(command)
+    with helper.watching():
+        _compiled_now()
+    assert helper.process is not None
+    compiled_cache.wait_for_helpers()
+    assert marker.exists() and helper.process.returncode == 0
+    helper.close()  # the command's own close afterwards: nothing left to wait for
+
+
 def test_the_compiling_notice_is_given_once_when_numba_compiles_and_never_on_a_cached_load(tmp_path: Path) -> None:
     marker = tmp_path / "started"
     command = [sys.executable, "-c", f"open({str(marker)!r}, 'w').close()"]
@@ -233,23 +248,24 @@ def _cache_index(cache: Path) -> set[str]:
 
 
 @pytest.mark.slow
-def test_prewarm_compiles_what_a_run_needs_except_the_kernel(tmp_path: Path) -> None:
+def test_prewarm_compiles_what_a_run_needs_except_the_kernel_and_the_plant(tmp_path: Path) -> None:
     """`nlcx prewarm` (what `nlcx run` starts beside itself on an empty cache) fills the cache
-    with the run's plugin and metric functions, but not the kernel; a run on that cache then
-    compiles the kernel alone, and its files equal those of a run on the warm cache."""
+    with the run's controller and metric functions, but not the kernel nor the plant's
+    right-hand side (the run compiles those); a run on that cache then compiles them, and its
+    files equal those of a run on the warm cache."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     overrides = ["simulation.t_end=2"]
     nlcx = [sys.executable, "-m", "nlcx.cli"]
     done = subprocess.run([*nlcx, "prewarm", str(CONFIG), *overrides], env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     index = _cache_index(tmp_path / "cache")
-    assert {"pid_step.pid_step", "pendulums.x_derived_rhs", "batch.measure_rows", "kernels.measure"} <= index
-    assert not any(name.startswith("integrator.") for name in index)
+    assert {"pid_step.pid_step", "schedules.error_ags_gains", "batch.measure_rows", "kernels.step_response"} <= index
+    assert not any(name.startswith(("integrator.", "pendulums.")) for name in index)
     for out, run_env in ((tmp_path / "cold", env), (tmp_path / "warm", None)):
         run = [*nlcx, "run", str(CONFIG), *overrides, "--out", str(out), "--no-report", "-q"]
         done = subprocess.run(run, env=run_env, capture_output=True, text=True)
         assert done.returncode == 0, done.stderr
-    assert "integrator.simulate" in _cache_index(tmp_path / "cache")
+    assert {"integrator.simulate", "pendulums.x_derived_rhs"} <= _cache_index(tmp_path / "cache")
     for name in ("metrics.csv", "timeseries.csv"):
         assert (tmp_path / "cold" / name).read_bytes() == (tmp_path / "warm" / name).read_bytes()
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numba
 import numpy as np
 import pytest
-from numba import types
+from numba import njit, types
 from packaging.requirements import Requirement
 
 from nlcx import _numba_compat
@@ -29,6 +29,8 @@ PACKAGE = ROOT / "nlcx"
 COMPAT = PACKAGE / "_numba_compat.py"
 #: Modules of numba.core whose names are public: exception classes and types.
 PUBLIC_CORE = ("numba.core.errors", "numba.core.types")
+#: Options of numba.njit that numba does not document.
+PRIVATE_OPTIONS = ("_nrt", "no_cpython_wrapper", "no_cfunc_wrapper")
 
 
 def _private_module(module: str) -> bool:
@@ -49,12 +51,13 @@ def _dotted(node: ast.expr) -> str:
 
 
 def private_numba_uses(source: str) -> list[str]:
-    """Every use of numba's private API in ``source``: the ``_nrt`` option, an import from
-    ``numba.core`` other than its errors and types, and an attribute ``numba.core.<private>``."""
+    """Every use of numba's private API in ``source``: the ``_nrt``, ``no_cpython_wrapper`` and
+    ``no_cfunc_wrapper`` options, an import from ``numba.core`` other than its errors and types,
+    and an attribute ``numba.core.<private>``."""
     found = []
     for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.keyword) and node.arg == "_nrt":
-            found.append(f"line {node.value.lineno}: _nrt=")
+        if isinstance(node, ast.keyword) and node.arg in PRIVATE_OPTIONS:
+            found.append(f"line {node.value.lineno}: {node.arg}=")
         elif isinstance(node, ast.Import):
             found += [f"line {node.lineno}: import {a.name}" for a in node.names if _private_module(a.name)]
         elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
@@ -90,8 +93,11 @@ def test_the_rule_finds_each_kind_of_private_use_and_passes_the_public_ones() ->
         "from numba import core\n"
         "f = njit(cache=True, _nrt=False)\n"
         "g = numba.core.typing.typeof.typeof_impl\n"
+        "h = njit(no_cpython_wrapper=True)\n"
+        "i = njit(no_cfunc_wrapper=True)\n"
     )
-    assert [use.split(":")[0] for use in private_numba_uses(planted)] == [f"line {n}" for n in range(2, 8)]
+    lines = sorted(int(use.split(":")[0].removeprefix("line ")) for use in private_numba_uses(planted))
+    assert lines == list(range(2, 10))
     public = (
         "import numba\n"
         "from numba import njit, types\n"
@@ -154,6 +160,26 @@ def test_hot_njit_compiles_without_reference_counting() -> None:
         compiled(a)
         assert a.tolist() == [0.0, 2.0, 4.0]
         assert compiled.targetoptions["_nrt"] is False
+
+
+def test_inner_njit_compiles_a_function_that_compiled_code_calls_without_its_wrappers() -> None:
+    def twice(a):  # pragma: no cover - compiled
+        for i in range(a.size):
+            a[i] *= 2.0
+
+    inner = _numba_compat.inner_njit(cache=False)(twice)
+
+    @njit(cache=False)
+    def caller(a):  # pragma: no cover - compiled
+        inner(a)
+
+    a = np.arange(3.0)
+    caller(a)
+    assert a.tolist() == [0.0, 2.0, 4.0]
+    assert inner.targetoptions["no_cpython_wrapper"] is True
+    assert inner.targetoptions["no_cfunc_wrapper"] is True
+    with pytest.raises(TypeError, match="compiled code only"):
+        inner(a)  # from Python: refused, not a call through the missing wrapper
 
 
 def test_register_typeof_types_a_class_when_a_compiled_function_is_called() -> None:

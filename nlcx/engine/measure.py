@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from nlcx.compiled_cache import wait_for_helpers
 from nlcx.engine.plan import LoopPlan, MeasuredSignal, MetricPlan
 from nlcx.engine.prepared import Prepared
 from nlcx.engine.results import MetricBlock, MetricTable, Run
@@ -30,13 +31,27 @@ def signal_values(
 ) -> np.ndarray:
     """The metric values (rows, len(signal.metrics)) of ``signal`` measured over the rows
     ``rows`` (default: all) of ``y`` (runs, samples) against the reference rows ``r`` (one
-    shared row, or one a row of ``y``)."""
-    picked = np.arange(y.shape[0]) if rows is None else np.asarray(rows, dtype=np.int64)
+    shared row, or one a row of ``y``).
+
+    The kernel gets its arrays C-contiguous and writable (:func:`compiled_form`), whatever
+    they are here (a view of a column of the records, a read-only reference), so that one
+    compiled :func:`~nlcx.metrics.batch.measure_rows` serves every call."""
+    picked = compiled_form(np.arange(y.shape[0]) if rows is None else rows, np.int64)
     out = np.empty((picked.size, len(signal.metrics)))
     if picked.size:
-        reference = r if r.ndim == 2 else r[np.newaxis, :]
-        measure_rows(signal.kind, t, y, reference, picked, signal.timing, signal.final, out)
+        reference = compiled_form(r if r.ndim == 2 else r[np.newaxis, :])
+        measure_rows(signal.kind, compiled_form(t), compiled_form(y), reference, picked, signal.timing,
+                     signal.final, out)  # fmt: skip
     return out
+
+
+def compiled_form(a: np.ndarray, dtype: type = np.float64) -> np.ndarray:
+    """``a`` as the metric kernels are compiled for: a C-contiguous, writable array of ``dtype``
+    (``a`` itself if it is one, else a copy). numba types an array by its layout and by whether
+    it is writable, and compiles a kernel once for each such type it is called with."""
+    if a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable:
+        return a
+    return np.array(a, dtype=dtype, order="C")
 
 
 def source_rows(xs: Sequence[np.ndarray], us: Sequence[np.ndarray], signal: MeasuredSignal, plant: Plant) -> np.ndarray:
@@ -141,7 +156,12 @@ def measure_experiments(prepared: list[Prepared], runs: list[list[Run]]) -> list
     """Metrics of every experiment's runs as a block of a shared table; experiments
     with the same plant signals and metric definitions are measured together (vectorised
     over all their runs). A shared table has the column ``experiment``, the position in
-    ``prepared``; each experiment's rows are contiguous."""
+    ``prepared``; each experiment's rows are contiguous.
+
+    A process whose numba cache was empty compiles the metric functions in its helper
+    (:class:`nlcx.compiled_cache.CompileHelper`, ``nlcx run``): it waits for the helper first
+    (:func:`nlcx.compiled_cache.wait_for_helpers`) and then loads them."""
+    wait_for_helpers()
     groups: dict[tuple[Any, ...], list[int]] = {}
     for e, p in enumerate(prepared):
         groups.setdefault(_group_key(p), []).append(e)

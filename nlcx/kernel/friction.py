@@ -20,8 +20,8 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
+from nlcx._numba_compat import inner_njit
 from nlcx.kernel.signatures import FloatArray, IntArray, RightHandSide
 from nlcx.layout import Layout
 
@@ -47,7 +47,7 @@ SLIP = 1
 STUCK = 2
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _derivative(
     rhs: RightHandSide,
     t: float,
@@ -76,7 +76,7 @@ def _derivative(
             dx[i] += acc
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def slip_friction(fric_row: FloatArray, v: float, direction: float) -> float:  # pragma: no cover - compiled
     """Friction while sliding in ``direction`` at velocity v (Appendix A).
 
@@ -94,7 +94,7 @@ def slip_friction(fric_row: FloatArray, v: float, direction: float) -> float:  #
     return -mu * f_n * direction - eps * v
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _solve_small(A: FloatArray, b: FloatArray, n: int) -> None:  # pragma: no cover - compiled
     """Solve A[:n, :n] z = b[:n] in place (Gaussian elimination, partial pivoting)."""
     for col in range(n):
@@ -118,7 +118,7 @@ def _solve_small(A: FloatArray, b: FloatArray, n: int) -> None:  # pragma: no co
         b[col] = acc / A[col, col]
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def friction_forces(
     rhs: RightHandSide,
     t: float,
@@ -180,7 +180,7 @@ def friction_forces(
             k += 1
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def update_friction_modes(
     rhs: RightHandSide,
     t: float,
@@ -208,7 +208,7 @@ def update_friction_modes(
             return
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def disturbance_at(
     drow: FloatArray, c: FloatArray, position: float, out: FloatArray
 ) -> None:  # pragma: no cover - compiled
@@ -233,7 +233,7 @@ def any_friction(axes: FloatArray | None) -> bool:
     return axes is not None and bool(np.any(axes[..., FA.model].astype(np.int64) != FRICTION_NONE))
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def has_friction(axes: FloatArray) -> bool:  # pragma: no cover - compiled
     """Whether any input's axis (rows of ``axes``, FRICTION_AXIS blocks) has a friction model."""
     for j in range(axes.shape[0]):  # noqa: SIM110 - compiled: numba has no any() over a generator
@@ -242,7 +242,7 @@ def has_friction(axes: FloatArray) -> bool:  # pragma: no cover - compiled
     return False
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def initial_modes(
     axes: FloatArray, x: FloatArray, mode: IntArray, direction: FloatArray, hold: FloatArray
 ) -> None:  # pragma: no cover - compiled

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from nlcx._numba_compat import inner_njit
 from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, shared_row
 from nlcx.kernel.signatures import BoolArray, ElementFunctions, FloatArray, IntArray
 from nlcx.kernel.stepping import (
@@ -58,16 +59,13 @@ if TYPE_CHECKING:
     from nlcx.kernel.structures import (
         ControllerCall,
         FrictionPath,
-        FrictionWork,
         Integration,
         LoopElements,
         Outcome,
         PlantCall,
         PlantForces,
         Records,
-        Slots,
     )
-    from nlcx.kernel.working_storage import Signals, StageColumns
 
 EE = ELEMENT_ENTRY.at
 
@@ -97,7 +95,7 @@ def _apply_elements(
             )  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _hook_counts(table: FloatArray) -> tuple[int, int]:  # pragma: no cover - compiled
     """(number of sensor elements, number of actuator elements) in the element table."""
     n_sensor = 0
@@ -217,13 +215,38 @@ def _no_friction_recorded(
             FRICTION[vid[b], k, j] = 0.0
 
 
-@njit(cache=True, error_model="numpy")
-def _step_batch(integration: Integration, plant: PlantCall, controller: ControllerCall, elements: LoopElements,
-                forces: PlantForces, records: Records, outcome: Outcome, friction_path: FrictionPath, slots: Slots,
-                n_free: int, signals: Signals, stages: StageColumns,
-                work: FrictionWork) -> None:  # pragma: no cover - compiled  # fmt: skip
-    """The sampling steps of :func:`simulate` over its working slots, signals, stage columns and
-    friction work space, until every variant stopped or reached t_K."""
+@njit(SIMULATE_SIG, cache=True, error_model="numpy")
+def simulate(
+    integration: Integration,
+    plant: PlantCall,
+    controller: ControllerCall,
+    elements: LoopElements,
+    forces: PlantForces,
+    records: Records,
+    outcome: Outcome,
+    friction_path: FrictionPath,
+) -> None:  # pragma: no cover
+    """Integrate a batch of closed loops in lock step (see the module docstring): at t_k = k dt
+    y_k = C x_k, SENSOR elements, controller -> u_k, ACTUATOR elements; u_k held while the
+    method of ``integration`` integrates to t_{k+1}, disturbances at the stage times, friction
+    on each input's axis. A variant that goes non-finite or out of bounds stops and leaves the
+    batch (active variants lead the working slots; ``slots.vid`` maps a slot to its variant).
+    The arguments are the structures of :mod:`nlcx.kernel.structures`; the kernel writes
+    ``records`` and ``outcome``.
+
+    One compiled function: the working storage (:mod:`nlcx.kernel.working_storage`), then the
+    sampling steps until every variant stopped or reached t_K. numba compiles a function called
+    by another into a module of its own and then again into its caller's, so the steps, the
+    bulk of the kernel, written as a function of their own would be optimised and compiled
+    twice."""
+    (n_batch, n), n_u = plant.x0.shape, records.U.shape[2]
+    rows, n_free = working_rows(plant, controller, forces.friction, n_u)
+    signals = signal_rows(rows.xrow, plant.C.shape[0], controller.ref.shape[2], n_u, records.LOG.shape[2])
+    stages = stage_columns(n_batch, n)
+    modes = friction_modes(rows.axes, rows.xrow)
+    init_outcome(records.X.shape[1] - 1, outcome)
+    work = friction_work(n, n_u, plant.p.shape[1], integration.rk_b.shape[0], forces.dist.shape[3])
+    slots = working_slots(rows, modes, signals.log)
     rhs, C, ref, step, callbacks = plant.rhs, plant.C, controller.ref, controller.step, controller.callbacks
     X, U, LOG, FRICTION = records.X, records.U, records.LOG, records.FRICTION
     dist, dist_map, dt = forces.dist, forces.dist_map, integration.dt
@@ -274,10 +297,8 @@ def _step_batch(integration: Integration, plant: PlantCall, controller: Controll
                 for q in range(m):
                     xnf[q] = xf[q] + dt / 6.0 * (k1f[q] + 2.0 * (k2f[q] + k3f[q]) + k4f[q])
             elif n_free > 0:
-                rk_step(
-                    rhs, t, dt, n_free, x, x_new, uc, pw, ks, xs, rk_a, rk_b, c, SEQUENTIAL, dist, vid, kd, dist_map,
-                    None,
-                )  # fmt: skip
+                rk_step(rhs, t, dt, n_free, x, x_new, uc, pw, ks, xs, rk_a, rk_b, c, SEQUENTIAL, dist, vid, kd,
+                        dist_map, None)  # fmt: skip
             if nb > n_free:
                 friction_path.step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c)
             n_stop += _accept_states(k, nb, vid, x, bw, xf, xnf, bwf, stopped, status, n_valid, fail_index)
@@ -288,33 +309,3 @@ def _step_batch(integration: Integration, plant: PlantCall, controller: Controll
             if nb == 0:
                 break
             yv, rv, uv, xv, cpv, csv, logv = y[:nb], r[:nb], u[:nb], xrow[:nb], cpw[:nb], cs[:nb], log[:nb]
-
-
-@njit(SIMULATE_SIG, cache=True, error_model="numpy")
-def simulate(
-    integration: Integration,
-    plant: PlantCall,
-    controller: ControllerCall,
-    elements: LoopElements,
-    forces: PlantForces,
-    records: Records,
-    outcome: Outcome,
-    friction_path: FrictionPath,
-) -> None:  # pragma: no cover
-    """Integrate a batch of closed loops in lock step (see the module docstring): at t_k = k dt
-    y_k = C x_k, SENSOR elements, controller -> u_k, ACTUATOR elements; u_k held while the
-    method of ``integration`` integrates to t_{k+1}, disturbances at the stage times, friction
-    on each input's axis. A variant that goes non-finite or out of bounds stops and leaves the
-    batch (active variants lead the working slots; ``slots.vid`` maps a slot to its variant).
-    The arguments are the structures of :mod:`nlcx.kernel.structures`; the kernel writes
-    ``records`` and ``outcome``."""
-    n_batch, n = plant.x0.shape
-    n_u = records.U.shape[2]
-    rows, n_free = working_rows(plant, controller, forces.friction, n_u)
-    signals = signal_rows(rows.xrow, plant.C.shape[0], controller.ref.shape[2], n_u, records.LOG.shape[2])
-    stages = stage_columns(n_batch, n)
-    modes = friction_modes(rows.axes, rows.xrow)
-    init_outcome(records.X.shape[1] - 1, outcome)
-    work = friction_work(n, n_u, plant.p.shape[1], integration.rk_b.shape[0], forces.dist.shape[3])
-    _step_batch(integration, plant, controller, elements, forces, records, outcome, friction_path,
-                working_slots(rows, modes, signals.log), n_free, signals, stages, work)  # fmt: skip

@@ -14,7 +14,7 @@ at t_k = k dt::
 
 :func:`rk_step` is the one Runge-Kutta body, for any explicit tableau, friction or not. The CPU
 kernel steps the classic RK4 of a batch without friction in a specialised copy of it (flat loops
-over every column, :func:`nlcx.kernel.integrator._step_batch`), which tests/test_stepping.py
+over every column, in :func:`nlcx.kernel.integrator.simulate`), which tests/test_stepping.py
 holds bit-identical to :func:`rk_step` with :data:`CLASSIC`.
 """
 

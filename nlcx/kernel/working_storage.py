@@ -5,6 +5,10 @@ holds variant ``vid[b]``): the plant's state, parameters and bounds by columns, 
 controller's by rows; the signals of a sample, the Runge-Kutta stage columns and their flat
 views, the friction work space; and the compaction that moves stopped variants behind the
 active ones.
+
+Only the kernel calls these functions: they are compiled without the wrappers that would let
+Python call them (:func:`nlcx._numba_compat.inner_njit`), as are the kernel's other parts
+that only compiled code calls (:mod:`nlcx.kernel.friction`, the sampling step's helpers).
 """
 
 from __future__ import annotations
@@ -12,8 +16,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
-from numba import njit
 
+from nlcx._numba_compat import inner_njit
 from nlcx.kernel.abi import MAX_STAGES, STATUS_OK, shared_row
 from nlcx.kernel.friction import FA, has_friction, initial_modes
 from nlcx.kernel.signatures import FloatArray, IntArray
@@ -85,7 +89,7 @@ class FlatViews(NamedTuple):
     k4: np.ndarray
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def swap_variants(i: int, j: int, slots: Slots) -> None:  # pragma: no cover - compiled
     """Exchange the working slots i and j (two variants' state, parameters and bookkeeping):
     columns of the plant's state, parameters and bounds, rows of the rest."""
@@ -103,21 +107,21 @@ def swap_variants(i: int, j: int, slots: Slots) -> None:  # pragma: no cover - c
         mode[i, c], mode[j, c] = mode[j, c], mode[i, c]
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _swap_rows(a: FloatArray, i: int, j: int) -> None:  # pragma: no cover - compiled
     """Exchange rows i and j of a 2-D array."""
     for c in range(a.shape[1]):
         a[i, c], a[j, c] = a[j, c], a[i, c]
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _swap_columns(a: FloatArray, i: int, j: int) -> None:  # pragma: no cover - compiled
     """Exchange columns i and j of a 2-D array."""
     for r in range(a.shape[0]):
         a[r, i], a[r, j] = a[r, j], a[r, i]
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _swap_rows3(a: FloatArray, i: int, j: int) -> None:  # pragma: no cover - compiled
     """Exchange rows i and j of a 3-D array."""
     for c in range(a.shape[1]):
@@ -125,7 +129,7 @@ def _swap_rows3(a: FloatArray, i: int, j: int) -> None:  # pragma: no cover - co
             a[i, c, d], a[j, c, d] = a[j, c, d], a[i, c, d]
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _row_order(friction: FloatArray, n_batch: int) -> tuple[IntArray, int]:  # pragma: no cover - compiled
     """(vid, n_free): the variants without friction first (stepped together), then those with
     friction (stepped one by one); vid maps a working row to its variant."""
@@ -143,7 +147,7 @@ def _row_order(friction: FloatArray, n_batch: int) -> tuple[IntArray, int]:  # p
     return vid, n_free
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def working_rows(
     plant: PlantCall, controller: ControllerCall, friction: FloatArray, n_u: int
 ) -> tuple[WorkingRows, int]:  # pragma: no cover - compiled
@@ -179,7 +183,7 @@ def working_rows(
     return WorkingRows(vid=vid, x=x, xrow=xrow, p=pw, cp=cpw, cs=cs, axes=fw, bounds=bw), n_free
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def friction_modes(axes: FloatArray, xrow: FloatArray) -> FrictionModes:  # pragma: no cover - compiled
     """The friction modes of every slot's axes at t_0 (Appendix A) from the initial states by
     rows, xrow; no slot stopped (:class:`FrictionModes`)."""
@@ -193,7 +197,7 @@ def friction_modes(axes: FloatArray, xrow: FloatArray) -> FrictionModes:  # prag
     return modes
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def working_slots(rows: WorkingRows, modes: FrictionModes, log: FloatArray) -> Slots:  # pragma: no cover - compiled
     """The working slots (:class:`~nlcx.kernel.structures.Slots`) of the working rows, the
     friction modes and the controller's log."""
@@ -203,14 +207,14 @@ def working_slots(rows: WorkingRows, modes: FrictionModes, log: FloatArray) -> S
     )  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _copy_row(src: FloatArray, i: int, dst: FloatArray, j: int) -> None:  # pragma: no cover - compiled
     """dst[j, :] = src[i, :] element by element (a slice assignment compiles a shape check)."""
     for c in range(src.shape[1]):
         dst[j, c] = src[i, c]
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def friction_work(n: int, n_u: int, n_p: int, n_stage: int, n_d: int) -> FrictionWork:  # pragma: no cover - compiled
     """Work space of the one-variant friction path (:class:`~nlcx.kernel.structures.FrictionWork`),
     allocated once per :func:`~nlcx.kernel.integrator.simulate` call."""
@@ -224,7 +228,7 @@ def friction_work(n: int, n_u: int, n_p: int, n_stage: int, n_d: int) -> Frictio
                         scratch=scratch)  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def clear_columns(start: int, stop: int, arrays: tuple[FloatArray, ...]) -> None:  # pragma: no cover - compiled
     """Zero columns start..stop-1 (variants that just left the batch) of ``arrays``: the state,
     x_{k+1} and the stage derivatives. The flat loops over every column then keep them zero and
@@ -235,13 +239,13 @@ def clear_columns(start: int, stop: int, arrays: tuple[FloatArray, ...]) -> None
                 a[i, b] = 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def compact(nb: int, n_free: int, slots: Slots) -> tuple[int, int]:  # pragma: no cover - compiled
     """Move the stopped variants behind the active ones, keeping the frictionless slots in
     front: a stopped frictionless slot trades places with the last frictionless one, which
     then trades with the last active one. Returns the new (nb, n_free)."""
     stopped = slots.stopped
-    b = 0
+    b = np.int64(0)  # int64 from the start: a literal 0 would compile swap_variants once more, for Literal[int](0)
     while b < nb:
         if not stopped[b]:
             b += 1
@@ -256,7 +260,7 @@ def compact(nb: int, n_free: int, slots: Slots) -> tuple[int, int]:  # pragma: n
     return nb, n_free
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def signal_rows(xrow: FloatArray, n_y: int, n_r: int, n_u: int, n_log: int) -> Signals:  # pragma: no cover - compiled
     """The work arrays of the signals (:class:`Signals`) beside the controller's copy of the
     state, xrow."""
@@ -267,13 +271,13 @@ def signal_rows(xrow: FloatArray, n_y: int, n_r: int, n_u: int, n_log: int) -> S
     )  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def stage_columns(n_batch: int, n: int) -> StageColumns:  # pragma: no cover - compiled
     """The work arrays of a Runge-Kutta step (:class:`StageColumns`)."""
     return StageColumns(x_new=np.empty((n, n_batch)), xs=np.empty((n, n_batch)), k=np.zeros((MAX_STAGES, n, n_batch)))
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def flat_views(slots: Slots, stages: StageColumns) -> FlatViews:  # pragma: no cover - compiled
     """Flat views, made once, on the (n, B) arrays of a step: x, a stage's input, x_{k+1}, the
     bounds and the stage derivatives. The RK4 sums and the acceptance of x_{k+1} are one loop
@@ -288,7 +292,7 @@ def flat_views(slots: Slots, stages: StageColumns) -> FlatViews:  # pragma: no c
     )  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def init_outcome(n_steps: int, outcome: Outcome) -> None:  # pragma: no cover - compiled
     """Every variant ok until it stops."""
     status, n_valid, fail_index = outcome.status, outcome.n_valid, outcome.fail_index

@@ -3,7 +3,9 @@
 Each function calls one kernel of :mod:`nlcx.metrics.kernels` for every row of ``Y`` (a 2-D
 array, rows on the grid ``t``, any strides) and writes row b's values to ``out[b]``. Per-row
 arguments are arrays of one value a row; ``has_*`` says whether an optional one was given.
-The work space of the pairwise sums is made once per call.
+The work space of the pairwise sums is made once per call. Each row's values start at offset
+``np.int64(0)`` of its output row, an int64 as the offsets :func:`~nlcx.metrics.kernels.measure`
+computes (a literal 0 would compile the kernel once more: :mod:`nlcx.metrics.kernels`).
 """
 
 from __future__ import annotations
@@ -50,7 +52,7 @@ def step_response_rows(
     for b in range(Y.shape[0]):
         y = Y[b]
         start = initial[b] if has_initial else value_at_step(y, m)
-        step_response(t, y, m, start, final[b], out[b], 0, ranges, partial)
+        step_response(t, y, m, start, final[b], out[b], np.int64(0), ranges, partial)
 
 
 @njit(cache=True, error_model="numpy")
@@ -70,7 +72,7 @@ def step_info_rows(
         y = Y[b]
         start = initial[b] if has_initial else value_at_step(y, m)
         target = final[b] if has_final else y[y.shape[0] - 1]
-        step_info(t, y, m, start, target, out[b], 0)
+        step_info(t, y, m, start, target, out[b], np.int64(0))
 
 
 @njit(cache=True, error_model="numpy")
@@ -80,7 +82,7 @@ def regulation_rows(
     """:func:`~nlcx.metrics.kernels.regulation` of every row."""
     ranges, partial = _stack()
     for b in range(Y.shape[0]):
-        regulation(t, Y[b], m, reference[b], out[b], 0, ranges, partial)
+        regulation(t, Y[b], m, reference[b], out[b], np.int64(0), ranges, partial)
 
 
 @njit(cache=True, error_model="numpy")
@@ -92,7 +94,7 @@ def error_integral_rows(
     ranges, partial = _stack()
     zero = np.zeros(E.shape[1])
     for b in range(E.shape[0]):
-        error_integrals(t, zero, E[b], first, start, out[b], 0, ranges, partial)
+        error_integrals(t, zero, E[b], first, start, out[b], np.int64(0), ranges, partial)
 
 
 @njit(cache=True, error_model="numpy")
@@ -100,7 +102,7 @@ def input_rows(t: FloatArray, U: FloatArray, out: FloatArray) -> None:  # pragma
     """:func:`~nlcx.metrics.kernels.input_effort` of every row."""
     ranges, partial = _stack()
     for b in range(U.shape[0]):
-        input_effort(t, U[b], out[b], 0, ranges, partial)
+        input_effort(t, U[b], out[b], np.int64(0), ranges, partial)
 
 
 @njit(cache=True, error_model="numpy")
@@ -120,4 +122,4 @@ def measure_rows(
     shared = R.shape[0] == 1
     for k in range(rows.shape[0]):
         b = rows[k]
-        measure(kind, t, Y[b], R[0] if shared else R[b], m, final, out[k], 0, ranges, partial)
+        measure(kind, t, Y[b], R[0] if shared else R[b], m, final, out[k], np.int64(0), ranges, partial)

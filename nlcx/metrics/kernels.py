@@ -16,6 +16,13 @@ and :func:`measure` strings them together as a measured signal of a run needs th
 (:mod:`nlcx.metrics.batch`), and the GPU runs the same source, one thread a run
 (:mod:`nlcx.kernel.cuda_metrics`). Where a step falls on the grid is found once, on the host,
 and handed over as a :class:`Timing`.
+
+numba compiles a function once for each distinct set of argument types it is called with, and
+a constant argument, such as a literal ``0``, has a type of its own (``Literal[int](0)``). The
+kernels therefore pass sample indices and offsets as int64 values (``np.int64(0)`` where it is
+zero), and their callers hand them C-contiguous, writable float64 rows
+(:func:`nlcx.engine.measure.signal_values`): each kernel is compiled once. The kind of the
+pairwise sums is the exception: a constant on purpose (:mod:`nlcx.metrics.sums`).
 """
 
 from __future__ import annotations
@@ -202,12 +209,13 @@ def regulation(
     """:func:`nlcx.metrics.regulation_metrics` of the row held at ``reference``, over the whole
     record: peak deviation, its time, the settling time (band max(band * peak, abs_tol)) and
     the steady-state error."""
-    at = deviation_peak(y, 0, reference)
+    whole = np.int64(0)  # the first sample, an int64 as m.first is (see the module docstring)
+    at = deviation_peak(y, whole, reference)
     peak = abs(y[at] - reference)
     out[o] = peak
     out[o + 1] = t[at] - t[0]
-    out[o + 2] = last_exit(t, y, 0, t[0], reference, np_maximum(m.band * peak, m.abs_tol))
-    out[o + 3] = reference - window_mean(t, y, 0, m.window, ranges, partial)
+    out[o + 2] = last_exit(t, y, whole, t[0], reference, np_maximum(m.band * peak, m.abs_tol))
+    out[o + 3] = reference - window_mean(t, y, whole, m.window, ranges, partial)
 
 
 @njit(cache=True, error_model="numpy")
@@ -252,7 +260,7 @@ def input_effort(
     out[o + 2] = variation
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def measure(
     kind: int,
     t: FloatArray,
@@ -269,7 +277,11 @@ def measure(
     the order of :data:`nlcx.metrics.names.MEASURED`: a step response (from y(t_step) to
     ``final``) or a regulation to ``final``, each followed by the error integrals of
     ref - y from the step; the error integrals alone (tracking); the step characteristics
-    against the row's last sample (an output no loop follows); an input's effort."""
+    against the row's last sample (an output no loop follows); an input's effort.
+
+    Inlined into its one caller on the CPU, :func:`nlcx.metrics.batch.measure_rows`: a compiled
+    function of its own would have every metric kernel optimised and compiled into its machine
+    code, and then again into the caller's. The GPU compiles it from its source."""
     if kind == STEP:
         step_response(t, y, m, value_at_step(y, m), final, out, o, ranges, partial)
         error_integrals(t, y, ref, m.first, m.t_step, out, o + 7, ranges, partial)
