@@ -2,6 +2,7 @@
 
     python scripts/fidelity_report.py doc results/identify > docs/fidelity.md
     python scripts/fidelity_report.py profile results/identify > configs/thesis/profiles/selected.yaml
+    python scripts/fidelity_report.py replication results/identify > docs/replication.md
 
 `make identify` runs the studies, the two reproductions (literal and selected profiles) and
 the consistency study, then this. Every number on the page comes from those outputs (the
@@ -31,6 +32,7 @@ SPLIT = ROOT / "configs" / "identify" / "split.yaml"
 PENDULUM_SPEC = ROOT / "configs" / "identify" / "pendulum_all.yaml"
 CSTR_SPEC = ROOT / "configs" / "identify" / "cstr.yaml"
 CONSISTENCY_SPEC = ROOT / "configs" / "identify" / "consistency.yaml"
+TARGETED_SPEC = ROOT / "configs" / "identify" / "targeted.yaml"
 #: A set of printed cells counts as robustly inconsistent when the loop nearest to it misses
 #: by at least this much (relative) under every definition of t_r and t_s.
 ROBUST_MISS = 0.2
@@ -161,6 +163,8 @@ def context(results: Path) -> dict[str, Any]:
         "selected": selected_rep,
         "targets": targets(literal_rep, selected_rep),
         **consistency(results / "consistency"),
+        "final_round": final_round(results),
+        "targeted": targeted(results / "targeted"),
         "frozen": frozen_rows(results),
     }
 
@@ -247,6 +251,46 @@ def consistency(study: Path) -> dict[str, Any]:
     }
 
 
+def final_round(results: Path) -> dict[str, Any] | None:
+    """The final round (configs/identify/final_round.yaml), if it ran: its ranking, its rank 1
+    against the study's rank 1 (R1, refitted in the round) and the pre-registered rule's
+    decision (:func:`nlcx.thesis.profiles.final_round_selects`)."""
+    study = results / "final_round"
+    if not (study / "ranking.csv").is_file():
+        return None
+    ranking = pd.read_csv(study / "ranking.csv")
+    first = str(pd.read_csv(results / "pendulum_all" / "ranking.csv").hypothesis.iloc[0])
+    best, current = ranking.iloc[0], ranking[ranking.hypothesis == first].iloc[0]
+    gain = 1.0 - float(best.validation_median_rel_error) / float(current.validation_median_rel_error)
+    return {
+        "study": json.loads((study / "study.json").read_text()),
+        "rows": ranking.to_dict("records"),
+        "best": best,
+        "current": current,
+        "gain": gain,
+        "selects": best.hypothesis != current.hypothesis and profiles.final_round_selects(best, current),
+    }
+
+
+def targeted(study: Path) -> dict[str, Any] | None:
+    """The targeted search (configs/identify/targeted.yaml), if it ran: one row per set searched,
+    its verdict counts and the spec's budget."""
+    if not (study / "targeted.csv").is_file():
+        return None
+    table = pd.read_csv(study / "targeted.csv", dtype={"table": str})
+    spec = yaml.safe_load(TARGETED_SPEC.read_text())
+    counts = table.verdict.value_counts()
+    return {
+        "spec": spec,
+        "study": json.loads((study / "study.json").read_text()),
+        "rows": table.to_dict("records"),
+        "counts": {v: int(counts.get(v, 0)) for v in ("reachable", "undecided", "unreachable")},
+        "loops": int(table.loops.sum()),
+        "candidates": int((pd.read_csv(study.parent / "consistency" / "subsets.csv").least_miss >= ROBUST_MISS).sum()),
+        "unreachable_columns": sorted(set(table[table.verdict == "unreachable"].table)),
+    }
+
+
 def claims_cell(row: Any) -> str:
     """'yes / partly / no' of a ranking row with claims, — otherwise."""
     values = [row.get(f"claims_{v}") for v in ("yes", "partly", "no")]
@@ -255,7 +299,44 @@ def claims_cell(row: Any) -> str:
     return " / ".join(str(int(v)) for v in values)
 
 
-def render(results: Path) -> str:
+def chapter_tables(results: Path) -> dict[int, dict[str, Any]]:
+    """Per chapter of the thesis, from the two reproductions (``literal`` and ``selected``
+    profiles): each table's cells within tolerance and verdict (report_summary.csv), the claims'
+    verdicts (claims.csv), and for chapter 5 each method's median relative error in Table 5.8."""
+    chapters: dict[int, dict[str, Any]] = {c: {"tables": {}, "claims": {}} for c in (2, 3, 4, 5)}
+    for profile in ("literal", "selected"):
+        directory = results / f"reproduce_{profile}"
+        summary = pd.read_csv(directory / "report_summary.csv")
+        for row in summary[summary.cells > 0].itertuples():
+            chapter = int(str(row.table).split()[-1].split(".")[0])
+            entry = chapters[chapter]["tables"].setdefault(
+                str(row.table), {"table": str(row.table), "cells": row.cells}
+            )
+            entry[profile] = {"within": int(row.within_tolerance), "verdict": str(row.verdict)}
+        for table in sorted((directory / "tables").glob("table_[234]_*.csv")):
+            statuses = pd.read_csv(table).get("nlcx_status", pd.Series(dtype=str))
+            chapter = int(table.stem.split("_")[1])
+            runs = chapters[chapter].setdefault("not_ok", {}).setdefault(profile, 0)
+            chapters[chapter]["not_ok"][profile] = runs + int((statuses.dropna() != "ok").sum())
+        claims = pd.read_csv(directory / "claims.csv")
+        for chapter, group in claims.groupby("chapter"):
+            counts = group.reproduced.value_counts()
+            chapters[int(chapter)]["claims"][profile] = {v: int(counts.get(v, 0)) for v in ("yes", "partly", "no")}
+        table_5_8 = pd.read_csv(directory / "tables" / "table_5_8.csv")
+        rows = table_5_8[table_5_8.metric.isin(CSTR_METRICS) & (table_5_8.thesis != 0)]
+        rel = ((rows.nlcx - rows.thesis).abs() / rows.thesis.abs()).fillna(np.inf)
+        per_method = rel.groupby(rows.method, sort=False).median()
+        chapters[5].setdefault("methods", {})[profile] = {str(k): float(v) for k, v in per_method.items()}
+    searched = targeted(results / "targeted")
+    for chapter, entry in chapters.items():
+        entry["tables"] = list(entry["tables"].values())
+        mine = [r for r in searched["rows"] if str(r["table"]).split(".")[0] == str(chapter)] if searched else []
+        entry["targeted"] = {v: sum(r["verdict"] == v for r in mine) for v in ("reachable", "undecided", "unreachable")}
+        entry["targeted"]["sets"] = len(mine)
+    return chapters
+
+
+def environment() -> jinja2.Environment:
     env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(Path(__file__).parent / "templates"),
         undefined=jinja2.StrictUndefined,
@@ -266,7 +347,16 @@ def render(results: Path) -> str:
     env.filters["f"] = fmt
     env.filters["from_json"] = json.loads
     env.globals["claims_cell"] = claims_cell
-    return env.get_template("fidelity.md.j2").render(**context(results))
+    return env
+
+
+def render_replication(results: Path) -> str:
+    """docs/replication.md: the replication report, chapter by chapter."""
+    return environment().get_template("replication.md.j2").render(**context(results), chapters=chapter_tables(results))
+
+
+def render(results: Path) -> str:
+    return environment().get_template("fidelity.md.j2").render(**context(results))
 
 
 def rule_chose_selected(ranking: pd.DataFrame) -> bool:
@@ -275,17 +365,21 @@ def rule_chose_selected(ranking: pd.DataFrame) -> bool:
 
 
 def selected_profile(results: Path) -> str:
-    """The pendulum study's rank 1 (by validation) with chapter 5's rank 1 (by train loss)."""
-    pend = yaml.safe_load((results / "pendulum_all" / "profile.yaml").read_text())
+    """The pendulum study's rank 1 (by validation), or the final round's where the
+    pre-registered rule lets it replace that one, with chapter 5's rank 1 (by train loss)."""
+    final = final_round(results)
+    study = "final_round" if final is not None and final["selects"] else "pendulum_all"
+    pend = yaml.safe_load((results / study / "profile.yaml").read_text())
     cstr = yaml.safe_load((results / "cstr" / "profile.yaml").read_text())
     profile = {**pend, "chapter5": cstr["chapter5"]}
     chapter5 = "+".join(f"{k}={v}" for k, v in cstr["chapter5"]["hypothesis"].items()) or "literal"
     profile["source"] = f"{pend['source']}; chapter 5: {chapter5}, rank 1 by train loss in cstr"
-    profile["default"] = rule_chose_selected(pd.read_csv(results / "pendulum_all" / "ranking.csv"))
+    profile["default"] = rule_chose_selected(pd.read_csv(results / study / "ranking.csv"))
     header = "# Generated by make identify (scripts/fidelity_report.py profile); do not edit.\n"
     return header + yaml.safe_dump(profile, sort_keys=False)
 
 
 if __name__ == "__main__":
     command, results = sys.argv[1], Path(sys.argv[2])
-    sys.stdout.write(render(results) if command == "doc" else selected_profile(results))
+    pages = {"doc": render, "replication": render_replication, "profile": selected_profile}
+    sys.stdout.write(pages[command](results))

@@ -40,6 +40,7 @@ CITATION = (
 VERDICTS = ("yes", "partly", "no")
 #: The documents the deviations section links to (relative to the repository root).
 DOCS = {
+    "docs/replication.md": "the replication report: what replicates, chapter by chapter, and what does not",
     "docs/assumptions.md": "every unprinted parameter and the value nlcx chose",
     "docs/errata.md": "where the printed equations disagree with their derivation",
     "docs/calibration.md": "the conventional gains fitted to the printed tables",
