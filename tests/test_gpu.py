@@ -415,12 +415,13 @@ def test_open_loop_step_sweep_on_gpu_matches_cpu(tmp_path: Path) -> None:
 
 def test_identify_refuses_the_gpu_where_it_does_not_use_it(tmp_path: Path) -> None:
     """--device cuda on a study that runs on the CPU only is one line, not silently ignored."""
-    done = _nlcx("identify", str(ROOT / "configs" / "identify" / "cstr.yaml"), "--device", "cuda", "--out",
-                 str(tmp_path / "o"))  # fmt: skip
-    assert done.returncode != 0
-    text = (done.stdout + done.stderr).strip()
-    assert text == "--device = 'cuda': a consistency or chapter 5 study runs on the cpu only", text
-    assert not (tmp_path / "o").exists()
+    for spec in ("cstr.yaml", "targeted.yaml"):
+        done = _nlcx("identify", str(ROOT / "configs" / "identify" / spec), "--device", "cuda", "--out",
+                     str(tmp_path / "o"))  # fmt: skip
+        assert done.returncode != 0
+        text = (done.stdout + done.stderr).strip()
+        assert text == "--device = 'cuda': a consistency, targeted or chapter 5 study runs on the cpu only", text
+        assert not (tmp_path / "o").exists()
 
 
 def test_overlapped_batches_in_chunks_match_cpu(tmp_path: Path) -> None:
