@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from nlcx.runtime import module_command
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -178,7 +180,7 @@ class Painter:
     def __init__(self, command: list[str] | None = None) -> None:
         try:
             self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
-                command or [sys.executable, "-m", "nlcx.drawing"], stdin=subprocess.PIPE, stdout=subprocess.PIPE
+                command or module_command("nlcx.drawing"), stdin=subprocess.PIPE, stdout=subprocess.PIPE
             )
         except OSError:
             self._process = None

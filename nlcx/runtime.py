@@ -42,7 +42,9 @@ import contextlib
 import ctypes
 import functools
 import gc
+import json
 import os
+import sys
 import warnings
 from collections.abc import Callable, Iterator
 from typing import Literal, TextIO
@@ -201,6 +203,35 @@ def gpu_compiler() -> None:
     from nlcx._numba_compat import cuda_without_fma
 
     cuda_without_fma()
+
+
+#: ``python -c`` code that takes this process's import path and then runs a module as ``python -m``
+#: would (:func:`module_command`).
+_RUN_MODULE = (
+    "import json, runpy, sys; sys.path[:] = json.loads(sys.argv.pop(1)); "
+    "runpy.run_module(sys.argv.pop(1), run_name='__main__', alter_sys=True)"
+)
+
+
+def module_command(module: str, *args: str) -> list[str]:
+    """The command that runs ``module`` (one of nlcx's, such as ``nlcx.cli``) in a child process as
+    ``python -m module args`` would, importing what this process imports: the child gets this
+    process's import path (``sys.path``).
+
+    ``python -m`` puts the working directory first on the path. Started in a checkout of nlcx's
+    source with nlcx installed elsewhere (``pip install .``), the child would import the checkout
+    instead: another nlcx, perhaps another version, whose numba cache is another directory (a
+    compile helper would fill a cache the run never reads).
+
+    Examples
+    --------
+    >>> import sys
+    >>> from nlcx.runtime import module_command
+    >>> command = module_command("nlcx.cli", "--version")
+    >>> command[0] == sys.executable, command[1], command[-2:]
+    (True, '-c', ['nlcx.cli', '--version'])
+    """
+    return [sys.executable, "-c", _RUN_MODULE, json.dumps(sys.path), module, *args]
 
 
 def _restore_variable(name: str, value: str | None) -> None:

@@ -14,6 +14,7 @@ import os
 import subprocess
 import sys
 from concurrent.futures import ProcessPoolExecutor
+from importlib.metadata import version
 from pathlib import Path
 
 import pytest
@@ -255,3 +256,24 @@ def test_freed_memory_is_kept_for_reuse_on_glibc() -> None:
     except (ValueError, OSError):
         glibc = False
     assert done.returncode == 0 and done.stdout.strip() == str(glibc), done.stderr
+
+
+def _decoy_checkout(root: Path) -> Path:
+    """A directory holding a package named nlcx that says so when imported, as a checkout of
+    another nlcx would."""
+    (root / "nlcx" / "cli").mkdir(parents=True)
+    (root / "nlcx" / "__init__.py").write_text("")
+    (root / "nlcx" / "cli" / "__init__.py").write_text("")
+    (root / "nlcx" / "cli" / "__main__.py").write_text("print('the decoy nlcx')\n")
+    return root
+
+
+def test_a_child_module_imports_the_nlcx_its_parent_imported(tmp_path: Path) -> None:
+    """The compile helper and the painter, started in a directory holding another nlcx, run this
+    process's nlcx; `python -m` would have run the other."""
+    cwd = _decoy_checkout(tmp_path)
+    child = subprocess.run(runtime.module_command("nlcx.cli", "--version"), cwd=cwd, capture_output=True, text=True)
+    assert child.returncode == 0, child.stderr
+    assert child.stdout.strip() == f"nlcx {version('nlcx')}"
+    plain = subprocess.run([sys.executable, "-m", "nlcx.cli", "--version"], cwd=cwd, capture_output=True, text=True)
+    assert plain.stdout.strip() == "the decoy nlcx"  # what module_command is there to avoid

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -123,7 +122,7 @@ def run(
     painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
     flags = ["--allow-env"] if allow_env else []
     flags += [item for file in plugins or [] for item in ("--plugins", str(file.resolve()))]
-    command = [sys.executable, "-m", "nlcx.cli", "prewarm", str(config), *flags, *(overrides or [])]
+    command = runtime.module_command("nlcx.cli", "prewarm", str(config), *flags, *(overrides or []))
     # a kernel that numba compiles (its disk cache empty or stale): said in one line on stderr (not with -q)
     helper = CompileHelper(command, notice=None if quiet else lambda: echo(COMPILING, err=True))
     try:
