@@ -28,6 +28,8 @@ frozen                                                 and matplotlib's objects
 (:func:`imports_done`,
 :func:`settle_heap`)
 matplotlib's backend Agg  command                      every figure goes to a file
+SIGTERM ends it as Ctrl-C command (a worker keeps      what it wrote is listed, its locks let go,
+(:class:`Terminated`)     the default action)          as after Ctrl-C (``kill``, a scheduler)
 numpy shim                a process that uses the GPU  numba-cuda before 0.31 calls
 (``np.row_stack``)        (:func:`gpu_shims`)          ``np.row_stack``, which numpy 2.5 removed
 no fused multiply-add     a process that uses the GPU  the GPU rounds every product and sum as the
@@ -44,7 +46,9 @@ import functools
 import gc
 import json
 import os
+import signal
 import sys
+import threading
 import warnings
 from collections.abc import Callable, Iterator
 from typing import Literal, TextIO
@@ -106,11 +110,29 @@ def cache_access() -> Iterator[None]:
         _numba_compat.restore_cache_access(done)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM received by a command (``kill``, a batch scheduler's time limit), raised in its main
+    thread: like Ctrl-C's KeyboardInterrupt, it runs every ``finally`` on its way out, so a study
+    resumed in place lists what it wrote (:func:`nlcx.rundir.claim_in_place`) and every lock is
+    let go; the command line reports it in one line and exits with 143 (128 + SIGTERM)."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    """SIGTERM's handler in a command: stop the command's worker processes (a pool would otherwise
+    finish every task it was given before letting the command end), then raise :class:`Terminated`."""
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        child.terminate()
+    raise Terminated
+
+
 @contextlib.contextmanager
 def command() -> Iterator[None]:
     """What a command sets for its process, each restored (where it can be) when it ends: numba's
     note that first-class function types are experimental (the kernel's function tables) not
-    shown, nlcx's own warnings (an untested numba) as one line;
+    shown, nlcx's own warnings (an untested numba) as one line; SIGTERM raising
+    :class:`Terminated` in the main thread, so that the command ends as Ctrl-C ends it;
     matplotlib's backend Agg (``MPLBACKEND``, inherited by the processes the command starts);
     freed memory kept (:func:`reuse_freed_memory`, for the process's lifetime); and whatever the
     command froze for the collector (:func:`imports_done`) unfrozen at its end (unless something
@@ -119,6 +141,8 @@ def command() -> Iterator[None]:
     from nlcx import _numba_compat
 
     before, frozen, backend = _role, gc.get_freeze_count(), os.environ.get("MPLBACKEND")
+    main = threading.current_thread() is threading.main_thread()  # only the main thread sets handlers
+    on_term = signal.signal(signal.SIGTERM, _terminate) if main else None
     _role = "command"
     try:
         with warnings.catch_warnings():
@@ -129,6 +153,8 @@ def command() -> Iterator[None]:
             yield
     finally:
         _role = before
+        if main:
+            signal.signal(signal.SIGTERM, on_term)
         _restore_variable("MPLBACKEND", backend)
         if not frozen:
             gc.unfreeze()
@@ -137,11 +163,13 @@ def command() -> Iterator[None]:
 def worker() -> None:
     """Enter a worker process (a process pool's initialiser): one BLAS, OpenMP and numba
     thread, numba's cache access serialised, freed memory kept; the collector's heap settled
-    by each batch (:func:`settle_heap`)."""
+    by each batch (:func:`settle_heap`); SIGTERM's default action (a worker forked from a command
+    would inherit :class:`Terminated`, and a pool that stops it must see it end)."""
     global _role
     from nlcx import _numba_compat
 
     _role = "worker"
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a pool stops its workers with SIGTERM: they end at once
     os.environ.update(thread_variables())
     _numba_compat.serialize_cache_access()
     reuse_freed_memory()

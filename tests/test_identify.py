@@ -5,6 +5,8 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -198,6 +200,36 @@ def test_a_study_stopped_part_way_resumes_in_its_own_directory(tmp_path: Path, m
     (out / "foreign.txt").write_text("not nlcx's")
     refused = runner.invoke(app, ["identify", str(spec), "--out", str(out)])
     assert refused.exit_code != 0 and "foreign.txt" in refused.output  # someone else's file still refused
+
+
+#: Runs `nlcx identify` with SIGTERM sent to itself right after its first fit is saved, as a
+#: batch scheduler's time limit would end it.
+TERMINATED_AFTER_FIRST_FIT = """
+import os, signal, sys
+from nlcx.thesis import identify
+real = identify.save_fit
+def save_then_terminate(*args):
+    real(*args)
+    os.kill(os.getpid(), signal.SIGTERM)
+identify.save_fit = save_then_terminate
+from nlcx.cli import main
+main()
+"""
+
+
+@pytest.mark.slow
+def test_a_terminated_study_resumes_in_its_own_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIGTERM after the first fit ends `nlcx identify` as Ctrl-C would: one line, exit 143, its
+    directory listed in its manifest, so that the rerun resumes there with the fit kept."""
+    spec, out = _spec(tmp_path, SPLIT), tmp_path / "out"
+    command = [sys.executable, "-c", TERMINATED_AFTER_FIRST_FIT, "identify", str(spec), "--out", str(out)]
+    stopped = subprocess.run(command, capture_output=True, text=True, timeout=900)
+    assert stopped.returncode == 143, stopped.stderr
+    assert stopped.stderr.splitlines()[-1].startswith("terminated: ")
+    fitted = _counting_fits(monkeypatch)
+    resumed = runner.invoke(app, ["identify", str(spec), "--out", str(out)])
+    assert resumed.exit_code == 0, resumed.output
+    assert len(fitted) == 1  # of the spec's two hypotheses, only the one the stopped run left
 
 
 @pytest.mark.slow

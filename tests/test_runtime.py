@@ -277,3 +277,30 @@ def test_a_child_module_imports_the_nlcx_its_parent_imported(tmp_path: Path) -> 
     assert child.stdout.strip() == f"nlcx {version('nlcx')}"
     plain = subprocess.run([sys.executable, "-m", "nlcx.cli", "--version"], cwd=cwd, capture_output=True, text=True)
     assert plain.stdout.strip() == "the decoy nlcx"  # what module_command is there to avoid
+
+
+def test_sigterm_ends_a_command_as_ctrl_c_does_and_stops_its_workers(tmp_path: Path) -> None:
+    """SIGTERM in a command raises Terminated (a KeyboardInterrupt) in its main thread, after
+    stopping its pool's workers, which keep SIGTERM's default action: the pool does not finish
+    its minute-long task before the command ends. Outside a command SIGTERM is left alone."""
+    code = """
+import os, signal, sys, time
+from concurrent.futures import ProcessPoolExecutor
+from nlcx import runtime
+assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+start = time.perf_counter()
+try:
+    with runtime.command(), ProcessPoolExecutor(max_workers=1, initializer=runtime.worker) as pool:
+        assert pool.submit(signal.getsignal, signal.SIGTERM).result(timeout=120) is signal.SIG_DFL
+        pool.submit(time.sleep, 60)
+        time.sleep(0.5)
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(60)
+except runtime.Terminated:
+    print("terminated", round(time.perf_counter() - start))
+assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    word, seconds = done.stdout.split()
+    assert word == "terminated" and int(seconds) < 30  # not the minute its worker's task would take

@@ -96,13 +96,14 @@ def one_line_errors(func: F) -> F:
         except NlcxError as exc:
             echo(_first_line(str(exc)), err=True)
             raise typer.Exit(exc.exit_code) from None
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as stop:
+            terminated = isinstance(stop, runtime.Terminated)
             echo(
-                "interrupted: the output directory was left as it was "
+                f"{'terminated' if terminated else 'interrupted'}: the output directory was left as it was "
                 "(a sweep keeps its finished batches to resume from)",
                 err=True,
             )
-            raise typer.Exit(130) from None
+            raise typer.Exit(143 if terminated else 130) from None
         except BrokenPipeError:  # the reader stopped early (nlcx diff ... | head): nothing more to say
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             raise typer.Exit(1) from None
