@@ -202,6 +202,46 @@ def test_a_study_stopped_part_way_resumes_in_its_own_directory(tmp_path: Path, m
     assert refused.exit_code != 0 and "foreign.txt" in refused.output  # someone else's file still refused
 
 
+def test_a_study_digest_follows_the_spec_the_source_and_the_configs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A task a study finished is taken over only by the same spec, nlcx source and thesis
+    configs; the selected profile, which `make identify` writes there, is not an input."""
+    (tmp_path / "profiles").mkdir()
+    (tmp_path / "x.yaml").write_text("a: 1\n")
+    first = fitting.study_digest("spec", tmp_path)
+    assert fitting.study_digest("spec", tmp_path) == first and fitting.study_digest("other", tmp_path) != first
+    (tmp_path / "profiles" / "selected.yaml").write_text("name: selected\n")
+    fitting._code_digest.cache_clear()
+    assert fitting.study_digest("spec", tmp_path) == first
+    (tmp_path / "x.yaml").write_text("a: 2\n")
+    fitting._code_digest.cache_clear()
+    changed_config = fitting.study_digest("spec", tmp_path)
+    monkeypatch.setattr(fitting, "source_digest", lambda: "another nlcx")
+    fitting._code_digest.cache_clear()
+    assert len({first, changed_config, fitting.study_digest("spec", tmp_path)}) == 3
+    fitting._code_digest.cache_clear()
+
+
+@pytest.mark.slow
+def test_a_study_is_done_again_by_another_nlcx_source(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rerun after nlcx's source changed, a study fits every hypothesis again instead of resuming
+    from fits the older source made (the same source resumes and fits none)."""
+    spec, out = _spec(tmp_path, SPLIT), tmp_path / "out"
+    assert runner.invoke(app, ["identify", str(spec), "--out", str(out)]).exit_code == 0
+    fitted = _counting_fits(monkeypatch)
+    assert runner.invoke(app, ["identify", str(spec), "--out", str(out)]).exit_code == 0
+    assert fitted == []
+    monkeypatch.setattr(fitting, "source_digest", lambda: "another nlcx")
+    fitting._code_digest.cache_clear()
+    try:
+        again = runner.invoke(app, ["identify", str(spec), "--out", str(out)])
+    finally:
+        fitting._code_digest.cache_clear()
+    assert again.exit_code == 0, again.output
+    assert len(fitted) == 2  # both hypotheses of the spec
+
+
 #: Runs `nlcx identify` with SIGTERM sent to itself right after its first fit is saved, as a
 #: batch scheduler's time limit would end it.
 TERMINATED_AFTER_FIRST_FIT = """

@@ -23,6 +23,7 @@ import pandas as pd
 
 from nlcx import config as cfg
 from nlcx import engine, report
+from nlcx.compiled_cache import source_digest
 from nlcx.engine.gpu import Ensemble
 from nlcx.engine.metric_rows import MetricColumns
 from nlcx.engine.results import ExperimentResult
@@ -267,6 +268,31 @@ def fitted(
         **scores(fit),
     }
     return summary, fit
+
+
+#: Files under the thesis configs that a study writes rather than reads (``make identify`` copies
+#: the selected profile there): left out of :func:`study_digest`.
+STUDY_OUTPUTS = ("profiles/selected.yaml",)
+
+
+@functools.cache
+def _code_digest(root: Path) -> str:
+    digest = hashlib.sha256(source_digest().encode())
+    for path in sorted(root.rglob("*.yaml")):
+        name = path.relative_to(root).as_posix()
+        if name not in STUDY_OUTPUTS:
+            digest.update(name.encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def study_digest(spec_digest: str, root: Path) -> str:
+    """What a finished task of a study (a fit, a cloud of loops, a searched set) depends on: its
+    spec's digest, nlcx's source (every Python file of the package: the loops, the metrics, the
+    optimisers; :func:`nlcx.compiled_cache.source_digest`) and the thesis configs under ``root``
+    that its tables run. A study resumes only from tasks that the same source and configs
+    finished; any other task is done again, so that no study mixes the results of two versions."""
+    return hashlib.sha256(f"{spec_digest}:{_code_digest(root.resolve())}".encode()).hexdigest()[:16]
 
 
 def spec_provenance(spec: Path) -> dict[str, Any]:

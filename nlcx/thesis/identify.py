@@ -65,6 +65,7 @@ from nlcx.thesis.fitting import (
     measure_fits,
     scores,
     search,
+    study_digest,
     write_study,
 )
 from nlcx.tuning.optimise import GASettings, check_search_box, evolve
@@ -187,7 +188,7 @@ def identify(
     root = root or Path("configs") / "thesis"
     cells = all_cells(spec_split)
     t0 = time.perf_counter()
-    fits = Fits(spec, root, cells, out_dir / "fits", spec_digest(spec, spec_split), jobs, progress)
+    fits = Fits(spec, root, cells, out_dir / "fits", study_digest(spec_digest(spec, spec_split), root), jobs, progress)
     families = spec.families
     if spec.screen is not None:
         singles = hypotheses.family(spec.families, 1)

@@ -30,7 +30,7 @@ from nlcx.errors import NlcxError
 from nlcx.kernel.signatures import FloatArray
 from nlcx.thesis import catalog, hypotheses, profiles, split
 from nlcx.thesis.cstr import CSTR_METRICS, cstr_value
-from nlcx.thesis.fitting import StudyProgress, fit_table, relative_errors, train_loss, write_study
+from nlcx.thesis.fitting import StudyProgress, fit_table, relative_errors, study_digest, train_loss, write_study
 from nlcx.thesis.identify import finished, save_fit, spec_digest
 from nlcx.tuning.optimise import GASettings, evolve
 from nlcx.validation import validate_model
@@ -156,7 +156,7 @@ def identify_cstr(
     spec_split = split.load((path.parent / spec.split).resolve())
     cells = all_cells(spec_split)
     root = root or Path("configs") / "thesis"
-    digest = spec_digest(spec, spec_split)
+    digest = study_digest(spec_digest(spec, spec_split), root)
     family = hypotheses.family(spec.families, spec.max_options)
     fits = out_dir / "fits"
     todo = [h for h in family if not finished(fits / f"{h.name}.json", digest)]

@@ -42,7 +42,7 @@ from nlcx.thesis import hypotheses
 from nlcx.thesis.consistency.analysis import analyse
 from nlcx.thesis.consistency.loops import ColumnRuns, Store, fit_column, random_loops
 from nlcx.thesis.consistency.spec import Column, ConsistencySpec, Family, digest, load_spec
-from nlcx.thesis.fitting import write_study
+from nlcx.thesis.fitting import study_digest, write_study
 from nlcx.thesis.pages import tolerances
 
 Task = tuple[str, str, str, str]  # (fit or cloud, table, controller, hypothesis; "" for a cloud)
@@ -54,7 +54,7 @@ def consistency(
     """Run the study of spec ``path`` (resuming finished tasks) and write its analysis."""
     spec = load_spec(path)
     root = root or Path("configs") / "thesis"
-    store = Store(out_dir, digest(spec))
+    store = Store(out_dir, study_digest(digest(spec), root))
     family = spec.family()
     columns: list[Column] = [(t, c) for t in spec.tables for c in spec.controllers]
     families = {col: ColumnRuns(root, *col).examined(family) for col in columns}

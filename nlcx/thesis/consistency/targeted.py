@@ -47,7 +47,7 @@ from nlcx.thesis import hypotheses
 from nlcx.thesis.consistency.analysis import twins
 from nlcx.thesis.consistency.loops import ColumnRuns, Store, slug, used_box
 from nlcx.thesis.consistency.spec import Column, ConsistencySpec, column_cells, digest, load_spec, with_intervals
-from nlcx.thesis.fitting import FLOORS, write_study
+from nlcx.thesis.fitting import FLOORS, study_digest, write_study
 from nlcx.thesis.pages import tolerances
 from nlcx.validation import validate_model
 
@@ -298,7 +298,7 @@ def search_set(
                            consistency.zero_decimals)  # fmt: skip
     members = [m for g in chosen.groups for m in g]
     judge = SetJudge(cells, members, chosen.groups)
-    store = Store(Path(spec.study), digest(consistency))
+    store = Store(Path(spec.study), study_digest(digest(consistency), root))
     fitted = [h.name for h in consistency.family() if store.fit_path(chosen.column, h.name).is_file()]
     studied = {d: store.loops(chosen.column, d, fitted) for d in consistency.definitions}
     measured = [judge.judge(loops[list(cells.cell)].to_numpy(float)) for loops in studied.values()]
@@ -364,7 +364,7 @@ def targeted(
         return cells[column]
 
     chosen = chosen_sets(spec, cells_of)
-    stamp = set_digest(spec, consistency)
+    stamp = study_digest(set_digest(spec, consistency), root)
     t0 = time.perf_counter()
     todo = [(k, s) for k, s in enumerate(chosen) if not _finished(out_dir, s, stamp)]
     for done, (chosen_set, summary, loops) in enumerate(_searches(spec, consistency, root, todo, jobs), 1):
