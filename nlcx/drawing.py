@@ -1,10 +1,10 @@
 """Figures as plain data (:class:`FigurePlan`), drawn by matplotlib here or in a painter process.
 
-A run's figures are planned where the results are (:mod:`nlcx.report`: which lines, labels and
-axes) and drawn from the plan alone. The plan holds numbers and strings only, so another
-process can draw it: ``nlcx run`` starts a :class:`Painter` before it imports the simulation
-code, the painter imports matplotlib on the second core meanwhile, and draws while the run
-writes its CSV files. The same plan gives the same PNG bytes in either process.
+A run's figures are planned where the results are (:mod:`nlcx.figure_plans`: which lines,
+labels and axes) and drawn from the plan alone. The plan holds numbers and strings only, so
+another process can draw it: ``nlcx run`` starts a :class:`Painter` before it imports the
+simulation code, the painter imports matplotlib on the second core meanwhile, and draws while
+the run writes its CSV files. The same plan gives the same PNG bytes in either process.
 
 This module imports neither pandas nor the simulation code; matplotlib only where it draws.
 """

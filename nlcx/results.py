@@ -266,7 +266,7 @@ class Result:
     def _plan(self, signals: Sequence[str] | None, title: str | None) -> FigurePlan:
         """The figure's plan (:class:`nlcx.drawing.FigurePlan`) from the trajectories."""
         from nlcx.drawing import FigurePlan, Line, Panel
-        from nlcx.report import LINE_STYLES, finite_for_plot, thinned
+        from nlcx.figure_plans import LINE_STYLES, finite_for_plot, thinned
 
         names = [o[0] for o in self._outputs]
         chosen = list(signals) if signals is not None else names

@@ -125,7 +125,7 @@ class SweepResult:
         ['x: ise over 6 variants', 'theta: ise over 6 variants']
         """
         from nlcx.drawing import new_figure
-        from nlcx.report import LINE_STYLES
+        from nlcx.figure_plans import LINE_STYLES
 
         rows = self.metrics[self.metrics.metric == metric]
         if rows.empty:

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from nlcx import drawing, report
+from nlcx import drawing, figure_plans
 from tests.conftest import run_raw
 
 
@@ -27,8 +27,8 @@ def _result(raw: dict[str, Any]) -> Any:
 def _jobs(result: Any, directory: Path) -> list[tuple[Path, drawing.FigurePlan]]:
     title = "A title long enough to be wrapped onto a second line by the figure, as the thesis's captions are"
     return [
-        (directory / "figure.png", report.output_plan(result, title)),
-        (directory / "gains.png", report.gains_plan(result)),
+        (directory / "figure.png", figure_plans.output_plan(result, title)),
+        (directory / "gains.png", figure_plans.gains_plan(result)),
     ]
 
 
@@ -55,7 +55,7 @@ def test_figures_are_drawn_here_when_the_painter_fails(tmp_path: Path, x_error_r
 def test_the_output_plan_holds_each_runs_output_and_the_reference(x_error_raw: dict) -> None:
     result = _result(x_error_raw)
     plant = result.prepared.plant
-    plan = report.output_plan(result)
+    plan = figure_plans.output_plan(result)
     assert len(plan.panels) == len(plant.outputs) + len(plant.inputs)
     assert [p.title[:4] for p in plan.panels] == [f"({c}) " for c in "abc"[: len(plan.panels)]]
     for k, sig in enumerate(plant.outputs):
@@ -100,7 +100,7 @@ def test_a_painter_closed_without_figures_stops_at_once() -> None:
 
 
 def test_every_column_of_the_gains_figure_ends_in_a_time_axis(x_error_raw: dict) -> None:
-    plan = report.gains_plan(_result(x_error_raw))
+    plan = figure_plans.gains_plan(_result(x_error_raw))
     assert plan.n_cols * plan.n_rows >= len(plan.panels) > plan.n_cols  # a grid whose last row is not full
     for col in range(plan.n_cols):
         column = plan.panels[col :: plan.n_cols]

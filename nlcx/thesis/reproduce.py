@@ -63,7 +63,7 @@ def run_config(
     """Run one experiment (under ``profile``), write its run directory and (optionally) its figure."""
     import time
 
-    from nlcx import drawing, engine, report
+    from nlcx import drawing, engine, figure_plans, report
     from nlcx.thesis.lyapunov import lyapunov_rate
 
     start = time.perf_counter()
@@ -73,7 +73,7 @@ def run_config(
     report.write_run(result, out_dir / "runs" / exp.name, result.timings, started=start, overrides=applied)
     if figure is not None:
         filename, title = figure
-        drawing.write_figure(out_dir / "figures" / filename, report.output_figure(result, title))
+        drawing.write_figure(out_dir / "figures" / filename, figure_plans.output_figure(result, title))
     lyap = {}
     plant = result.prepared.plant
     if plant.features.energy is not None and not exp.uncertainties:
