@@ -12,11 +12,10 @@ not write is never replaced, whatever it holds: only a directory that carries nl
 the directories above it, the home directory and the root are refused as targets, whatever
 they hold.
 
-Replacing (:func:`install`): on Linux the new and the old directory exchange their names in
-one step (``renameat2`` with ``RENAME_EXCHANGE``), so the target's name always holds a
-complete directory. Elsewhere, or where the file system cannot exchange names, the old
-directory is renamed aside and the new one renamed in: between those two consecutive renames
-no directory bears the target's name. Then the old directory is deleted.
+Replacing (:func:`nlcx.atomic_install.install`): on Linux the new and the old directory
+exchange their names in one step, so the target's name always holds a complete directory;
+elsewhere the old directory is renamed aside and the new one renamed in. Then the old
+directory is deleted.
 
 Sweeps are the exception to "an interrupted write leaves nothing": their finished batches
 (``parts/``, and the time series of each variant) are kept in a staging directory with a
@@ -37,22 +36,18 @@ file behind; the check is made again under the lock.
 from __future__ import annotations
 
 import contextlib
-import ctypes
-import errno
-import functools
 import json
 import os
-import secrets
 import shutil
 import socket
-import sys
 import time
-from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from nlcx import manifest
+from nlcx.atomic_install import install, new_stage, real_path, remove_leftovers
 from nlcx.errors import NlcxError
 from nlcx.pages.writing import ReportError, write_pages
 
@@ -66,11 +61,7 @@ KINDS = ("run", "sweep", "reproduction", "linearize", "baselines")
 MARKER = manifest.MARKER
 #: What an output directory may be.
 ALLOWED = "a new or empty directory, or one nlcx wrote"
-_TMP, _OLD, _PARTIAL, _LOCK, _OWNER = ".nlcx-tmp-", ".nlcx-old-", ".nlcx-partial", ".nlcx-lock", ".nlcx-owner"
-#: Hex digits of the random part of a temporary or set-aside directory's name.
-_RANDOM_HEX = 8
-_AT_FDCWD = -100  # <fcntl.h>: a path relative to the working directory
-_RENAME_EXCHANGE = 2  # <linux/fs.h>: renameat2 swaps the two names
+_PARTIAL, _LOCK, _OWNER = ".nlcx-partial", ".nlcx-lock", ".nlcx-owner"
 
 #: Lock files this process holds (:func:`locked`), with the process id that took each one: a
 #: forked worker inherits the table but not the right to release.
@@ -89,13 +80,8 @@ class OutputError(NlcxError):
         return (type(self), (self.target, self.problem, self.allowed, self.key))
 
 
-def _real(target: Path) -> Path:
-    """``target`` absolute, symbolic links resolved: the directory that is renamed and replaced."""
-    return Path(os.path.realpath(target))
-
-
 def _beside(target: Path, suffix: str) -> Path:
-    real = _real(target)
+    real = real_path(target)
     return real.parent / f".{real.name}{suffix}"
 
 
@@ -125,12 +111,12 @@ def written_by_nlcx(directory: Path) -> bool:
 def _protected(target: Path) -> str | None:
     """Why ``target`` can never be an output directory (it is the working directory or above
     it, the home directory or the root), or None."""
-    real = _real(target)
+    real = real_path(target)
     if real == Path(real.anchor):
         return "the root of the file system"
-    if real == _real(Path.home()):
+    if real == real_path(Path.home()):
         return "the home directory"
-    cwd = _real(Path.cwd())
+    cwd = real_path(Path.cwd())
     if real == cwd or real in cwd.parents:
         return "the working directory" if real == cwd else "a directory above the working directory"
     return None
@@ -228,29 +214,6 @@ def locked(target: Path, key: str = "--out") -> Iterator[None]:
         lock.release()
 
 
-def _ours(name: str, target: Path) -> bool:
-    """Whether ``name`` is a temporary or set-aside directory of ``target`` (random part included,
-    so ``.a.nlcx-tmp-b.nlcx-tmp-<random>``, target ``a.nlcx-tmp-b``'s, is not target ``a``'s)."""
-    real = _real(target)
-    for suffix in (_TMP, _OLD):
-        prefix = f".{real.name}{suffix}"
-        rest = name[len(prefix) :]
-        if name.startswith(prefix) and len(rest) == _RANDOM_HEX and all(c in "0123456789abcdef" for c in rest):
-            return True
-    return False
-
-
-def remove_leftovers(target: Path) -> None:
-    """Delete the temporary and set-aside directories a killed writer of ``target`` left beside
-    it. Only under ``target``'s lock (:func:`claim`): then none of them is being written."""
-    parent = _real(target).parent
-    if not parent.is_dir():
-        return
-    for entry in parent.iterdir():
-        if _ours(entry.name, target) and entry.is_dir() and not entry.is_symlink():
-            shutil.rmtree(entry, ignore_errors=True)
-
-
 @contextmanager
 def claim(target: Path) -> Iterator[None]:
     """Make ``target`` this process's to write: check that it may be replaced
@@ -301,74 +264,15 @@ def check_marked(directory: Path, key: str = "DIR") -> None:
                           "a run, sweep or reproduction directory nlcx wrote", key)  # fmt: skip
 
 
-def _new_sibling(target: Path, suffix: str) -> Path:
-    """A name beside ``target`` that no entry has: ``.<name><suffix><8 random hex digits>``."""
-    real = _real(target)
-    while True:
-        candidate = real.parent / f".{real.name}{suffix}{secrets.token_hex(_RANDOM_HEX // 2)}"
-        if not os.path.lexists(candidate):
-            return candidate
-
-
-@functools.cache
-def _renameat2() -> Callable[..., int] | None:
-    """The C library's ``renameat2``, where there is one (Linux, glibc 2.28 and later)."""
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        function = ctypes.CDLL(None, use_errno=True).renameat2
-    except (AttributeError, OSError):
-        return None
-    function.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
-    function.restype = ctypes.c_int
-    return function
-
-
-def _exchange(first: Path, second: Path) -> bool:
-    """Swap the names of two existing directories in one step; False where the system or the
-    file system cannot (then nothing was renamed)."""
-    renameat2 = _renameat2()
-    if renameat2 is None:
-        return False
-    if renameat2(_AT_FDCWD, os.fsencode(first), _AT_FDCWD, os.fsencode(second), _RENAME_EXCHANGE) == 0:
-        return True
-    code = ctypes.get_errno()
-    if code in (errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP):
-        return False
-    raise OSError(code, os.strerror(code), str(first), None, str(second))
-
-
-def install(complete: Path, target: Path) -> None:
-    """Rename the directory ``complete`` to ``target``, replacing the directory ``target`` holds
-    (whose replacement :func:`claim` allowed), then delete the old one. ``complete`` must be
-    beside ``target``."""
-    real = _real(target)
-    if not os.path.lexists(real):
-        os.rename(complete, real)
-        return
-    if _exchange(complete, real):
-        shutil.rmtree(complete, ignore_errors=True)  # it names the old directory now
-        return
-    aside = _new_sibling(target, _OLD)
-    os.rename(real, aside)
-    try:
-        os.rename(complete, real)
-    except BaseException:
-        os.rename(aside, real)
-        raise
-    shutil.rmtree(aside, ignore_errors=True)
-
-
 @contextmanager
 def staged(target: Path) -> Iterator[Path]:
-    """A new, empty directory beside ``target`` to write its output into, renamed into place
-    (:func:`install`) when the block completes; removed, ``target`` untouched, when the block
-    raises or is interrupted. ``target`` is claimed (:func:`claim`) for the block."""
+    """A new, empty directory beside ``target`` to write its output into
+    (:func:`nlcx.atomic_install.new_stage`), renamed into place
+    (:func:`nlcx.atomic_install.install`) when the block completes; removed, ``target``
+    untouched, when the block raises or is interrupted. ``target`` is claimed (:func:`claim`)
+    for the block."""
     with claim(target):
-        real = _real(target)
-        real.parent.mkdir(parents=True, exist_ok=True)
-        stage = _new_sibling(target, _TMP)
-        stage.mkdir()
+        stage = new_stage(target)
         try:
             yield stage
             install(stage, target)
@@ -394,17 +298,6 @@ def open_partial(target: Path, keep: Collection[str], fresh: bool = False) -> Pa
         else:
             entry.unlink()
     return partial
-
-
-def link_or_copy(source: Path, destination: Path) -> None:
-    """``source`` at ``destination`` too: a hard link (the files of a finished sweep are never
-    rewritten in place: :func:`nlcx.drawing.atomic_write` replaces a file by renaming), or a
-    copy where the file system has no hard links."""
-    destination.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        os.link(source, destination)
-    except OSError:
-        shutil.copy2(source, destination)
 
 
 def save_run(

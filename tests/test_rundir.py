@@ -21,7 +21,7 @@ import yaml
 from typer.testing import CliRunner
 
 import nlcx
-from nlcx import config, engine, rundir
+from nlcx import atomic_install, config, engine, rundir
 from nlcx import manifest as manifests
 from nlcx.cli import app
 from nlcx.results import read_output_table
@@ -84,8 +84,10 @@ def test_the_new_directory_replaces_the_old_one_whole(
         (stage / "sub" / "old.txt").write_text("old\n")
         manifests.write(stage, {rundir.MARKER: "run"})
     calls: list[bool] = []
-    real_exchange = rundir._exchange
-    monkeypatch.setattr(rundir, "_exchange", lambda a, b: calls.append(exchange) or (exchange and real_exchange(a, b)))
+    real_exchange = atomic_install._exchange
+    monkeypatch.setattr(
+        atomic_install, "_exchange", lambda a, b: calls.append(exchange) or (exchange and real_exchange(a, b))
+    )
     with rundir.staged(out) as stage:
         assert stage.parent == out.parent and stage.name.startswith(".D.nlcx-tmp-")
         (stage / "new.csv").write_text("new\n")

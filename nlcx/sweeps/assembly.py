@@ -276,14 +276,14 @@ def assemble_columns(
     those of the parts this run computed (their workers counted them); the others' are read."""
     import pyarrow.parquet as pq
 
-    from nlcx import rundir
+    from nlcx import atomic_install
 
     for name, stem in (("metrics", "metrics"), ("index", "sweep")):
         paths = [out_dir / "parts" / f"{part}.{name}.parquet" for _, part in parts]
         if spec.format == "parquet":
             _fresh(out_dir / f"{stem}.parquet")
             for (first, _), path in zip(parts, paths, strict=True):
-                rundir.link_or_copy(path, out_dir / f"{stem}.parquet" / f"part-{first:09d}.parquet")
+                atomic_install.link_or_copy(path, out_dir / f"{stem}.parquet" / f"part-{first:09d}.parquet")
         else:
             _csv_of_parts(out_dir / f"{stem}.csv", paths)
     write_config(out_dir, base_raw, spec)

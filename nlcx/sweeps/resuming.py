@@ -32,7 +32,7 @@ def _carry_parts(finished: Path, staging: Path, want: Mapping[str, int]) -> None
     variant of this plan (``want``: config hash -> variant index) and are not there yet: each
     part's metrics and index, and the time series of those variants whose index in this plan
     is the one they were written under, then its seal (which marks it complete)."""
-    from nlcx import rundir
+    from nlcx import atomic_install
 
     series: dict[str, list[Path]] = {}
     if (finished / "timeseries").is_dir():
@@ -48,12 +48,12 @@ def _carry_parts(finished: Path, staging: Path, want: Mapping[str, int]) -> None
         if planned.isna().all():
             continue
         for name in (f"{part}.metrics.csv", f"{part}.index.csv"):
-            rundir.link_or_copy(finished / "parts" / name, staging / "parts" / name)
+            atomic_install.link_or_copy(finished / "parts" / name, staging / "parts" / name)
         for variant in index.variant[planned.to_numpy() == index.variant.to_numpy()]:
             for source in series.get(f"variant_{int(variant):06d}", []):
                 if not (staging / "timeseries" / source.name).exists():
-                    rundir.link_or_copy(source, staging / "timeseries" / source.name)
-        rundir.link_or_copy(finished / "parts" / seal, staging / "parts" / seal)
+                    atomic_install.link_or_copy(source, staging / "timeseries" / source.name)
+        atomic_install.link_or_copy(finished / "parts" / seal, staging / "parts" / seal)
 
 
 def open_staging(out_dir: Path, variants: list[Variant], hashes: list[str], force: bool) -> Path:
@@ -75,7 +75,7 @@ def open_column_staging(out_dir: Path, force: bool) -> Path:
     parts kept, and a finished sweep's in ``out_dir`` linked in (a batch's part name is the hash
     of its values and seeds, so a part of the same name is that batch's result); ``force``:
     none. Every sealed part is checked against its seal (:func:`nlcx.sweeps.seals.verify`)."""
-    from nlcx import rundir
+    from nlcx import atomic_install, rundir
 
     staging = rundir.open_partial(out_dir, keep=("parts",), fresh=force)
     if not force and (out_dir / "parts").is_dir():
@@ -84,6 +84,6 @@ def open_column_staging(out_dir: Path, force: bool) -> Path:
             if not (staging / "parts" / seal).exists():
                 seals.verify_part(out_dir, part)
                 for name in (f"{part}.metrics.parquet", f"{part}.index.parquet", seal):
-                    rundir.link_or_copy(out_dir / "parts" / name, staging / "parts" / name)
+                    atomic_install.link_or_copy(out_dir / "parts" / name, staging / "parts" / name)
     seals.verify(staging)
     return staging

@@ -286,7 +286,7 @@ class _Job:
                 computed: int, how: str, with_report: bool) -> SweepOutcome:  # fmt: skip
         """manifest.json, the report (its failure recorded, the results installed all the same),
         the directory renamed into place."""
-        from nlcx import rundir
+        from nlcx import atomic_install, rundir
 
         end = time.perf_counter()
         timings["wall"] = end - self.start
@@ -297,7 +297,7 @@ class _Job:
         )  # fmt: skip
         failure = rundir.write_pages(staging) if with_report and variants else None
         reported = time.perf_counter()
-        rundir.install(staging, self.out_dir)
+        atomic_install.install(staging, self.out_dir)
         if failure is not None:
             raise rundir.ReportError(self.out_dir, failure)
         report = self.out_dir / "report.html" if with_report and variants else None
