@@ -15,16 +15,8 @@ import numpy as np
 from nlcx.diff.cells import as_texts, hash_rows
 from nlcx.diff.matching import Found, Matcher, pending_cap
 from nlcx.diff.records import KEEP_STATUS, STATUS_RUNS, Drift, FileDrift, Tolerances
-from nlcx.diff.rows import (
-    BASE,
-    NEW,
-    ColumnRoles,
-    RunFilter,
-    RunPairs,
-    plan_columns,
-    rows_of,
-    status_changes,
-)
+from nlcx.diff.rows import BASE, NEW, ColumnRoles, plan_columns, rows_of
+from nlcx.diff.statuses import RunFilter, RunPairs, status_changes
 from nlcx.diff.tables import KindChangedError, TableSource
 
 
@@ -112,7 +104,7 @@ def _compared(
     runs = _runs_changed(name, pairs, out)
     if runs is not None:
         matcher = _matched(name, base, new, layout, tol, keep, runs, (None, None))
-        out.statuses = runs.drifts(name, layout)
+        out.statuses = runs.drifts(name, layout.status)
     tally = matcher.tally
     out.cells, out.missing_rows, out.extra_rows = tally.cells, tally.missing, tally.extra
     out.largest = tally.largest
