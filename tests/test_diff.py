@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 from nlcx import manifest
 from nlcx.cli import app
 from nlcx.diff import KEEP, FileDrift, Tolerances, diff_dirs, render, summary
+from nlcx.diff import matching as diff_matching
 from nlcx.diff import stream as diff_stream
 from nlcx.diff import tables as diff_tables
 
@@ -224,13 +225,13 @@ def test_every_drifting_cell_is_counted_and_only_the_first_are_held(
     pq.write_table(base, tmp_path / "base.parquet")
     pq.write_table(new, tmp_path / "new.parquet")
     held = []
-    offer = diff_stream._DriftTally.offer
+    offer = diff_matching.DriftTally.offer
 
-    def watched(self: diff_stream._DriftTally, found: list[diff_stream._Found]) -> None:
+    def watched(self: diff_matching.DriftTally, found: list[diff_matching.Found]) -> None:
         offer(self, found)
         held.append(len(self.kept))
 
-    monkeypatch.setattr(diff_stream._DriftTally, "offer", watched)
+    monkeypatch.setattr(diff_matching.DriftTally, "offer", watched)
     report = diff_dirs(tmp_path / "base.parquet", tmp_path / "new.parquet", ZERO)
     (table,) = report.files
     assert (table.cells, table.missing_rows, table.extra_rows, table.status_changes) == (2 * rows, 0, 0, 0)
@@ -309,7 +310,7 @@ def test_rows_in_another_order_beyond_the_pending_cap(
 ) -> None:
     """Past the cap on rows waiting for their match, matching stops: the rest are missing and
     extra rows, and one line says so."""
-    monkeypatch.setattr(diff_stream, "PENDING_ROWS", 8)
+    monkeypatch.setattr(diff_matching, "PENDING_ROWS", 8)
     base = _long_form(runs=10)
     paths = _frames(tmp_path, base, base.iloc[::-1])
     table = _one_table(*paths)

@@ -23,8 +23,9 @@ Two kinds of text column are not part of a row's key:
   has a failure time instead of metrics), are not compared; elsewhere a status is compared
   cell by cell as a note is.
 
-How a pair of tables is compared (:mod:`nlcx.diff.stream`, :mod:`nlcx.diff.rows`,
-:mod:`nlcx.diff.tables`), in memory bounded whatever their size and in time linear in it:
+How a pair of tables is compared (:mod:`nlcx.diff.stream`, :mod:`nlcx.diff.matching`,
+:mod:`nlcx.diff.rows`, :mod:`nlcx.diff.statuses`, :mod:`nlcx.diff.tables`), in memory bounded
+whatever their size and in time linear in it:
 
 - Each file of a table (a CSV or Parquet file, each part file of a dataset) is checked
   against the manifest of the nlcx output directory that lists it before it is read
