@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 
-from nlcx.thesis.loop_options import FAMILIES, OptionValue, Raw, unchanged
+from nlcx.thesis.loop_options import FAMILIES, OptionValue, unchanged
+from nlcx.thesis.scenario_options import Raw
 
 
 def _zn_rule(rule: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:

@@ -19,7 +19,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from nlcx.thesis.cstr_options import CSTR_FAMILIES, CSTR_OPERATING_CB
-from nlcx.thesis.loop_options import FAMILIES, NEUTRAL, OptionValue, Raw
+from nlcx.thesis.loop_options import FAMILIES, NEUTRAL, OptionValue
+from nlcx.thesis.scenario_options import Raw
 
 __all__ = [
     "CSTR_FAMILIES", "CSTR_OPERATING_CB", "FAMILIES", "NEUTRAL", "OPTIONS", "Hypothesis", "OptionValue", "combine",

@@ -1,14 +1,13 @@
 """The loop options of the pendulums (chapters 2-4) a hypothesis about the loop the thesis
-simulated may pick (:mod:`nlcx.thesis.hypotheses`), by family.
+simulated may pick (:mod:`nlcx.thesis.hypotheses`), by family (:data:`FAMILIES`).
 
 Every option is a setting a user can put in any config (nothing here is a special case of
-the kernel): the PID's derivative, integral form, PID form, sampling and actuator saturation with
-anti-windup, the units its loops see, the error-AGS argument, the reading of the printed gain
-ranges, an actuator lag, a reference prefilter and the integrators' limits; and the experiment
-as Simulink may have run it: the steps' amplitude and time and the origin of the measured
-times, the settling band of a regulated angle, the initial angle, the z loop of the x-z and
-x-y-z pendulums, the disturbance's phase, start and entry. A value changes only what the
-experiment has: a disturbance option leaves an experiment without a disturbance as it is.
+the kernel). Here, the PID's: its derivative, integral form, PID form, sampling and actuator
+saturation with anti-windup, the units its loops see, the error-AGS argument, the reading of
+the printed gain ranges, the integrators' limits, the z loop's schedule and the x-z and x-y-z
+pendulums' own conventional gains; the experiment's (an actuator lag, a reference prefilter,
+the steps, the initial angle, the z loop, the disturbance, the measurement) are
+:mod:`nlcx.thesis.scenario_options`'.
 """
 
 from __future__ import annotations
@@ -16,11 +15,21 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
-from nlcx import registry
-
-Raw = dict[str, Any]
+from nlcx.thesis.scenario_options import (
+    ANGLES,
+    Raw,
+    absolute_settling,
+    actuator_lag,
+    disturbance,
+    initial_angle,
+    plant_states,
+    prefilter,
+    rise_limits,
+    step_amplitude,
+    step_at_one_second_timed_from,
+    z_loop,
+)
 
 
 @dataclass(frozen=True)
@@ -98,119 +107,9 @@ def _ags_angle_degrees(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
             loop["schedule"]["error_scale"] = 180.0 / math.pi
 
 
-def _forces_before_input_disturbances(raw: Raw) -> None:
-    """Loop elements act in config order: an actuator lag filters the controller's forces
-    only, so it goes before any disturbance that enters at the inputs."""
-    elements = raw.get("uncertainty") or {}
-    lag = elements.get("actuator_lag")
-    names = list(elements)
-    at_input = [k for k, e in elements.items() if isinstance(e, dict) and e.get("kind") == "disturbance"
-                and e.get("entry") == "input"]  # fmt: skip
-    if lag is None or not at_input or names.index("actuator_lag") < names.index(at_input[0]):
-        return
-    rest = [(k, e) for k, e in elements.items() if k != "actuator_lag"]
-    first = [k for k, _ in rest].index(at_input[0])
-    raw["uncertainty"] = dict([*rest[:first], ("actuator_lag", lag), *rest[first:]])
-
-
-def _actuator_lag(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
-    """A first-order lag tau on every force (the actuator_lag loop element), after every other
-    element except a disturbance entering at the inputs (:func:`_forces_before_input_disturbances`)."""
-    raw.setdefault("uncertainty", {})["actuator_lag"] = {"kind": "actuator_lag", "tau": params["tau"]}
-    _forces_before_input_disturbances(raw)
-
-
-def _prefilter(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
-    """Every step reference through a first-order prefilter of time constant T_f."""
-    for reference in raw.get("reference", {}).values():
-        if reference.get("kind") == "step":
-            reference.update(kind="filtered_step", time_constant=params["T_f"])
-
-
 def _sampled(pid: Raw, params: Mapping[str, float], _: list[str]) -> None:
     """A discrete PID sampled every T_s (the free parameter)."""
     pid["sample_time"] = params["T_s"]
-
-
-def _step_references(raw: Raw) -> list[Raw]:
-    """The experiment's step references (a prefiltered step is one)."""
-    return [r for r in (raw.get("reference") or {}).values() if r.get("kind") in STEPS]
-
-
-def _set_metrics(raw: Raw, **settings: Any) -> None:
-    raw["metrics"] = {**(raw.get("metrics") or {}), **settings}
-
-
-def _plant_states(raw: Raw) -> list[str]:
-    """The state names of the experiment's plant (from the plant registry)."""
-    plant = registry.plants.get(raw["plant"]["name"], path="plant.name")
-    return [s.name for s in plant.states]
-
-
-def _absolute_settling(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
-    """A regulated signal (theta, phi) settles inside a band of at least tol (the free
-    parameter): the larger of tol and the settling band's fraction of its peak deviation."""
-    _set_metrics(raw, regulation_abs_tol=params["tol"])
-
-
-def _step_amplitude(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
-    """Every step reference ends at A (the free parameter) instead of its configured final value."""
-    for reference in _step_references(raw):
-        reference["final"] = params["A"]
-
-
-def _step_at_one_second(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
-    """The reference steps at t = 1 s (Simulink's Step block default), not at t = 0."""
-    for reference in _step_references(raw):
-        reference["time"] = 1.0
-
-
-def _step_at_one_second_timed_from(origin: str) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
-    """The reference steps at t = 1 s; a step response's times are measured from ``origin``
-    (``metrics.time_origin``: ``start``, t = 0, or ``step``, its step)."""
-
-    def change(raw: Raw, params: Mapping[str, float], inputs: list[str]) -> None:
-        _step_at_one_second(raw, params, inputs)
-        _set_metrics(raw, time_origin=origin)
-
-    return change
-
-
-def _initial_angle(raw: Raw, params: Mapping[str, float], _: list[str]) -> None:
-    """The pendulum starts tilted: theta(0) = theta0 (the free parameter), and phi(0) alike
-    on the pendulums that have it."""
-    angles = [state for state in _plant_states(raw) if state in ANGLES]
-    plant = raw["plant"]
-    plant["x0"] = {**(plant.get("x0") or {}), **dict.fromkeys(angles, params["theta0"])}
-
-
-def _z_loop(feedforward: bool, printed: bool) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
-    """On a plant with a z axis only: without the equilibrium feed-forward on every PID (the z
-    loop holds the weight by its integrator) and/or with the printed state equations."""
-
-    def change(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
-        if "z" not in _plant_states(raw):
-            return
-        if not feedforward:
-            for controller in (raw.get("controllers") or {}).values():
-                if controller.get("kind") == "pid":
-                    controller["feedforward"] = "none"
-        if printed:
-            raw["plant"]["params"] = {**(raw["plant"].get("params") or {}), "equations": "printed"}
-
-    return change
-
-
-def _disturbance(**settings: Any) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
-    """``settings`` on every ``kind: disturbance`` element of the experiment (none: no change)."""
-
-    def change(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
-        for element in (raw.get("uncertainty") or {}).values():
-            if isinstance(element, dict) and element.get("kind") == "disturbance":
-                element.update(settings)
-        _forces_before_input_disturbances(raw)
-
-    return change
 
 
 def _integral_limit(signals: tuple[str, ...] | None) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
@@ -229,7 +128,7 @@ def _own_conventional_gains(raw: Raw, params: Mapping[str, float], _: list[str])
     """On a plant with a z axis (x-z, x-y-z) only: the constant-gain angle and position loops'
     k_p, k_i, k_d times their own factors (``c_angle_kp`` ... ``c_position_kd``, free), so these
     pendulums' conventional gains are their own, not the x pendulum's."""
-    if "z" not in _plant_states(raw):
+    if "z" not in plant_states(raw):
         return
     for controller in (raw.get("controllers") or {}).values():
         if controller.get("kind") != "pid":
@@ -261,16 +160,6 @@ def _z_schedule(swapped: bool, rate_free: bool) -> Callable[[Raw, Mapping[str, f
     return change
 
 
-def _rise_limits(low: float, high: float) -> Callable[[Raw, Mapping[str, float], list[str]], None]:
-    """A measurement option: t_r from ``low`` to ``high`` of the step (metrics.rise_limits)."""
-
-    def change(raw: Raw, _: Mapping[str, float], __: list[str]) -> None:
-        _set_metrics(raw, rise_limits=[low, high])
-
-    return change
-
-
-ANGLES = ("theta", "phi")
 #: The position loops (an integrator limit on them leaves the angle and z loops unlimited).
 POSITIONS = ("x", "y")
 #: The loops whose gains :func:`_own_conventional_gains` scales, by group.
@@ -278,8 +167,6 @@ GAIN_GROUPS = {"theta": "angle", "phi": "angle", "x": "position", "y": "position
 GAINS = ("kp", "ki", "kd")
 #: The factors of the x-z and x-y-z pendulums' own conventional gains.
 OWN_GAINS = {f"c_{group}_{gain}": (0.2, 5.0) for group in ("angle", "position") for gain in GAINS}
-#: Reference kinds that step (a step, and a step through a prefilter).
-STEPS = ("step", "filtered_step")
 F_MAX = {"F_max": (2.0, 100.0)}
 #: The free parameters' values nearest the default loop: the widest limit, the shortest lag,
 #: prefilter and sampling period, the narrowest absolute band, the unit step, the upright
@@ -327,13 +214,13 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
     "lag": {
         "none": OptionValue("forces applied as commanded (default)", unchanged),
         "first_order": OptionValue(
-            "first-order actuator lag tau on every force", _actuator_lag, {"tau": (0.001, 0.3)}, "experiment"
+            "first-order actuator lag tau on every force", actuator_lag, {"tau": (0.001, 0.3)}, "experiment"
         ),
     },
     "prefilter": {
         "none": OptionValue("raw step references (default)", unchanged),
         "first_order": OptionValue(
-            "first-order prefiltered steps, time constant T_f", _prefilter, {"T_f": (0.01, 3.0)}, "experiment"
+            "first-order prefiltered steps, time constant T_f", prefilter, {"T_f": (0.01, 3.0)}, "experiment"
         ),
     },
     "sampling": {
@@ -356,7 +243,7 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
         "relative": OptionValue("a regulated angle settles inside 2 % of its peak deviation (default)", unchanged),
         "absolute": OptionValue(
             "a regulated angle settles inside max(2 % of its peak deviation, tol) (metrics.regulation_abs_tol)",
-            _absolute_settling,
+            absolute_settling,
             {"tol": (0.002, 0.05)},
             "experiment",
         ),
@@ -365,7 +252,7 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
         "unit": OptionValue("unit steps, as printed (default)", unchanged),
         "free": OptionValue(
             "every step reference ends at A (the AGS error normalisation untouched)",
-            _step_amplitude,
+            step_amplitude,
             {"A": (0.2, 2.0)},
             "experiment",
         ),
@@ -374,12 +261,12 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
         "zero": OptionValue("reference step at t = 0 (default)", unchanged),
         "one_second": OptionValue(
             "reference step at t = 1 s (Simulink's default), times measured from t = 0 (metrics.time_origin: start)",
-            _step_at_one_second_timed_from("start"),
+            step_at_one_second_timed_from("start"),
             scope="experiment",
         ),
         "one_second_from_step": OptionValue(
             "reference step at t = 1 s (Simulink's default), times measured from the step (metrics.time_origin: step)",
-            _step_at_one_second_timed_from("step"),
+            step_at_one_second_timed_from("step"),
             scope="experiment",
         ),
     },
@@ -387,7 +274,7 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
         "zero": OptionValue("the pendulum starts upright (default)", unchanged),
         "free": OptionValue(
             "theta(0) = theta0, and phi(0) alike where the pendulum has phi",
-            _initial_angle,
+            initial_angle,
             {"theta0": (0.0, 0.2)},
             "experiment",
         ),
@@ -398,39 +285,37 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
         ),
         "no_feedforward": OptionValue(
             "x-z, x-y-z: no feed-forward (the z loop's integrator holds the weight)",
-            _z_loop(feedforward=False, printed=False),
+            z_loop(feedforward=False, printed=False),
             scope="experiment",
         ),
         "no_feedforward_printed": OptionValue(
             "x-z, x-y-z: no feed-forward, the printed state equations",
-            _z_loop(feedforward=False, printed=True),
+            z_loop(feedforward=False, printed=True),
             scope="experiment",
         ),
         "printed": OptionValue(
             "x-z, x-y-z: the printed state equations (plant.params.equations)",
-            _z_loop(feedforward=True, printed=True),
+            z_loop(feedforward=True, printed=True),
             scope="experiment",
         ),
     },
     "disturbance_phase": {
         "zero": OptionValue("d = A sin(2 pi f t), as printed (default)", unchanged),
-        "quarter": OptionValue("the disturbance's phase pi/2", _disturbance(phase=math.pi / 2), scope="experiment"),
-        "half": OptionValue("the disturbance's phase pi", _disturbance(phase=math.pi), scope="experiment"),
+        "quarter": OptionValue("the disturbance's phase pi/2", disturbance(phase=math.pi / 2), scope="experiment"),
+        "half": OptionValue("the disturbance's phase pi", disturbance(phase=math.pi), scope="experiment"),
         "three_quarter": OptionValue(
-            "the disturbance's phase 3 pi/2", _disturbance(phase=3 * math.pi / 2), scope="experiment"
+            "the disturbance's phase 3 pi/2", disturbance(phase=3 * math.pi / 2), scope="experiment"
         ),
     },
     "disturbance_start": {
         "zero": OptionValue("the disturbance acts from t = 0 (default)", unchanged),
         "one_second": OptionValue(
-            "the disturbance starts at t = 1 s (d = 0 before)", _disturbance(start=1.0), scope="experiment"
+            "the disturbance starts at t = 1 s (d = 0 before)", disturbance(start=1.0), scope="experiment"
         ),
     },
     "disturbance_entry": {
         "accelerations": OptionValue("d added to every acceleration, as eqs. 2.13-2.16 print it (default)", unchanged),
-        "input": OptionValue(
-            "d added as a force to every plant input", _disturbance(entry="input"), scope="experiment"
-        ),
+        "input": OptionValue("d added as a force to every plant input", disturbance(entry="input"), scope="experiment"),
     },
     "integrator_limit": {
         "none": OptionValue("unlimited integrators (default)", unchanged),
@@ -470,11 +355,11 @@ FAMILIES: dict[str, dict[str, OptionValue]] = {
         "10_90": OptionValue("a measurement option: t_r from 10 % to 90 % of the step (default)", unchanged),
         "0_100": OptionValue(
             "a measurement option: t_r from the step to its first reaching 100 %",
-            _rise_limits(0.0, 1.0),
+            rise_limits(0.0, 1.0),
             scope="experiment",
         ),
         "5_95": OptionValue(
-            "a measurement option: t_r from 5 % to 95 % of the step", _rise_limits(0.05, 0.95), scope="experiment"
+            "a measurement option: t_r from 5 % to 95 % of the step", rise_limits(0.05, 0.95), scope="experiment"
         ),
     },
 }
