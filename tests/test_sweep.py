@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 from nlcx import config, engine, rundir
 from nlcx import sweeps as sweep
 from nlcx.cli import app
-from nlcx.sweeps import assembly
+from nlcx.sweeps import assembly, seals
 
 ROOT = Path(__file__).resolve().parent.parent
 runner = CliRunner()
@@ -183,8 +183,9 @@ _merged = assembly._merged_metrics
 
 
 def _finished_parts(staged: Path) -> int:
-    """The index files of finished batches (not the hidden temporary file of one being written)."""
-    return sum(not p.name.startswith(".") for p in staged.glob("*.index.*"))
+    """The seals of finished batches (a part's files before its seal are an unfinished batch;
+    the hidden temporary file of a seal being written is not one)."""
+    return sum(not p.name.startswith(".") for p in staged.glob(f"*{seals.SEAL}"))
 
 
 @pytest.mark.slow
