@@ -35,7 +35,6 @@ file behind; the check is made again under the lock.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import shutil
@@ -243,7 +242,7 @@ def claim_in_place(target: Path, kind: str, key: str = "--out") -> Iterator[None
         try:
             yield
         except BaseException:
-            with contextlib.suppress(manifest.IntegrityError, OSError):
+            with suppress(manifest.IntegrityError, OSError):
                 _list_written(target)
             raise
         _list_written(target)
@@ -251,7 +250,7 @@ def claim_in_place(target: Path, kind: str, key: str = "--out") -> Iterator[None
 
 def _list_written(target: Path) -> None:
     """``target``'s manifest listing every file in it, each hashed anew."""
-    manifest.update(target, manifest.load(target).get("checksums", {}))
+    manifest.write(target, manifest.load(target))  # no checksum known: every file hashed anew
 
 
 def check_marked(directory: Path, key: str = "DIR") -> None:

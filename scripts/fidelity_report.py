@@ -58,6 +58,14 @@ def fmt(value: Any, digits: int = 3) -> str:
     return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
 
 
+def table_5_8_errors(directory: Path) -> tuple[pd.DataFrame, pd.Series]:
+    """Table 5.8's rows of the CSTR metrics with a printed value other than 0, and each one's
+    relative error |nlcx - thesis| / |thesis| (inf where nlcx has no value)."""
+    table_5_8 = pd.read_csv(directory / "tables" / "table_5_8.csv")
+    rows = table_5_8[table_5_8.metric.isin(CSTR_METRICS) & (table_5_8.thesis != 0)]
+    return rows, ((rows.nlcx - rows.thesis).abs() / rows.thesis.abs()).fillna(np.inf)
+
+
 def reproduction(directory: Path, spec_split: split.Split) -> dict[str, Any]:
     """A reproduction's claims counts, its pendulum test scores and its Table 5.8 test error."""
     claims = pd.read_csv(directory / "claims.csv").reproduced.value_counts()
@@ -68,14 +76,11 @@ def reproduction(directory: Path, spec_split: split.Split) -> dict[str, Any]:
             frame = frame[frame.metric.isin(spec_split.metrics)]
             rows.append(frame.assign(part=part, table=table)[["part", "table", "signal", "controller", "metric",
                                                               "thesis", "nlcx"]])  # fmt: skip
-    table_5_8 = pd.read_csv(directory / "tables" / "table_5_8.csv")
-    test = table_5_8[table_5_8.method.isin(spec_split.cstr.test) & table_5_8.metric.isin(CSTR_METRICS)]
-    test = test[test.thesis != 0]
-    rel = ((test.nlcx - test.thesis).abs() / test.thesis.abs()).fillna(np.inf)
+    cstr, rel = table_5_8_errors(directory)
     return {
         "claims": {v: int(claims.get(v, 0)) for v in ("yes", "partly", "no")},
         "scores": scores(pd.concat(rows, ignore_index=True)),
-        "table_5_8_test": float(np.median(rel)),
+        "table_5_8_test": float(np.median(rel[cstr.method.isin(spec_split.cstr.test)])),
     }
 
 
@@ -299,10 +304,11 @@ def claims_cell(row: Any) -> str:
     return " / ".join(str(int(v)) for v in values)
 
 
-def chapter_tables(results: Path) -> dict[int, dict[str, Any]]:
+def chapter_tables(results: Path, searched: dict[str, Any] | None) -> dict[int, dict[str, Any]]:
     """Per chapter of the thesis, from the two reproductions (``literal`` and ``selected``
     profiles): each table's cells within tolerance and verdict (report_summary.csv), the claims'
-    verdicts (claims.csv), and for chapter 5 each method's median relative error in Table 5.8."""
+    verdicts (claims.csv), for chapter 5 each method's median relative error in Table 5.8, and
+    the verdicts of the targeted search's sets (``searched``, :func:`targeted`)."""
     chapters: dict[int, dict[str, Any]] = {c: {"tables": {}, "claims": {}} for c in (2, 3, 4, 5)}
     for profile in ("literal", "selected"):
         directory = results / f"reproduce_{profile}"
@@ -322,12 +328,9 @@ def chapter_tables(results: Path) -> dict[int, dict[str, Any]]:
         for chapter, group in claims.groupby("chapter"):
             counts = group.reproduced.value_counts()
             chapters[int(chapter)]["claims"][profile] = {v: int(counts.get(v, 0)) for v in ("yes", "partly", "no")}
-        table_5_8 = pd.read_csv(directory / "tables" / "table_5_8.csv")
-        rows = table_5_8[table_5_8.metric.isin(CSTR_METRICS) & (table_5_8.thesis != 0)]
-        rel = ((rows.nlcx - rows.thesis).abs() / rows.thesis.abs()).fillna(np.inf)
+        rows, rel = table_5_8_errors(directory)
         per_method = rel.groupby(rows.method, sort=False).median()
         chapters[5].setdefault("methods", {})[profile] = {str(k): float(v) for k, v in per_method.items()}
-    searched = targeted(results / "targeted")
     for chapter, entry in chapters.items():
         entry["tables"] = list(entry["tables"].values())
         mine = [r for r in searched["rows"] if str(r["table"]).split(".")[0] == str(chapter)] if searched else []
@@ -352,7 +355,9 @@ def environment() -> jinja2.Environment:
 
 def render_replication(results: Path) -> str:
     """docs/replication.md: the replication report, chapter by chapter."""
-    return environment().get_template("replication.md.j2").render(**context(results), chapters=chapter_tables(results))
+    found = context(results)
+    chapters = chapter_tables(results, found["targeted"])
+    return environment().get_template("replication.md.j2").render(**found, chapters=chapters)
 
 
 def render(results: Path) -> str:

@@ -46,20 +46,22 @@ def groups_of(group_keys: list[tuple[Hashable, ...]]) -> list[list[int]]:
     return list(groups.values())
 
 
-def kernel_calls(groups: list[list[int]], items: list[Item]) -> list[KernelCall]:
+def kernel_calls(groups: list[list[int]], items: list[Item], copies: int = 1) -> list[KernelCall]:
     """The kernel calls of the groups. A group of items whose controllers share their kind but
     not their step (PIDs of different loop structures, each running the step compiled for its
     own, ``pid.step_for``) is split into a call per step when every step has at least
     :data:`MIN_ROWS_PER_STEP` rows, and is otherwise one call of the kind's general step (the
     same arithmetic, so the same bits): a call's cost per time step, shared by its rows,
     outweighs the faster step for one or two rows (``nlcx run`` of a conventional PID against an
-    AGS PID is faster as one call)."""
+    AGS PID is faster as one call). ``copies``: how many times each call's rows are simulated
+    (the variants of an ensemble, :func:`nlcx.engine.ensembles.ensemble_calls`), which counts
+    toward the rows of a step."""
     calls: list[KernelCall] = []
     for indices in groups:
         by_step: dict[int, list[int]] = {}
         for i in indices:
             by_step.setdefault(id(items[i].controller.step), []).append(i)
-        if len(by_step) == 1 or all(len(rows) >= MIN_ROWS_PER_STEP for rows in by_step.values()):
+        if len(by_step) == 1 or all(copies * len(rows) >= MIN_ROWS_PER_STEP for rows in by_step.values()):
             calls += [KernelCall(rows, items[rows[0]].controller.step) for rows in by_step.values()]
         else:
             # steps differ within a group only where its controllers have a general step (group_key)

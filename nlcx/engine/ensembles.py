@@ -17,11 +17,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, TypeAlias, cast
+from typing import Any, TypeAlias
 
 import numpy as np
 
-from nlcx.engine.batching import MIN_ROWS_PER_STEP, group_key, groups_of
+from nlcx.engine.batching import group_key, groups_of, kernel_calls
 from nlcx.engine.measure import signal_values
 from nlcx.engine.metric_rows import Categories, MetricColumns, RowBlock, failed_block, ok_block, ordered
 from nlcx.engine.plan import MeasuredSignal, MetricPlan, signal_plans
@@ -220,17 +220,8 @@ def ensemble_calls(items: list[Item], n_variants: int) -> list[tuple[np.ndarray,
     The calls :func:`~nlcx.engine.batching.kernel_calls` makes for the variants' items, found on
     one variant's: a group of loops splits into a call per step when each step has
     :data:`~nlcx.engine.batching.MIN_ROWS_PER_STEP` rows over all the variants."""
-    calls: list[tuple[np.ndarray, ControllerStep]] = []
-    for group in groups_of([group_key(item) for item in items]):
-        by_step: dict[int, list[int]] = {}
-        for i in group:
-            by_step.setdefault(id(items[i].controller.step), []).append(i)
-        if len(by_step) == 1 or all(n_variants * len(rows) >= MIN_ROWS_PER_STEP for rows in by_step.values()):
-            calls += [(np.array(rows), items[rows[0]].controller.step) for rows in by_step.values()]
-        else:
-            # steps differ within a group only where its controllers have a general step (group_key)
-            calls.append((np.array(group), cast(ControllerStep, items[group[0]].controller.general_step)))
-    return calls
+    calls = kernel_calls(groups_of([group_key(item) for item in items]), items, copies=n_variants)
+    return [(np.array(call.indices), call.step) for call in calls]
 
 
 def call_arguments(

@@ -105,7 +105,7 @@ def _rows(part: Structure, rows: slice) -> Structure:
     """One of :func:`_chunk`'s structures."""
     fields = {}
     for name, value in part._asdict().items():
-        per_row = isinstance(value, np.ndarray) and value.ndim >= 1 and name not in ("C", "dist_map", "table")
+        per_row = isinstance(value, np.ndarray) and value.ndim >= 1 and name not in _WHOLE
         if per_row and value.shape[0] > 1:
             fields[name] = np.ascontiguousarray(value[rows])
     return part._replace(**fields)

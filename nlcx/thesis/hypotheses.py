@@ -24,7 +24,7 @@ from nlcx.thesis.scenario_options import Raw
 
 __all__ = [
     "CSTR_FAMILIES", "CSTR_OPERATING_CB", "FAMILIES", "NEUTRAL", "OPTIONS", "Hypothesis", "OptionValue", "combine",
-    "default", "family", "parse",
+    "default", "family", "from_options", "parse",
 ]  # fmt: skip
 
 
@@ -102,13 +102,17 @@ def parse(name: str) -> Hypothesis:
             known = ", ".join(OPTIONS.get(family_name, OPTIONS))
             raise ValueError(f"hypothesis {name!r}: {part!r} is not one option of a family (allowed: {known})")
         options[family_name] = value
+    return from_options(options)
+
+
+def from_options(options: Mapping[str, str]) -> Hypothesis:
+    """The hypothesis of ``options`` (family -> value), its options in the order of :data:`OPTIONS`."""
     return Hypothesis(tuple((f, options[f]) for f in OPTIONS if f in options))
 
 
 def combine(first: Hypothesis, second: Hypothesis) -> Hypothesis:
     """``first``'s options with ``second``'s (``second``'s value where both set a family)."""
-    options = dict(first.options) | dict(second.options)
-    return Hypothesis(tuple((f, options[f]) for f in OPTIONS if f in options))
+    return from_options(dict(first.options) | dict(second.options))
 
 
 def family(

@@ -31,6 +31,9 @@ from nlcx.thesis.scenario_options import (
     z_loop,
 )
 
+#: A PID loop's gains, each with its own schedule.
+GAINS = ("kp", "ki", "kd")
+
 
 @dataclass(frozen=True)
 class OptionValue:
@@ -51,7 +54,7 @@ def _by_magnitude(pid: Raw, _: Mapping[str, float], __: list[str]) -> None:
     printed bounds are negative, the "min" value is the one of smaller magnitude."""
     for loop in pid["loops"].values():
         schedule = loop["schedule"]
-        for gain in ("kp", "ki", "kd"):
+        for gain in GAINS:
             bounds = schedule.get(gain)
             if isinstance(bounds, dict) and bounds["min"] < 0 and bounds["max"] < 0:
                 lo, hi = sorted((bounds["min"], bounds["max"]), key=abs)
@@ -164,7 +167,6 @@ def _z_schedule(swapped: bool, rate_free: bool) -> Callable[[Raw, Mapping[str, f
 POSITIONS = ("x", "y")
 #: The loops whose gains :func:`_own_conventional_gains` scales, by group.
 GAIN_GROUPS = {"theta": "angle", "phi": "angle", "x": "position", "y": "position"}
-GAINS = ("kp", "ki", "kd")
 #: The factors of the x-z and x-y-z pendulums' own conventional gains.
 OWN_GAINS = {f"c_{group}_{gain}": (0.2, 5.0) for group in ("angle", "position") for gain in GAINS}
 F_MAX = {"F_max": (2.0, 100.0)}

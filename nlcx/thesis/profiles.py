@@ -48,11 +48,6 @@ def _check_options(options: dict[str, str], families: dict[str, dict[str, Any]])
     return options
 
 
-def _as_hypothesis(options: dict[str, str]) -> hypotheses.Hypothesis:
-    order = list(hypotheses.OPTIONS)
-    return hypotheses.Hypothesis(tuple(sorted(options.items(), key=lambda kv: order.index(kv[0]))))
-
-
 class Chapter5Part(BaseModel):
     """The hypothesis every chapter-5 experiment (Table 5.8, the CSTR) runs under."""
 
@@ -93,7 +88,7 @@ class Profile(BaseModel):
         return not (self.hypothesis or self.values or self.chapter5.hypothesis or self.chapter5.values)
 
     def as_hypothesis(self) -> hypotheses.Hypothesis:
-        return _as_hypothesis(self.hypothesis)
+        return hypotheses.from_options(self.hypothesis)
 
 
 def rule_selects(selected: Mapping[str, Any], literal: Mapping[str, Any]) -> bool:
@@ -146,7 +141,7 @@ def experiment(path: Path, overrides: list[str], profile: Profile | None) -> cfg
     if plant in profile.plants:
         return apply(raw, profile.as_hypothesis(), profile.values)
     if plant in CHAPTER5_PLANTS and (profile.chapter5.hypothesis or profile.chapter5.values):
-        return apply(raw, _as_hypothesis(profile.chapter5.hypothesis), profile.chapter5.values)
+        return apply(raw, hypotheses.from_options(profile.chapter5.hypothesis), profile.chapter5.values)
     return cfg.build(cfg.interpolate(raw))
 
 

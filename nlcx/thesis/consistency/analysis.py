@@ -29,13 +29,25 @@ from nlcx.thesis.fitting import FLOORS
 from nlcx.thesis.pages import tolerances
 
 
-def hits(loops: pd.DataFrame, cells: pd.DataFrame) -> np.ndarray:
-    """(loops, cells) booleans: the loop's value inside the interval the printed cell covers,
-    ``cells.lower`` <= ours <= ``cells.upper`` (:func:`with_intervals`: the printed value's
-    rounding to its decimals, widened by its metric's relative tolerance)."""
-    ours = loops[list(cells.cell)].to_numpy(dtype=float)
+def inside(cells: pd.DataFrame, ours: np.ndarray) -> np.ndarray:
+    """(loops, cells) booleans of ``ours`` (loops, cells): the value inside the interval the
+    printed cell covers, ``cells.lower`` <= ours <= ``cells.upper`` (:func:`with_intervals`: the
+    printed value's rounding to its decimals, widened by its metric's relative tolerance)."""
     with np.errstate(invalid="ignore"):
         return (cells.lower.to_numpy() <= ours) & (ours <= cells.upper.to_numpy())
+
+
+def relative_miss(cells: pd.DataFrame, ours: np.ndarray) -> np.ndarray:
+    """(loops, cells) relative misses of ``ours``, |ours - printed| / max(|printed|, floor), the
+    floor of the cell's metric (:data:`nlcx.thesis.fitting.FLOORS`); NaN where ours is undefined."""
+    scale = np.maximum(cells.value.abs().to_numpy(), cells.metric.map(FLOORS).to_numpy())
+    with np.errstate(invalid="ignore"):
+        return np.abs(ours - cells.value.to_numpy()) / scale
+
+
+def hits(loops: pd.DataFrame, cells: pd.DataFrame) -> np.ndarray:
+    """(loops, cells) booleans: each loop's value of each cell :func:`inside` its interval."""
+    return inside(cells, loops[list(cells.cell)].to_numpy(dtype=float))
 
 
 #: The mirror signals of the symmetric pendulums: y mirrors x, phi mirrors theta.
@@ -88,8 +100,7 @@ class Evidence:
 
 
 def evidence(cells: pd.DataFrame, groups: list[list[int]], loops: pd.DataFrame) -> Evidence:
-    scale = np.maximum(cells.value.abs().to_numpy(), cells.metric.map(FLOORS).to_numpy())
-    miss = np.abs(loops[list(cells.cell)].to_numpy(float) - cells.value.to_numpy()) / scale
+    miss = relative_miss(cells, loops[list(cells.cell)].to_numpy(float))
     cell_hit = hits(loops, cells)
     return Evidence(loops, cell_hit, *group_hits(cell_hit, miss, groups))
 

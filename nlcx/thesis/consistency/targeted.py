@@ -44,10 +44,10 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from nlcx import report, runtime, safe_yaml
 from nlcx.errors import ConfigError
 from nlcx.thesis import hypotheses
-from nlcx.thesis.consistency.analysis import twins
+from nlcx.thesis.consistency.analysis import inside, relative_miss, twins
 from nlcx.thesis.consistency.loops import ColumnRuns, Store, slug, used_box
 from nlcx.thesis.consistency.spec import Column, ConsistencySpec, column_cells, digest, load_spec, with_intervals
-from nlcx.thesis.fitting import FLOORS, study_digest, write_study
+from nlcx.thesis.fitting import study_digest, write_study
 from nlcx.thesis.pages import tolerances
 from nlcx.validation import validate_model
 
@@ -193,7 +193,7 @@ def candidates(
         combined = [hypotheses.combine(anchor, h) for h in nearest + extra]
     everything = [*base, *extra, *combined]
     options = {o for h in everything for o in h.options}
-    moving = {o for o in options if runs.examined([hypotheses.Hypothesis((o,))])}
+    moving = {h.options[0] for h in runs.examined([hypotheses.Hypothesis((o,)) for o in options])}
     reduced = [hypotheses.Hypothesis(tuple(o for o in h.options if o in moving)) for h in everything]
     return list({h.name: h for h in reduced}.values())
 
@@ -219,13 +219,8 @@ class SetJudge:
 
     def judge(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(largest miss, hit) per loop of ``values`` (loops, the column's cells)."""
-        cells = self.cells
-        scale = np.maximum(cells.value.abs().to_numpy(), cells.metric.map(FLOORS).to_numpy())
-        with np.errstate(invalid="ignore"):
-            miss = np.abs(values - cells.value.to_numpy()) / scale
-            inside = (cells.lower.to_numpy() <= values) & (values <= cells.upper.to_numpy())
-        miss = np.nan_to_num(miss, nan=np.inf)[:, self.members]
-        return miss.max(axis=1), np.asarray(inside[:, self.members].all(axis=1))
+        miss = np.nan_to_num(relative_miss(self.cells, values), nan=np.inf)[:, self.members]
+        return miss.max(axis=1), np.asarray(inside(self.cells, values)[:, self.members].all(axis=1))
 
 
 def search_hypothesis(
@@ -234,14 +229,15 @@ def search_hypothesis(
     runs: ColumnRuns,
     judge: SetJudge,
     hyp: hypotheses.Hypothesis,
+    gains: dict[str, tuple[float, float]],
     start: dict[str, float],
     seed: int,
 ) -> pd.DataFrame:
-    """CMA-ES on one set under one hypothesis: every loop evaluated, with its largest miss and
-    hit under each definition and the objective (the smallest of those misses)."""
+    """CMA-ES on one set under one hypothesis, over ``gains`` (the conventional PID's box) and
+    the hypothesis's own parameters: every loop evaluated, with its largest miss and hit under
+    each definition and the objective (the smallest of those misses)."""
     import cma
 
-    gains = used_box(runs.runs, runs.table, consistency.free) if runs.controller == "conventional" else {}
     box = gains | hyp.free()
     keys = list(box)
     lower, upper = (np.array([b[i] for b in box.values()]) for i in (0, 1))
@@ -265,9 +261,6 @@ def search_hypothesis(
     if not keys:
         evaluate(np.zeros((1, 0)))
         return pd.concat(frames, ignore_index=True)
-    x0 = np.clip([(start.get(k, (lo + hi) / 2) - lo) / (hi - lo) for k, (lo, hi) in box.items()], 0.0, 1.0)
-    options = {"bounds": [0.0, 1.0], "popsize": spec.budget.popsize, "seed": seed, "verbose": -9,
-               "maxfevals": spec.budget.loops, "tolfun": 0.0, "tolx": 1e-9}  # fmt: skip
     limit = min(spec.budget.loops, spec.budget.per_parameter * (len(keys) + 1))
     if len(keys) == 1:  # CMA-ES needs two dimensions: one parameter gets an even grid of the same budget
         grid = np.linspace(0.0, 1.0, limit)[:, None]
@@ -275,7 +268,9 @@ def search_hypothesis(
             if evaluate(grid[first : first + spec.budget.popsize]).hit.any():
                 break
         return pd.concat(frames, ignore_index=True)
-    options["maxfevals"] = limit
+    x0 = np.clip([(start.get(k, (lo + hi) / 2) - lo) / (hi - lo) for k, (lo, hi) in box.items()], 0.0, 1.0)
+    options = {"bounds": [0.0, 1.0], "popsize": spec.budget.popsize, "seed": seed, "verbose": -9,
+               "maxfevals": limit, "tolfun": 0.0, "tolx": 1e-9}  # fmt: skip
     es = cma.CMAEvolutionStrategy(x0, spec.budget.sigma, options)
     used = 0
     while not es.stop() and used < limit:
@@ -289,16 +284,21 @@ def search_hypothesis(
 
 
 def search_set(
-    spec: TargetedSpec, consistency: ConsistencySpec, root: Path, chosen: CellSet, index: int
+    spec: TargetedSpec,
+    consistency: ConsistencySpec,
+    root: Path,
+    store: Store,
+    chosen: CellSet,
+    cells: pd.DataFrame,
+    index: int,
 ) -> tuple[dict[str, object], pd.DataFrame]:
-    """Every candidate hypothesis of one set in turn (stopping at the first hit): (the set's
-    summary, every loop evaluated)."""
+    """Every candidate hypothesis of one set in turn (stopping at the first hit), started from
+    the consistency study's loops in ``store``, judged on the column's ``cells`` (with their
+    intervals): (the set's summary, every loop evaluated)."""
     runs = ColumnRuns(root, *chosen.column)
-    cells = with_intervals(column_cells(*chosen.column), tolerances.load(root / "tolerances.yaml"),
-                           consistency.zero_decimals)  # fmt: skip
     members = [m for g in chosen.groups for m in g]
     judge = SetJudge(cells, members, chosen.groups)
-    store = Store(Path(spec.study), study_digest(digest(consistency), root))
+    gains = used_box(runs.runs, runs.table, consistency.free) if runs.controller == "conventional" else {}
     fitted = [h.name for h in consistency.family() if store.fit_path(chosen.column, h.name).is_file()]
     studied = {d: store.loops(chosen.column, d, fitted) for d in consistency.definitions}
     measured = [judge.judge(loops[list(cells.cell)].to_numpy(float)) for loops in studied.values()]
@@ -314,7 +314,8 @@ def search_set(
         mine = np.flatnonzero(judged[0][0] == hyp.name)
         if mine.size:  # from the study's loop of this hypothesis nearest the set
             start |= json.loads(ours["values"].iloc[mine[np.argmin(judged[0][1][mine])]])
-        frame = search_hypothesis(spec, consistency, runs, judge, hyp, start, spec.budget.seed + 1000 * index + k)
+        seed = spec.budget.seed + 1000 * index + k
+        frame = search_hypothesis(spec, consistency, runs, judge, hyp, gains, start, seed)
         frames.append(frame)
         if frame.hit.any():
             break
@@ -365,9 +366,10 @@ def targeted(
 
     chosen = chosen_sets(spec, cells_of)
     stamp = study_digest(set_digest(spec, consistency), root)
+    store = Store(Path(spec.study), study_digest(digest(consistency), root))  # the consistency study's
     t0 = time.perf_counter()
-    todo = [(k, s) for k, s in enumerate(chosen) if not _finished(out_dir, s, stamp)]
-    for done, (chosen_set, summary, loops) in enumerate(_searches(spec, consistency, root, todo, jobs), 1):
+    todo = [(k, s, cells_of(s.column)) for k, s in enumerate(chosen) if not _finished(out_dir, s, stamp)]
+    for done, (chosen_set, summary, loops) in enumerate(_searches(spec, consistency, root, store, todo, jobs), 1):
         _save(out_dir, chosen_set, stamp, summary, loops)
         if progress is not None:
             progress(len(chosen) - len(todo) + done, len(chosen), f"{chosen_set.key}: {summary['verdict']}")
@@ -395,15 +397,21 @@ def _save(out_dir: Path, chosen: CellSet, stamp: str, summary: dict[str, object]
 
 
 def _searches(
-    spec: TargetedSpec, consistency: ConsistencySpec, root: Path, todo: list[tuple[int, CellSet]], jobs: int
+    spec: TargetedSpec,
+    consistency: ConsistencySpec,
+    root: Path,
+    store: Store,
+    todo: list[tuple[int, CellSet, pd.DataFrame]],
+    jobs: int,
 ) -> Iterator[tuple[CellSet, dict[str, object], pd.DataFrame]]:
     """Each set's search as it finishes (a set's search depends only on the set and its
     index in the spec's choice, so the number of workers changes nothing)."""
     if jobs <= 1:
-        for k, chosen in todo:
-            yield chosen, *search_set(spec, consistency, root, chosen, k)
+        for k, chosen, cells in todo:
+            yield chosen, *search_set(spec, consistency, root, store, chosen, cells, k)
         return
     with ProcessPoolExecutor(max_workers=jobs, initializer=runtime.worker) as pool:
-        futures = {pool.submit(search_set, spec, consistency, root, chosen, k): chosen for k, chosen in todo}
+        futures = {pool.submit(search_set, spec, consistency, root, store, chosen, cells, k): chosen
+                   for k, chosen, cells in todo}  # fmt: skip
         for future in as_completed(futures):
             yield futures[future], *future.result()
