@@ -36,13 +36,22 @@ PACKAGE = Path(__file__).resolve().parent
 STAMP = PACKAGE / "__pycache__" / "numba-source.sha256"
 
 
+def files_digest(root: Path, pattern: str, skip: tuple[str, ...] = (), prefix: bytes = b"") -> str:
+    """SHA-256 over ``prefix``, then the relative path (``/``-separated) and bytes of every file
+    under ``root`` whose name matches ``pattern``, in sorted order, but those whose relative
+    path is in ``skip``."""
+    digest = hashlib.sha256(prefix)
+    for path in sorted(root.rglob(pattern)):
+        name = path.relative_to(root).as_posix()
+        if name not in skip:
+            digest.update(name.encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
 def source_digest(root: Path = PACKAGE) -> str:
     """SHA-256 over the relative path and bytes of every ``.py`` file of the package."""
-    digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        digest.update(str(path.relative_to(root)).encode())
-        digest.update(path.read_bytes())
-    return digest.hexdigest()
+    return files_digest(root, "*.py")
 
 
 def cache_files(root: Path = PACKAGE) -> list[Path]:

@@ -51,7 +51,8 @@ def finite_for_plot(values: np.ndarray, limit: float = 1e9) -> np.ndarray:
     return np.where(np.abs(values) < limit, values, np.nan)
 
 
-def _style(i: int) -> tuple[str, str]:
+def line_style(i: int) -> tuple[str, str]:
+    """(colour, line style) of the ``i``-th controller of a figure, :data:`LINE_STYLES` in turn."""
     return LINE_STYLES[i % len(LINE_STYLES)]
 
 
@@ -77,7 +78,7 @@ def _lines(run_values: list[tuple[Run, np.ndarray | None, str]], lw: float) -> t
     out = []
     for i, (run, values, label) in enumerate(run_values):
         if values is not None:
-            color, ls = _style(i)
+            color, ls = line_style(i)
             out.append(Line(*thinned(run.t, finite_for_plot(values)), color=color, ls=ls, lw=lw, label=label))
     return tuple(out)
 

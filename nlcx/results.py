@@ -266,7 +266,7 @@ class Result:
     def _plan(self, signals: Sequence[str] | None, title: str | None) -> FigurePlan:
         """The figure's plan (:class:`nlcx.drawing.FigurePlan`) from the trajectories."""
         from nlcx.drawing import FigurePlan, Line, Panel
-        from nlcx.figure_plans import LINE_STYLES, finite_for_plot, thinned
+        from nlcx.figure_plans import finite_for_plot, line_style, thinned
 
         names = [o[0] for o in self._outputs]
         chosen = list(signals) if signals is not None else names
@@ -279,7 +279,7 @@ class Result:
             lines = []
             for i, controller in enumerate(self.controllers):
                 frame = self.trajectory(controller)
-                color, ls = LINE_STYLES[i % len(LINE_STYLES)]
+                color, ls = line_style(i)
                 legend = controller if self.status(controller) == "ok" else f"{controller} ({self.status(controller)})"
                 t, y = thinned(frame.t.to_numpy(), finite_for_plot(frame[name].to_numpy()))
                 lines.append(Line(t, y, color=color, ls=ls, lw=1.3, label=legend))

@@ -125,7 +125,7 @@ class SweepResult:
         ['x: ise over 6 variants', 'theta: ise over 6 variants']
         """
         from nlcx.drawing import new_figure
-        from nlcx.figure_plans import LINE_STYLES
+        from nlcx.figure_plans import line_style
 
         rows = self.metrics[self.metrics.metric == metric]
         if rows.empty:
@@ -149,7 +149,7 @@ class SweepResult:
                 labels.append(f"{c}\nn = {values.size}, unstable {int(unstable.get(c, 0))}")
             boxes = ax.boxplot(data, tick_labels=labels, patch_artist=True, widths=0.5)
             for k, box in enumerate(boxes["boxes"]):
-                box.set_facecolor(LINE_STYLES[k % len(LINE_STYLES)][0])
+                box.set_facecolor(line_style(k)[0])
                 box.set_alpha(0.6)
                 box.set_label(controllers[k])
             unit = str(here.unit.iloc[0]) if "unit" in here and len(here) else ""

@@ -19,6 +19,18 @@ the variant of working slot b, :data:`nlcx.kernel.abi.RHS_SIG`), so that the equ
 the Runge-Kutta sums run in vector code over the batch; the signals the controller and the
 loop elements see (y, r, u, a copy of x, the controller's parameters and state) by rows. The
 working slots, signals and stage columns of a call are :mod:`nlcx.kernel.working_storage`'s.
+
+One sampling step of :func:`simulate`, at t_k = k dt: y_k = C x_k, the SENSOR elements, the
+controller (u_k), the ACTUATOR elements; u_k is held while the method of ``integration``
+integrates to t_{k+1}, with the disturbances at the stage times and friction on each input's
+axis. A variant that goes non-finite or out of bounds stops and leaves the batch (the active
+variants lead the working slots; ``slots.vid`` maps a slot to its variant). The arguments are
+the structures of :mod:`nlcx.kernel.structures`; the kernel writes ``records`` and ``outcome``.
+
+:func:`simulate` is one compiled function: the working storage, then the sampling steps until
+every variant stopped or reached t_K. numba compiles a function called by another into a
+module of its own and then again into its caller's, so the steps, the bulk of the kernel,
+written as a function of their own would be optimised and compiled twice.
 """
 
 from __future__ import annotations
@@ -226,19 +238,7 @@ def simulate(
     outcome: Outcome,
     friction_path: FrictionPath,
 ) -> None:  # pragma: no cover
-    """Integrate a batch of closed loops in lock step (see the module docstring): at t_k = k dt
-    y_k = C x_k, SENSOR elements, controller -> u_k, ACTUATOR elements; u_k held while the
-    method of ``integration`` integrates to t_{k+1}, disturbances at the stage times, friction
-    on each input's axis. A variant that goes non-finite or out of bounds stops and leaves the
-    batch (active variants lead the working slots; ``slots.vid`` maps a slot to its variant).
-    The arguments are the structures of :mod:`nlcx.kernel.structures`; the kernel writes
-    ``records`` and ``outcome``.
-
-    One compiled function: the working storage (:mod:`nlcx.kernel.working_storage`), then the
-    sampling steps until every variant stopped or reached t_K. numba compiles a function called
-    by another into a module of its own and then again into its caller's, so the steps, the
-    bulk of the kernel, written as a function of their own would be optimised and compiled
-    twice."""
+    """Integrate a batch of closed loops in lock step into ``records`` and ``outcome`` (the module docstring)."""
     (n_batch, n), n_u = plant.x0.shape, records.U.shape[2]
     rows, n_free = working_rows(plant, controller, forces.friction, n_u)
     signals = signal_rows(rows.xrow, plant.C.shape[0], controller.ref.shape[2], n_u, records.LOG.shape[2])
@@ -279,7 +279,7 @@ def simulate(
             _no_friction_recorded(k, nb, vid, stopped, FRICTION)
         if k < n_steps and nb > n_stop:
             kd = shared_row(dist.shape[1], k)
-            if n_free > 0 and classic:  # rk_step's CLASSIC written out in flat loops (the module docstring)
+            if n_free > 0 and classic:  # rk_step's CLASSIC written out in flat loops (nlcx.kernel.stepping)
                 rhs(t, x, uc, pw, k1, n_free)
                 add_disturbances(k1, n_free, dist, vid, kd, 0, dist_map)
                 for q in range(m):
@@ -303,8 +303,7 @@ def simulate(
                 friction_path.step(rhs, t, kd, nb, n_free, slots, x_new, u, forces, work, integration, c)
             n_stop += _accept_states(k, nb, vid, x, bw, xf, xnf, bwf, stopped, status, n_valid, fail_index)
         if n_stop > 0:
-            nb_before = nb
-            nb, n_free = compact(nb, n_free, slots)
+            nb_before, (nb, n_free) = nb, compact(nb, n_free, slots)
             clear_columns(nb, nb_before, (x, x_new, k1, k2, k3, k4))
             if nb == 0:
                 break

@@ -23,7 +23,7 @@ import pandas as pd
 
 from nlcx import config as cfg
 from nlcx import engine, report
-from nlcx.compiled_cache import source_digest
+from nlcx.compiled_cache import files_digest, source_digest
 from nlcx.engine.gpu import Ensemble
 from nlcx.engine.metric_rows import MetricColumns
 from nlcx.engine.results import ExperimentResult
@@ -277,13 +277,7 @@ STUDY_OUTPUTS = ("profiles/selected.yaml",)
 
 @functools.cache
 def _code_digest(root: Path) -> str:
-    digest = hashlib.sha256(source_digest().encode())
-    for path in sorted(root.rglob("*.yaml")):
-        name = path.relative_to(root).as_posix()
-        if name not in STUDY_OUTPUTS:
-            digest.update(name.encode())
-            digest.update(path.read_bytes())
-    return digest.hexdigest()
+    return files_digest(root, "*.yaml", skip=STUDY_OUTPUTS, prefix=source_digest().encode())
 
 
 def study_digest(spec_digest: str, root: Path) -> str:
