@@ -336,12 +336,13 @@ def test_the_kernels_structures_are_typed_as_its_signature_declares(
     unc = {"friction": {"kind": "friction", "model": "simple", "mu_s": 0.2, "mu_c": 0.15}} if friction else {}
     args, typed = _kernel_arguments(x_error_raw, monkeypatch, **unc)
     declared = structures.SIMULATE_SIG.args
-    assert len(args) == len(typed) == len(declared) == 8
+    assert len(args) == len(typed) == len(declared) == 9
     kinds = (structures.Integration, structures.PlantCall, structures.ControllerCall, structures.LoopElements,
-             structures.PlantForces, structures.Records, structures.Outcome, structures.FrictionPath)  # fmt: skip
+             structures.PlantForces, structures.Records, structures.Outcome, structures.FrictionPath,
+             structures.Working)  # fmt: skip
     for arg, kind, numba_type, declared_type in zip(args, kinds, typed, declared, strict=True):
         assert type(arg) is kind and numba_type == declared_type == kind.numba_type
-    assert args[-1] is (FRICTIONAL if friction else FRICTIONLESS)
+    assert args[7] is (FRICTIONAL if friction else FRICTIONLESS)
     records = structures.Records(*(np.zeros_like(a) for a in args[5]))  # the kernel's are read-only after it
     numba.typeof(records)
     for field, bad in (

@@ -48,6 +48,7 @@ from nlcx.kernel.structures import (
     PlantForces,
     method_of,
 )
+from nlcx.kernel.working_storage import working_storage
 from nlcx.plants.base import Plant
 
 #: The structures of a kernel call: (plant, controller, elements, forces).
@@ -290,8 +291,9 @@ def simulate_ensemble(
         n_b = n_variants * pattern.size
         records = empty_records([items[i] for i in pattern], grid.t.size, 1, n_rows=n_b)
         outcome = Outcome(*(np.zeros(n_b, dtype=np.int64) for _ in range(3)))
+        working = working_storage(integration, plant, controller, elements, forces, records, outcome)
         simulate(integration, plant, controller, elements, forces, records, outcome,
-                 FRICTIONAL if any_friction(forces.friction) else FRICTIONLESS)  # fmt: skip
+                 FRICTIONAL if any_friction(forces.friction) else FRICTIONLESS, working)  # fmt: skip
         calls.append(EnsembleCall(
             variants=np.repeat(np.arange(n_variants), pattern.size), loops=np.tile(pattern, n_variants),
             X=records.X, U=records.U, status=outcome.status, n_valid=outcome.n_valid,

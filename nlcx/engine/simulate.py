@@ -32,6 +32,7 @@ from nlcx.kernel.structures import (
     Records,
     method_of,
 )
+from nlcx.kernel.working_storage import working_storage
 from nlcx.plants.base import Plant, check_rows
 
 
@@ -86,7 +87,8 @@ def simulate_items(
         if device == "cuda":
             on_gpu(integration, *arguments, records, outcome)
         else:
-            simulate(integration, *arguments, records, outcome, _friction_path(group))
+            working = working_storage(integration, *arguments, records, outcome)
+            simulate(integration, *arguments, records, outcome, _friction_path(group), working)
         for array in records:
             array.flags.writeable = False
         for j, i in enumerate(call.indices):

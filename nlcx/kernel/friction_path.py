@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, cast
 from numba import njit
 
 from nlcx.kernel.abi import Padding, shared_row
-from nlcx.kernel.friction import FA, SLIP, STUCK, disturbance_at, friction_forces, update_friction_modes
+from nlcx.kernel.friction import FA, SLIP, STUCK, disturbance_at, friction_forces, initial_modes, update_friction_modes
 from nlcx.kernel.signatures import FloatArray, IntArray, RightHandSide
 from nlcx.kernel.stepping import SEQUENTIAL, FrictionStage, rk_step
 from nlcx.kernel.structures import FRICTION_SAMPLE_SIG, FRICTION_STEP_SIG, FrictionPath, FrictionSample, FrictionStep
@@ -129,7 +129,8 @@ def frictional_sample(
     records: Records,
 ) -> None:  # pragma: no cover - compiled
     """Breakaway at t_k for the frictional variants (Appendix A's static case), and the friction
-    force on each axis at t_k when it is recorded (the step evaluates its own). ``slots``: the
+    force on each axis at t_k when it is recorded (the step evaluates its own); at t_0, first
+    each axis's mode (:func:`~nlcx.kernel.friction.initial_modes`). ``slots``: the
     working slots (:class:`~nlcx.kernel.structures.Slots`), u by rows."""
     dist, dist_map, FRICTION = forces.dist, forces.dist_map, records.FRICTION
     record = FRICTION.shape[1] > 1
@@ -146,6 +147,8 @@ def frictional_sample(
         _load_one(b, slots, u, work)
         d_k = _disturbance_at_sample(dist[shared_row(dist.shape[0], v)], k)
         axes, mode, direction = slots.axes[b], slots.mode[b], slots.direction[b]
+        if k == 0:  # the modes at t_0, from x_0
+            initial_modes(axes, work.x[:, 0], mode, direction, slots.hold[b])
         update_friction_modes(rhs, t, work.x[:, 0], work.u[:, 0], d_k, dist_map, axes, mode, direction, scratch)
         if record:
             friction_forces(rhs, t, work.x[:, 0], work.u[:, 0], d_k, dist_map, axes, mode, direction, scratch)

@@ -18,7 +18,8 @@ The plant's state, parameters, input and stage derivatives are held by columns (
 the variant of working slot b, :data:`nlcx.kernel.abi.RHS_SIG`), so that the equations and
 the Runge-Kutta sums run in vector code over the batch; the signals the controller and the
 loop elements see (y, r, u, a copy of x, the controller's parameters and state) by rows. The
-working slots, signals and stage columns of a call are :mod:`nlcx.kernel.working_storage`'s.
+working slots, signals and stage columns of a call (``working``) are built before it, in numpy
+(:func:`nlcx.kernel.working_storage.working_storage`): what runs once per call is not compiled.
 
 One sampling step of :func:`simulate`, at t_k = k dt: y_k = C x_k, the SENSOR elements, the
 controller (u_k), the ACTUATOR elements; u_k is held while the method of ``integration``
@@ -27,8 +28,8 @@ axis. A variant that goes non-finite or out of bounds stops and leaves the batch
 variants lead the working slots; ``slots.vid`` maps a slot to its variant). The arguments are
 the structures of :mod:`nlcx.kernel.structures`; the kernel writes ``records`` and ``outcome``.
 
-:func:`simulate` is one compiled function: the working storage, then the sampling steps until
-every variant stopped or reached t_K. numba compiles a function called by another into a
+:func:`simulate` is one compiled function: the sampling steps until every variant stopped or
+reached t_K. numba compiles a function called by another into a
 module of its own and then again into its caller's, so the steps, the bulk of the kernel,
 written as a function of their own would be optimised and compiled twice.
 """
@@ -40,32 +41,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from nlcx._numba_compat import inner_njit
 from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, shared_row
 from nlcx.kernel.signatures import BoolArray, ElementFunctions, FloatArray, IntArray
-from nlcx.kernel.stepping import (
-    SEQUENTIAL,
-    add_disturbances,
-    first_failing_state,
-    hold_input,
-    output_picks,
-    rk_step,
-    sample_signals,
-    stage_nodes,
-)
+from nlcx.kernel.stepping import SEQUENTIAL, add_disturbances, first_failing_state, hold_input, rk_step, sample_signals
 from nlcx.kernel.structures import CLASSIC_RK4, SIMULATE_SIG
-from nlcx.kernel.working_storage import (
-    clear_columns,
-    compact,
-    flat_views,
-    friction_modes,
-    friction_work,
-    init_outcome,
-    signal_rows,
-    stage_columns,
-    working_rows,
-    working_slots,
-)
+from nlcx.kernel.working_storage import clear_columns, compact
 
 if TYPE_CHECKING:
     from nlcx.kernel.structures import (
@@ -77,6 +57,7 @@ if TYPE_CHECKING:
         PlantCall,
         PlantForces,
         Records,
+        Working,
     )
 
 EE = ELEMENT_ENTRY.at
@@ -105,19 +86,6 @@ def _apply_elements(
                 t, dt, k, signal, vid, ep, es, data,
                 int(table[e, EE.param_offset]), int(table[e, EE.state_offset]), int(table[e, EE.data_offset]),
             )  # fmt: skip
-
-
-@inner_njit(cache=True, error_model="numpy")
-def _hook_counts(table: FloatArray) -> tuple[int, int]:  # pragma: no cover - compiled
-    """(number of sensor elements, number of actuator elements) in the element table."""
-    n_sensor = 0
-    n_actuator = 0
-    for e in range(table.shape[0]):
-        if int(table[e, EE.hook]) == SENSOR:
-            n_sensor += 1
-        elif int(table[e, EE.hook]) == ACTUATOR:
-            n_actuator += 1
-    return n_sensor, n_actuator
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -186,7 +154,7 @@ def _accept_states(
     stops (its outcome: status and the first failing state). Returns the number of variants
     stopped.
 
-    One loop over the flat views (:class:`~nlcx.kernel.working_storage.FlatViews`) of x, x_new
+    One loop over the flat views (:class:`~nlcx.kernel.structures.FlatViews`) of x, x_new
     and the bounds, xf, xnf and bwf, takes the new states of every column and counts the states
     not finite or past their bounds (vector code); only if there are any are the active variants
     examined one by one. The columns from nb on hold zeros
@@ -237,16 +205,10 @@ def simulate(
     records: Records,
     outcome: Outcome,
     friction_path: FrictionPath,
+    working: Working,
 ) -> None:  # pragma: no cover
     """Integrate a batch of closed loops in lock step into ``records`` and ``outcome`` (the module docstring)."""
-    (n_batch, n), n_u = plant.x0.shape, records.U.shape[2]
-    rows, n_free = working_rows(plant, controller, forces.friction, n_u)
-    signals = signal_rows(rows.xrow, plant.C.shape[0], controller.ref.shape[2], n_u, records.LOG.shape[2])
-    stages = stage_columns(n_batch, n)
-    modes = friction_modes(rows.axes, rows.xrow)
-    init_outcome(records.X.shape[1] - 1, outcome)
-    work = friction_work(n, n_u, plant.p.shape[1], integration.rk_b.shape[0], forces.dist.shape[3])
-    slots = working_slots(rows, modes, signals.log)
+    slots, signals, stages, flat, work = working.slots, working.signals, working.stages, working.flat, working.friction
     rhs, C, ref, step, callbacks = plant.rhs, plant.C, controller.ref, controller.step, controller.callbacks
     X, U, LOG, FRICTION = records.X, records.U, records.LOG, records.FRICTION
     dist, dist_map, dt = forces.dist, forces.dist_map, integration.dt
@@ -255,12 +217,11 @@ def simulate(
     xrow, y, r, u, uc = signals.xrow, signals.y, signals.r, signals.u, signals.uc
     x_new, xs, ks = stages.x_new, stages.xs, stages.k
     k1, k2, k3, k4 = ks[0], ks[1], ks[2], ks[3]
-    flat = flat_views(slots, stages)
     xf, xsf, xnf, bwf, k1f, k2f, k3f, k4f = flat.x, flat.xs, flat.x_new, flat.bounds, flat.k1, flat.k2, flat.k3, flat.k4
     rk_a, rk_b, classic = integration.rk_a, integration.rk_b, integration.method == CLASSIC_RK4
-    c, picked = stage_nodes(rk_a), output_picks(C)
-    fns, table, ep, es, data = elements.functions, elements.table, elements.ep, elements.es0.copy(), elements.data
-    n_sensor, n_actuator = _hook_counts(table)
+    c, picked, n_free = working.c, working.picked, working.n_free
+    n_sensor, n_actuator = working.n_sensor, working.n_actuator
+    fns, table, ep, es, data = elements.functions, elements.table, elements.ep, working.es, elements.data
     n_steps, nb, m = X.shape[1] - 1, x.shape[1], x.size
     yv, rv, uv, xv, cpv, csv, logv = y, r, u, xrow, cpw, cs, log
     for k in range(n_steps + 1):

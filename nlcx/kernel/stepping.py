@@ -39,9 +39,8 @@ if TYPE_CHECKING:
 SEQUENTIAL, CLASSIC = 0, 1
 
 
-@njit(cache=True, error_model="numpy")
-def stage_nodes(rk_a: FloatArray) -> FloatArray:  # pragma: no cover - compiled
-    """c_i = sum_j a_ij: the stage times t_k + c_i dt."""
+def stage_nodes(rk_a: FloatArray) -> FloatArray:
+    """c_i = sum_j a_ij: the stage times t_k + c_i dt (added in the order of j, from 0)."""
     n_stage = rk_a.shape[0]
     c = np.zeros(n_stage)
     for i in range(n_stage):
@@ -50,11 +49,10 @@ def stage_nodes(rk_a: FloatArray) -> FloatArray:  # pragma: no cover - compiled
     return c
 
 
-@njit(cache=True, error_model="numpy")
-def output_picks(C: FloatArray) -> IntArray:  # pragma: no cover - compiled
+def output_picks(C: FloatArray) -> IntArray:
     """picked[i] = j where row i of C is the unit vector e_j (y_i = x_j exactly), else -1."""
     n_y, n = C.shape
-    picked = np.full(n_y, -1)
+    picked = np.full(n_y, -1, dtype=np.int64)
     for i in range(n_y):
         for j in range(n):
             if C[i, j] == 1.0 and picked[i] == -1:

@@ -1,10 +1,10 @@
 """The kernel's arguments and work spaces, one named structure per concept.
 
 The engine hands :func:`nlcx.kernel.integrator.simulate` a batch of closed loops as eight
-structures, and the kernel hands its friction path (:mod:`nlcx.kernel.friction_path`) its working
-slots and scratch the same way. Each is a :class:`typing.NamedTuple`, which numba compiles as a
-named tuple: a field is read by its name (``plant.x0``, ``records.U``, ``scratch.rhs_s``) in
-the compiled code as in Python.
+structures and their working storage, and the kernel hands its friction path
+(:mod:`nlcx.kernel.friction_path`) its working slots and scratch the same way. Each is a
+:class:`typing.NamedTuple`, which numba compiles as a named tuple: a field is read by its name
+(``plant.x0``, ``records.U``, ``scratch.rhs_s``) in the compiled code as in Python.
 
 Rows are variants; an axis of length 1 (written ``B|1``) is shared by every variant of the
 batch. The structures the engine passes in are:
@@ -15,7 +15,8 @@ batch. The structures the engine passes in are:
 - :class:`LoopElements`: the loop elements' functions, table, parameters, state and time series;
 - :class:`PlantForces`: what enters the plant besides the input (disturbances, friction axes);
 - :class:`Records` and :class:`Outcome`: what the kernel writes;
-- :class:`FrictionPath`: the two functions that step the variants with friction.
+- :class:`FrictionPath`: the two functions that step the variants with friction;
+- :class:`Working`: the working storage of the call (slots, signals, stage columns, ...).
 
 Each carries its numba type (``numba_type``), declared by :func:`declare`. numba types such a
 value by that declaration when the kernel is called, with a check of each array's dtype,
@@ -283,6 +284,67 @@ class FrictionWork(NamedTuple):
     scratch: FrictionScratch
 
 
+class Signals(NamedTuple):
+    """The signals of a sample, written anew at every sample: by rows, the controller's copy
+    of the state xrow (B, n), the outputs y (B, n_y), the references r (B, n_r), the input u
+    (B, n_u) and the controller's log (B, n_log, NaN until written; the slots' log); by columns,
+    the input held over the step uc (n_u, B) (the plant's)."""
+
+    xrow: np.ndarray
+    y: np.ndarray
+    r: np.ndarray
+    u: np.ndarray
+    log: np.ndarray
+    uc: np.ndarray
+
+
+class StageColumns(NamedTuple):
+    """Work arrays of a Runge-Kutta step: x_{k+1} and a stage's state xs (n, B), and the stage
+    derivatives k (MAX_STAGES, n, B; zero where no right-hand side writes them: the columns of
+    variants with friction)."""
+
+    x_new: np.ndarray
+    xs: np.ndarray
+    k: np.ndarray
+
+
+class FlatViews(NamedTuple):
+    """Flat views (n B,) on the (n, B) arrays of a step: the state x, a stage's state xs, x_{k+1},
+    the bounds and the first four stage derivatives. The RK4 sums and the acceptance of x_{k+1}
+    are one loop over every column, the inactive ones included (their values are never read
+    again): a loop per state costs more than its work in a batch of a few variants."""
+
+    x: np.ndarray
+    xs: np.ndarray
+    x_new: np.ndarray
+    bounds: np.ndarray
+    k1: np.ndarray
+    k2: np.ndarray
+    k3: np.ndarray
+    k4: np.ndarray
+
+
+class Working(NamedTuple):
+    """The working storage of a kernel call, built before the call
+    (:func:`nlcx.kernel.working_storage.working_storage`): the working slots, of which the first
+    n_free hold the variants without friction; the signals of a sample; the stage columns and
+    their flat views; the friction path's work space; the stage nodes c (s,) (t_k + c_i dt);
+    the output picks (n_y,) (:func:`nlcx.kernel.stepping.output_picks`); the loop elements'
+    state es (B, n_es); and the numbers of sensor and actuator elements."""
+
+    slots: Slots
+    n_free: int
+    signals: Signals
+    stages: StageColumns
+    flat: FlatViews
+    friction: FrictionWork
+    c: np.ndarray
+    picked: np.ndarray
+    es: np.ndarray
+    n_sensor: int
+    n_actuator: int
+
+
 #: The friction path at sample k (:class:`FrictionPath`, :data:`FRICTION_SAMPLE_SIG`).
 FrictionSample: TypeAlias = Callable[
     [RightHandSide, float, int, int, int, Slots, FloatArray, PlantForces, FrictionWork, Records], None
@@ -334,6 +396,13 @@ FrictionScratchType = declare(
     FrictionScratch, k_stage=ARR3, xs=MAT, f=VEC, work=VEC, A=MAT, rhs_s=VEC, dx=VEC, d_tmp=VEC, one=OneColumnType,
 )  # fmt: skip
 FrictionWorkType = declare(FrictionWork, x=MAT, x_new=MAT, x_mid=MAT, u=MAT, scratch=FrictionScratchType)
+SignalsType = declare(Signals, xrow=MAT, y=MAT, r=MAT, u=MAT, log=MAT, uc=MAT)
+StageColumnsType = declare(StageColumns, x_new=MAT, xs=MAT, k=ARR3)
+FlatViewsType = declare(FlatViews, x=VEC, xs=VEC, x_new=VEC, bounds=VEC, k1=VEC, k2=VEC, k3=VEC, k4=VEC)
+WorkingType = declare(
+    Working, slots=SlotsType, n_free=I64, signals=SignalsType, stages=StageColumnsType, flat=FlatViewsType,
+    friction=FrictionWorkType, c=VEC, picked=IVEC, es=MAT, n_sensor=I64, n_actuator=I64,
+)  # fmt: skip
 
 #: The friction path's two signatures (:class:`FrictionPath`).
 FRICTION_SAMPLE_SIG = types.void(
@@ -347,8 +416,8 @@ FrictionPathType = declare(
 )
 
 #: The kernel's signature: ``simulate(integration, plant, controller, elements, forces, records,
-#: outcome, friction_path)``.
+#: outcome, friction_path, working)``.
 SIMULATE_SIG = types.void(
     IntegrationType, PlantCallType, ControllerCallType, LoopElementsType, PlantForcesType, RecordsType, OutcomeType,
-    FrictionPathType,
+    FrictionPathType, WorkingType,
 )  # fmt: skip

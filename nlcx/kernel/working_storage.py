@@ -1,92 +1,127 @@
 """The working storage of a batched kernel call (:func:`nlcx.kernel.integrator.simulate`).
 
-The batch's arrays copied into working slots, the variants without friction first (slot b
-holds variant ``vid[b]``): the plant's state, parameters and bounds by columns, the
-controller's by rows; the signals of a sample, the Runge-Kutta stage columns and their flat
-views, the friction work space; and the compaction that moves stopped variants behind the
-active ones.
+:func:`working_storage` copies the batch's arrays into working slots before the call, the
+variants without friction first (slot b holds variant ``vid[b]``): the plant's state,
+parameters and bounds by columns, the controller's by rows; and allocates the signals of a
+sample, the Runge-Kutta stage columns and their flat views and the friction path's work space.
+It is plain numpy: what runs once per call costs nothing to compile. (The friction modes at t_0
+are set by the friction path, at its first sample: :func:`nlcx.kernel.friction_path.frictional_sample`.)
 
-Only the kernel calls these functions: they are compiled without the wrappers that would let
-Python call them (:func:`nlcx._numba_compat.inner_njit`), as are the kernel's other parts
-that only compiled code calls (:mod:`nlcx.kernel.friction`, the sampling step's helpers).
+During the call, :func:`compact` moves stopped variants behind the active ones. Only the kernel
+calls it: it is compiled without the wrappers that would let Python call it
+(:func:`nlcx._numba_compat.inner_njit`), as are the kernel's other parts that only compiled code
+calls (:mod:`nlcx.kernel.friction`, the sampling step's helpers).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, NamedTuple
-
 import numpy as np
 
 from nlcx._numba_compat import inner_njit
-from nlcx.kernel.abi import MAX_STAGES, STATUS_OK, shared_row
-from nlcx.kernel.friction import FA, has_friction, initial_modes
-from nlcx.kernel.signatures import FloatArray, IntArray
-from nlcx.kernel.structures import FrictionScratch, FrictionWork, OneColumn, Slots
-
-if TYPE_CHECKING:
-    from nlcx.kernel.structures import ControllerCall, Outcome, PlantCall
-
-
-class WorkingRows(NamedTuple):
-    """The working copies of a batch's arrays, in the order of its working slots (slot b holds
-    variant vid[b]): the plant's state x, parameters p and bounds by columns; the controller's
-    copy of the state xrow, its parameters cp and state cs and the friction axes by rows."""
-
-    vid: np.ndarray
-    x: np.ndarray
-    xrow: np.ndarray
-    p: np.ndarray
-    cp: np.ndarray
-    cs: np.ndarray
-    axes: np.ndarray
-    bounds: np.ndarray
-
-
-class FrictionModes(NamedTuple):
-    """Each slot's friction axes (B, n_u): mode, slip direction and the position a stuck axis
-    holds; and whether the slot's variant stopped (B,)."""
-
-    mode: np.ndarray
-    direction: np.ndarray
-    hold: np.ndarray
-    stopped: np.ndarray
+from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, MAX_STAGES, SENSOR, STATUS_OK
+from nlcx.kernel.friction import FA, FRICTION_NONE
+from nlcx.kernel.signatures import FloatArray
+from nlcx.kernel.stepping import output_picks, stage_nodes
+from nlcx.kernel.structures import (
+    ControllerCall,
+    FlatViews,
+    FrictionScratch,
+    FrictionWork,
+    Integration,
+    LoopElements,
+    OneColumn,
+    Outcome,
+    PlantCall,
+    PlantForces,
+    Records,
+    Signals,
+    Slots,
+    StageColumns,
+    Working,
+)
 
 
-class Signals(NamedTuple):
-    """The signals of a sample, written anew at every sample: by rows, the controller's copy
-    of the state xrow (B, n), the outputs y (B, n_y), the references r (B, n_r), the input u
-    (B, n_u) and the controller's log (B, n_log, NaN until written); by columns, the input held
-    over the step uc (n_u, B) (the plant's)."""
+def working_storage(
+    integration: Integration,
+    plant: PlantCall,
+    controller: ControllerCall,
+    elements: LoopElements,
+    forces: PlantForces,
+    records: Records,
+    outcome: Outcome,
+) -> Working:
+    """The working storage of a kernel call (:class:`~nlcx.kernel.structures.Working`), and
+    every variant's ``outcome`` set to ok until it stops."""
+    n_steps, n_u = records.X.shape[1] - 1, records.U.shape[2]
+    slots, n_free = working_slots(plant, controller, forces.friction, n_u, records.LOG.shape[2])
+    xrow = slots_rows(plant.x0, slots.vid)
+    n_batch, n = xrow.shape
+    signals = Signals(
+        xrow=xrow, y=np.empty((n_batch, plant.C.shape[0])), r=np.empty((n_batch, controller.ref.shape[2])),
+        u=np.empty((n_batch, n_u)), log=slots.log, uc=np.empty((n_u, n_batch)),
+    )  # fmt: skip
+    stages = StageColumns(x_new=np.empty((n, n_batch)), xs=np.empty((n, n_batch)), k=np.zeros((MAX_STAGES, n, n_batch)))
+    hooks = elements.table[:, ELEMENT_ENTRY.at.hook].astype(np.int64)
+    outcome.status[:], outcome.fail_index[:], outcome.n_valid[:] = STATUS_OK, -1, n_steps + 1
+    return Working(
+        slots=slots, n_free=n_free, signals=signals, stages=stages, flat=flat_views(slots, stages),
+        friction=friction_work(n, n_u, plant.p.shape[1], integration.rk_b.shape[0], forces.dist.shape[3]),
+        c=stage_nodes(integration.rk_a), picked=output_picks(plant.C), es=elements.es0.copy(),
+        n_sensor=int(np.sum(hooks == SENSOR)), n_actuator=int(np.sum(hooks == ACTUATOR)),
+    )  # fmt: skip
 
-    xrow: np.ndarray
-    y: np.ndarray
-    r: np.ndarray
-    u: np.ndarray
-    log: np.ndarray
-    uc: np.ndarray
+
+def slots_rows(a: np.ndarray, vid: np.ndarray) -> np.ndarray:
+    """Row vid[b] of ``a`` (B|1, ...) in row b, a copy (an axis of length 1 is every variant's)."""
+    return np.ascontiguousarray(a[vid if a.shape[0] > 1 else np.zeros_like(vid)])
 
 
-class StageColumns(NamedTuple):
-    """Work arrays of a Runge-Kutta step: x_{k+1} and a stage's state xs (n, B), and the stage
-    derivatives k (MAX_STAGES, n, B; zero where no right-hand side writes them: the columns of
-    variants with friction)."""
-
-    x_new: np.ndarray
-    xs: np.ndarray
-    k: np.ndarray
+def slots_columns(a: np.ndarray, vid: np.ndarray) -> np.ndarray:
+    """Row vid[b] of ``a`` (B|1, m) in column b (m, B), a copy."""
+    return np.ascontiguousarray(slots_rows(a, vid).T)
 
 
-class FlatViews(NamedTuple):
-    """Flat views (n B,), made once, on the (n, B) arrays of a step (:func:`flat_views`)."""
+def working_slots(
+    plant: PlantCall, controller: ControllerCall, friction: np.ndarray, n_u: int, n_log: int
+) -> tuple[Slots, int]:
+    """(slots, n_free): the working slots (:class:`~nlcx.kernel.structures.Slots`), the variants
+    without friction first (the first n_free, stepped together), then those with friction
+    (stepped one by one, their friction modes set at t_0 by the friction path); no slot stopped,
+    the log NaN until written."""
+    n_batch = plant.x0.shape[0]
+    frictional = np.any(friction[:, :, FA.model].astype(np.int64) != FRICTION_NONE, axis=1)
+    frictional = np.broadcast_to(frictional, (n_batch,))
+    vid = np.concatenate([np.flatnonzero(~frictional), np.flatnonzero(frictional)]).astype(np.int64)
+    slots = Slots(
+        vid=vid, stopped=np.zeros(n_batch, dtype=np.bool_), x=slots_columns(plant.x0, vid),
+        p=slots_columns(plant.p, vid), bounds=slots_columns(plant.bounds, vid), cp=slots_rows(controller.cp, vid),
+        cs=slots_rows(controller.cs0, vid), log=np.full((n_batch, n_log), np.nan),
+        axes=slots_rows(friction[:, :n_u, : len(FA)], vid), mode=np.zeros((n_batch, n_u), dtype=np.int64),
+        direction=np.zeros((n_batch, n_u)), hold=np.zeros((n_batch, n_u)),
+    )  # fmt: skip
+    return slots, int(n_batch - np.sum(frictional))
 
-    x: np.ndarray
-    xs: np.ndarray
-    x_new: np.ndarray
-    bounds: np.ndarray
-    k1: np.ndarray
-    k2: np.ndarray
-    k3: np.ndarray
-    k4: np.ndarray
+
+def flat_views(slots: Slots, stages: StageColumns) -> FlatViews:
+    """Flat views on the (n, B) arrays of a step (:class:`~nlcx.kernel.structures.FlatViews`)."""
+    k = stages.k
+    return FlatViews(
+        x=slots.x.reshape(-1), xs=stages.xs.reshape(-1), x_new=stages.x_new.reshape(-1),
+        bounds=slots.bounds.reshape(-1), k1=k[0].reshape(-1), k2=k[1].reshape(-1), k3=k[2].reshape(-1),
+        k4=k[3].reshape(-1),
+    )  # fmt: skip
+
+
+def friction_work(n: int, n_u: int, n_p: int, n_stage: int, n_d: int) -> FrictionWork:
+    """Work space of the one-variant friction path (:class:`~nlcx.kernel.structures.FrictionWork`)."""
+    one = OneColumn(x=np.empty((n, 1)), u=np.empty((n_u, 1)), p=np.empty((n_p, 1)), dx=np.empty((n, 1)))
+    scratch = FrictionScratch(
+        k_stage=np.empty((n_stage, n, 1)), xs=np.empty((n, 1)), f=np.empty(n_u), work=np.empty(n_u),
+        A=np.empty((n_u, n_u)), rhs_s=np.empty(n_u), dx=np.empty(n), d_tmp=np.empty(n_d), one=one,
+    )  # fmt: skip
+    column = (n, 1)
+    return FrictionWork(x=np.empty(column), x_new=np.empty(column), x_mid=np.empty(column), u=np.empty((n_u, 1)),
+                        scratch=scratch)  # fmt: skip
 
 
 @inner_njit(cache=True, error_model="numpy")
@@ -130,105 +165,6 @@ def _swap_rows3(a: FloatArray, i: int, j: int) -> None:  # pragma: no cover - co
 
 
 @inner_njit(cache=True, error_model="numpy")
-def _row_order(friction: FloatArray, n_batch: int) -> tuple[IntArray, int]:  # pragma: no cover - compiled
-    """(vid, n_free): the variants without friction first (stepped together), then those with
-    friction (stepped one by one); vid maps a working row to its variant."""
-    vid = np.empty(n_batch, dtype=np.int64)
-    n_free = 0
-    for v in range(n_batch):
-        if not has_friction(friction[shared_row(friction.shape[0], v)]):
-            vid[n_free] = v
-            n_free += 1
-    b = n_free
-    for v in range(n_batch):
-        if has_friction(friction[shared_row(friction.shape[0], v)]):
-            vid[b] = v
-            b += 1
-    return vid, n_free
-
-
-@inner_njit(cache=True, error_model="numpy")
-def working_rows(
-    plant: PlantCall, controller: ControllerCall, friction: FloatArray, n_u: int
-) -> tuple[WorkingRows, int]:  # pragma: no cover - compiled
-    """(rows, n_free): the working copies (:class:`WorkingRows`), the variants without friction
-    first (the first n_free, stepped together), then those with friction (stepped one by one)."""
-    x0, p, bounds, cp, cs0 = plant.x0, plant.p, plant.bounds, controller.cp, controller.cs0
-    n_batch, n = x0.shape
-    vid, n_free = _row_order(friction, n_batch)
-    x = np.empty((n, n_batch))
-    xrow = np.empty((n_batch, n))
-    pw = np.empty((p.shape[1], n_batch))
-    cpw = np.empty((n_batch, cp.shape[1]))
-    cs = np.empty((n_batch, cs0.shape[1]))
-    fw = np.empty((n_batch, n_u, len(FA)))
-    bw = np.empty((n, n_batch))
-    for b in range(n_batch):
-        v = vid[b]
-        _copy_row(x0, v, xrow, b)
-        bp = shared_row(p.shape[0], v)
-        for i in range(n):
-            x[i, b] = x0[v, i]
-        for i in range(p.shape[1]):
-            pw[i, b] = p[bp, i]
-        _copy_row(cp, v, cpw, b)
-        _copy_row(cs0, v, cs, b)
-        bb = shared_row(bounds.shape[0], v)
-        for i in range(n):
-            bw[i, b] = bounds[bb, i]
-        fr = shared_row(friction.shape[0], v)
-        for j in range(n_u):
-            for c in range(len(FA)):
-                fw[b, j, c] = friction[fr, j, c]
-    return WorkingRows(vid=vid, x=x, xrow=xrow, p=pw, cp=cpw, cs=cs, axes=fw, bounds=bw), n_free
-
-
-@inner_njit(cache=True, error_model="numpy")
-def friction_modes(axes: FloatArray, xrow: FloatArray) -> FrictionModes:  # pragma: no cover - compiled
-    """The friction modes of every slot's axes at t_0 (Appendix A) from the initial states by
-    rows, xrow; no slot stopped (:class:`FrictionModes`)."""
-    n_batch, n_u = axes.shape[0], axes.shape[1]
-    modes = FrictionModes(
-        mode=np.zeros((n_batch, n_u), dtype=np.int64), direction=np.zeros((n_batch, n_u)),
-        hold=np.zeros((n_batch, n_u)), stopped=np.zeros(n_batch, dtype=np.bool_),
-    )  # fmt: skip
-    for b in range(n_batch):
-        initial_modes(axes[b], xrow[b], modes.mode[b], modes.direction[b], modes.hold[b])
-    return modes
-
-
-@inner_njit(cache=True, error_model="numpy")
-def working_slots(rows: WorkingRows, modes: FrictionModes, log: FloatArray) -> Slots:  # pragma: no cover - compiled
-    """The working slots (:class:`~nlcx.kernel.structures.Slots`) of the working rows, the
-    friction modes and the controller's log."""
-    return Slots(
-        vid=rows.vid, stopped=modes.stopped, x=rows.x, p=rows.p, bounds=rows.bounds, cp=rows.cp, cs=rows.cs, log=log,
-        axes=rows.axes, mode=modes.mode, direction=modes.direction, hold=modes.hold,
-    )  # fmt: skip
-
-
-@inner_njit(cache=True, error_model="numpy")
-def _copy_row(src: FloatArray, i: int, dst: FloatArray, j: int) -> None:  # pragma: no cover - compiled
-    """dst[j, :] = src[i, :] element by element (a slice assignment compiles a shape check)."""
-    for c in range(src.shape[1]):
-        dst[j, c] = src[i, c]
-
-
-@inner_njit(cache=True, error_model="numpy")
-def friction_work(n: int, n_u: int, n_p: int, n_stage: int, n_d: int) -> FrictionWork:  # pragma: no cover - compiled
-    """Work space of the one-variant friction path (:class:`~nlcx.kernel.structures.FrictionWork`),
-    allocated once per :func:`~nlcx.kernel.integrator.simulate` call."""
-    one = OneColumn(x=np.empty((n, 1)), u=np.empty((n_u, 1)), p=np.empty((n_p, 1)), dx=np.empty((n, 1)))
-    scratch = FrictionScratch(
-        k_stage=np.empty((n_stage, n, 1)), xs=np.empty((n, 1)), f=np.empty(n_u), work=np.empty(n_u),
-        A=np.empty((n_u, n_u)), rhs_s=np.empty(n_u), dx=np.empty(n), d_tmp=np.empty(n_d), one=one,
-    )  # fmt: skip
-    column = (n, 1)
-    return FrictionWork(x=np.empty(column), x_new=np.empty(column), x_mid=np.empty(column), u=np.empty((n_u, 1)),
-                        scratch=scratch)  # fmt: skip
-
-
-@inner_njit(cache=True, error_model="numpy")
 def clear_columns(start: int, stop: int, arrays: tuple[FloatArray, ...]) -> None:  # pragma: no cover - compiled
     """Zero columns start..stop-1 (variants that just left the batch) of ``arrays``: the state,
     x_{k+1} and the stage derivatives. The flat loops over every column then keep them zero and
@@ -258,45 +194,3 @@ def compact(nb: int, n_free: int, slots: Slots) -> tuple[int, int]:  # pragma: n
             swap_variants(b, nb - 1, slots)
         nb -= 1
     return nb, n_free
-
-
-@inner_njit(cache=True, error_model="numpy")
-def signal_rows(xrow: FloatArray, n_y: int, n_r: int, n_u: int, n_log: int) -> Signals:  # pragma: no cover - compiled
-    """The work arrays of the signals (:class:`Signals`) beside the controller's copy of the
-    state, xrow."""
-    n_batch = xrow.shape[0]
-    return Signals(
-        xrow=xrow, y=np.empty((n_batch, n_y)), r=np.empty((n_batch, n_r)), u=np.empty((n_batch, n_u)),
-        log=np.full((n_batch, n_log), np.nan), uc=np.empty((n_u, n_batch)),
-    )  # fmt: skip
-
-
-@inner_njit(cache=True, error_model="numpy")
-def stage_columns(n_batch: int, n: int) -> StageColumns:  # pragma: no cover - compiled
-    """The work arrays of a Runge-Kutta step (:class:`StageColumns`)."""
-    return StageColumns(x_new=np.empty((n, n_batch)), xs=np.empty((n, n_batch)), k=np.zeros((MAX_STAGES, n, n_batch)))
-
-
-@inner_njit(cache=True, error_model="numpy")
-def flat_views(slots: Slots, stages: StageColumns) -> FlatViews:  # pragma: no cover - compiled
-    """Flat views, made once, on the (n, B) arrays of a step: x, a stage's input, x_{k+1}, the
-    bounds and the stage derivatives. The RK4 sums and the acceptance of x_{k+1} are one loop
-    over every column, the inactive ones included (their values are never read again): a loop
-    per state costs more than its work in a batch of a few variants."""
-    size = slots.x.size
-    k1, k2, k3, k4 = stages.k[0], stages.k[1], stages.k[2], stages.k[3]
-    return FlatViews(
-        x=slots.x.reshape(size), xs=stages.xs.reshape(size), x_new=stages.x_new.reshape(size),
-        bounds=slots.bounds.reshape(size), k1=k1.reshape(size), k2=k2.reshape(size), k3=k3.reshape(size),
-        k4=k4.reshape(size),
-    )  # fmt: skip
-
-
-@inner_njit(cache=True, error_model="numpy")
-def init_outcome(n_steps: int, outcome: Outcome) -> None:  # pragma: no cover - compiled
-    """Every variant ok until it stops."""
-    status, n_valid, fail_index = outcome.status, outcome.n_valid, outcome.fail_index
-    for v in range(status.shape[0]):
-        status[v] = STATUS_OK
-        fail_index[v] = -1
-        n_valid[v] = n_steps + 1
