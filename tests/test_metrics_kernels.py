@@ -12,9 +12,62 @@ import itertools
 
 import numpy as np
 import pytest
+from numba import njit
 
 from nlcx import metrics
 from nlcx.metrics import scans, sums
+
+Row = np.ndarray
+
+# The scans and sums are compiled for compiled callers only (no Python wrapper): each is called
+# here through a compiled function that passes its arguments on.
+
+
+@njit
+def first_crossing(t: Row, y: Row, first: int, t0: float, s: float, level: float) -> tuple[float, int]:
+    return scans.first_crossing(t, y, first, t0, s, level)
+
+
+@njit
+def last_exit(t: Row, y: Row, first: int, t0: float, center: float, band: float) -> float:
+    return scans.last_exit(t, y, first, t0, center, band)
+
+
+@njit
+def extremes(y: Row, first: int, s: float, s_final: float, s_initial: float) -> tuple[float, float, int]:
+    return scans.extremes(y, first, s, s_final, s_initial)
+
+
+@njit
+def deviation_peak(y: Row, first: int, center: float) -> int:
+    return scans.deviation_peak(y, first, center)
+
+
+@njit
+def max_abs(y: Row, first: int) -> float:
+    return scans.max_abs(y, first)
+
+
+@njit
+def np_maximum(a: float, b: float) -> float:
+    return scans.np_maximum(a, b)
+
+
+@njit
+def np_minimum(a: float, b: float) -> float:
+    return scans.np_minimum(a, b)
+
+
+@njit
+def search_right(t: Row, first: int, value: float) -> int:
+    return scans.search_right(t, first, value)
+
+
+@njit
+def pairwise_sums(
+    kind: int, t: Row, y: Row, ref: Row, start: float, lo: int, n: int, ranges: np.ndarray, partial: np.ndarray
+) -> tuple[float, float, float]:
+    return sums.pairwise_sums(kind, t, y, ref, start, lo, n, ranges, partial)
 
 
 def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
@@ -82,16 +135,16 @@ def test_scans_equal_their_numpy_formulation(seed: int) -> None:
     sy = s[:, np.newaxis] * y
     t0 = float(rng.uniform(-0.01, 0.01))
     t = tau + t0  # the scans measure from t0: tau = t - t0, formed sample by sample
-    crossings = per_row(lambda row, s_b, level_b: scans.first_crossing(t, row, 0, t0, s_b, level_b), y, s, level)
+    crossings = per_row(lambda row, s_b, level_b: first_crossing(t, row, 0, t0, s_b, level_b), y, s, level)
     t_np, index_np = numpy_first_crossing(t - t0, sy, level)
     assert same_bits(np.array([c[0] for c in crossings]), t_np)
     found = ~np.isnan(t_np)
     assert np.array_equal(np.array([c[1] for c in crossings])[found], index_np[found])
     center, band = rng.uniform(-1, 2, y.shape[0]), rng.uniform(0, 0.3, y.shape[0])
-    exits = per_row(lambda row, c, b: scans.last_exit(t, row, 0, t0, c, b), y, center, band)
+    exits = per_row(lambda row, c, b: last_exit(t, row, 0, t0, c, b), y, center, band)
     assert same_bits(np.array(exits), numpy_last_exit(t - t0, y, center, band))
     s_final, s_initial = s * center, s * rng.uniform(-1, 1, y.shape[0])
-    found = per_row(lambda row, a, b, c: scans.extremes(row, 0, a, b, c), y, s, s_final, s_initial)
+    found = per_row(lambda row, a, b, c: extremes(row, 0, a, b, c), y, s, s_final, s_initial)
     over, under, peak = (np.array(column) for column in zip(*found, strict=True))
     for ours, theirs in ((over, np.max(sy - s_final[:, np.newaxis], axis=1)),
                          (under, np.max(s_initial[:, np.newaxis] - sy, axis=1))):  # fmt: skip
@@ -100,10 +153,10 @@ def test_scans_equal_their_numpy_formulation(seed: int) -> None:
         assert np.array_equal(ours, theirs, equal_nan=True)
         assert same_bits(np.maximum(ours, 0.0), np.maximum(theirs, 0.0))
     assert np.array_equal(peak, np.argmax(sy, axis=1))
-    index = np.array(per_row(lambda row, c: scans.deviation_peak(row, 0, c), y, center))
+    index = np.array(per_row(lambda row, c: deviation_peak(row, 0, c), y, center))
     absdev = np.abs(y - center[:, np.newaxis])
     assert np.array_equal(index, np.argmax(absdev, axis=1))
-    assert same_bits(np.array(per_row(lambda row: scans.max_abs(row, 0), y)), np.max(np.abs(y), axis=1))
+    assert same_bits(np.array(per_row(lambda row: max_abs(row, 0), y)), np.max(np.abs(y), axis=1))
 
 
 def test_two_value_extremes_are_numpys() -> None:
@@ -111,7 +164,7 @@ def test_two_value_extremes_are_numpys() -> None:
     value and sign (of two equal values numpy returns the second)."""
     values = [0.0, -0.0, np.nan, np.inf, -np.inf, 1.0, -1.0, 2.5]
     for a, b in itertools.product(values, repeat=2):
-        for ours, theirs in ((scans.np_maximum(a, b), np.maximum(a, b)), (scans.np_minimum(a, b), np.minimum(a, b))):
+        for ours, theirs in ((np_maximum(a, b), np.maximum(a, b)), (np_minimum(a, b), np.minimum(a, b))):
             assert same_bits(np.array([ours]), np.array([theirs]))
 
 
@@ -120,7 +173,7 @@ def test_search_right_is_searchsorted() -> None:
     for value in [t[0] - 1, *t[::7], *(t[::11] + 1e-4), t[-1] + 1]:
         for first in (0, 5):
             expected = first + int(np.searchsorted(t[first:], value, side="right"))
-            assert scans.search_right(t, first, value) == expected
+            assert search_right(t, first, value) == expected
 
 
 def _terms(kind: int, t: np.ndarray, y: np.ndarray, ref: np.ndarray, start: float) -> list[np.ndarray]:
@@ -146,11 +199,11 @@ def test_pairwise_sums_are_numpys_sums(n: int) -> None:
     ref = rng.standard_normal(n + 1)
     ranges, partial = sums.stack()
     for kind in (sums.ERRORS, sums.TRAPEZOID, sums.INPUT):
-        ours = sums.pairwise_sums(kind, t, y, ref, t[0] - 0.3, 0, n, ranges, partial)
+        ours = pairwise_sums(kind, t, y, ref, t[0] - 0.3, 0, n, ranges, partial)
         for value, terms in zip(ours, _terms(kind, t, y, ref, t[0] - 0.3), strict=False):
             assert same_bits(np.array([value]), np.array([np.sum(terms)]))
     lo = n // 3  # a range that starts inside the row: the sum of terms lo .. n-1
-    ours = sums.pairwise_sums(sums.TRAPEZOID, t, y, y, 0.0, lo, n - lo, ranges, partial)
+    ours = pairwise_sums(sums.TRAPEZOID, t, y, y, 0.0, lo, n - lo, ranges, partial)
     assert same_bits(np.array([ours[0]]), np.array([np.sum(_terms(sums.TRAPEZOID, t[lo:], y[lo:], y[lo:], 0.0)[0])]))
 
 

@@ -22,7 +22,16 @@ a constant argument, such as a literal ``0``, has a type of its own (``Literal[i
 kernels therefore pass sample indices and offsets as int64 values (``np.int64(0)`` where it is
 zero), and their callers hand them C-contiguous, writable float64 rows
 (:func:`nlcx.engine.measure.signal_values`): each kernel is compiled once. The kind of the
-pairwise sums is the exception: a constant on purpose (:mod:`nlcx.metrics.sums`).
+pairwise sums is passed as ``np.int64`` too; the sums compile each kind's block loop apart
+(:mod:`nlcx.metrics.sums`).
+
+numba compiles a function that another calls into a module of its own, optimises it and makes
+its machine code, then links that module into its caller's and optimises and compiles it again.
+The five kernels above are therefore inlined by numba (``inline="always"``) into each of their
+callers, which call each of them once (:func:`measure`, itself inlined into its one caller,
+:func:`nlcx.metrics.batch.measure_rows`; the per-kernel loops of :mod:`nlcx.metrics.batch`);
+their helpers that two kernels call (:func:`window_mean`, :func:`_step_core`, the scans, the
+pairwise sums) stay compiled functions of their own, typed once.
 """
 
 from __future__ import annotations
@@ -33,6 +42,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from nlcx._numba_compat import inner_njit
 from nlcx.kernel.signatures import FloatArray, IntArray
 from nlcx.metrics.scans import (
     deviation_peak,
@@ -90,14 +100,14 @@ def timing(
     return Timing(first, j, a, on_grid, ts, shift, float(band), float(lo), float(hi), float(window), float(abs_tol))
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def value_at_step(y: FloatArray, m: Timing) -> float:  # pragma: no cover - compiled
     """y(t_step): sample j, or interpolated linearly between samples j and j+1."""
     j = m.j
     return y[j] if m.on_grid else y[j] + m.a * (y[j + 1] - y[j])
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def window_mean(
     t: FloatArray, y: FloatArray, first: int, window: float, ranges: IntArray, partial: FloatArray
 ) -> float:  # pragma: no cover - compiled
@@ -107,17 +117,17 @@ def window_mean(
     t_end = t[n - 1]
     w_start = t_end - window
     if w_start <= t[first]:
-        area, _, _ = pairwise_sums(TRAPEZOID, t, y, y, 0.0, first, n - 1 - first, ranges, partial)
+        area, _, _ = pairwise_sums(np.int64(TRAPEZOID), t, y, y, 0.0, first, n - 1 - first, ranges, partial)
         return area / (t_end - t[first])
     j = search_right(t, first, w_start)  # t[j-1] <= w_start < t[j]
     a = (w_start - t[j - 1]) / (t[j] - t[j - 1])
     y_start = y[j - 1] + a * (y[j] - y[j - 1])
     head = 0.5 * (t[j] - w_start) * (y_start + y[j])
-    area, _, _ = pairwise_sums(TRAPEZOID, t, y, y, 0.0, j, n - 1 - j, ranges, partial)
+    area, _, _ = pairwise_sums(np.int64(TRAPEZOID), t, y, y, 0.0, j, n - 1 - j, ranges, partial)
     return (head + area) / window
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _step_core(
     t: FloatArray, y: FloatArray, m: Timing, initial: float, final: float, out: FloatArray, o: int
 ) -> tuple[bool, float, int, int]:  # pragma: no cover - compiled
@@ -140,7 +150,7 @@ def _step_core(
     return valid, t_hi, hi_index, peak
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def step_response(
     t: FloatArray,
     y: FloatArray,
@@ -162,7 +172,7 @@ def step_response(
     _shift_event_times(out, o + 1, o + 5, m.shift)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def step_info(
     t: FloatArray, y: FloatArray, m: Timing, initial: float, final: float, out: FloatArray, o: int
 ) -> None:  # pragma: no cover - compiled
@@ -195,7 +205,7 @@ def _shift_event_times(
         out[peak_time] = out[peak_time] + shift
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def regulation(
     t: FloatArray,
     y: FloatArray,
@@ -218,7 +228,7 @@ def regulation(
     out[o + 3] = reference - window_mean(t, y, whole, m.window, ranges, partial)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def error_integrals(
     t: FloatArray,
     y: FloatArray,
@@ -233,7 +243,7 @@ def error_integrals(
     """:func:`nlcx.metrics.error_integrals` of e = ref - y from sample ``first``: ISE, IAE,
     ITAE (time from ``start``), max |e| and the RMS error sqrt(ISE / duration)."""
     n = y.shape[0]
-    ise, iae, itae = pairwise_sums(ERRORS, t, y, ref, start, first, n - 1 - first, ranges, partial)
+    ise, iae, itae = pairwise_sums(np.int64(ERRORS), t, y, ref, start, first, n - 1 - first, ranges, partial)
     peak = -math.inf
     for k in range(first, n):
         a = abs(ref[k] - y[k])
@@ -248,13 +258,13 @@ def error_integrals(
     out[o + 4] = math.sqrt(ise / (t[n - 1] - t[first]))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def input_effort(
     t: FloatArray, u: FloatArray, out: FloatArray, o: int, ranges: IntArray, partial: FloatArray
 ) -> None:  # pragma: no cover - compiled
     """:func:`nlcx.metrics.input_metrics` of the row: the effort (integral of u^2), max |u| and
     the total variation sum |u_k - u_{k-1}|."""
-    effort, variation, _ = pairwise_sums(INPUT, t, u, u, 0.0, 0, u.shape[0] - 1, ranges, partial)
+    effort, variation, _ = pairwise_sums(np.int64(INPUT), t, u, u, 0.0, np.int64(0), u.shape[0] - 1, ranges, partial)
     out[o] = effort
     out[o + 1] = max_abs(u, 0)
     out[o + 2] = variation
@@ -279,9 +289,8 @@ def measure(
     ref - y from the step; the error integrals alone (tracking); the step characteristics
     against the row's last sample (an output no loop follows); an input's effort.
 
-    Inlined into its one caller on the CPU, :func:`nlcx.metrics.batch.measure_rows`: a compiled
-    function of its own would have every metric kernel optimised and compiled into its machine
-    code, and then again into the caller's. The GPU compiles it from its source."""
+    Inlined into its one caller on the CPU, :func:`nlcx.metrics.batch.measure_rows`, with the
+    kernels it calls (the module docstring). The GPU compiles it from its source."""
     if kind == STEP:
         step_response(t, y, m, value_at_step(y, m), final, out, o, ranges, partial)
         error_integrals(t, y, ref, m.first, m.t_step, out, o + 7, ranges, partial)

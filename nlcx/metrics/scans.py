@@ -9,19 +9,19 @@ and :func:`np_maximum`/:func:`np_minimum` are np.maximum/np.minimum of two value
 
 The same functions run on the CPU, called by :mod:`nlcx.metrics.kernels`, and on the GPU,
 compiled from this source as device functions (:class:`nlcx.kernel.device.Retarget`): they use
-only scalar arithmetic and :mod:`math`.
+only scalar arithmetic and :mod:`math`. Only compiled code calls them: they are compiled without
+the wrappers that would let Python call them (:func:`nlcx._numba_compat.inner_njit`).
 """
 
 from __future__ import annotations
 
 import math
 
-from numba import njit
-
+from nlcx._numba_compat import inner_njit
 from nlcx.kernel.signatures import FloatArray
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def clip01(x: float) -> float:  # pragma: no cover - compiled
     """np.clip(x, 0, 1): NaN stays NaN, -0.0 stays -0.0."""
     if x < 0.0:
@@ -31,7 +31,7 @@ def clip01(x: float) -> float:  # pragma: no cover - compiled
     return x
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def sign(x: float) -> float:  # pragma: no cover - compiled
     """np.sign(x): -1, 0 or 1, NaN for NaN."""
     if x > 0.0:
@@ -43,7 +43,7 @@ def sign(x: float) -> float:  # pragma: no cover - compiled
     return math.nan
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def np_maximum(a: float, b: float) -> float:  # pragma: no cover - compiled
     """np.maximum(a, b): NaN if either is NaN, else a where a > b, else b (of two equal
     values, +0.0 and -0.0 among them, numpy returns the second)."""
@@ -54,7 +54,7 @@ def np_maximum(a: float, b: float) -> float:  # pragma: no cover - compiled
     return a if a > b else b
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def np_minimum(a: float, b: float) -> float:  # pragma: no cover - compiled
     """np.minimum(a, b): NaN if either is NaN, else a where a < b, else b."""
     if a != a:
@@ -64,7 +64,7 @@ def np_minimum(a: float, b: float) -> float:  # pragma: no cover - compiled
     return a if a < b else b
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def search_right(t: FloatArray, first: int, value: float) -> int:  # pragma: no cover - compiled
     """np.searchsorted(t, value, side="right") over t[first:], as an index of t: the first
     sample after ``value`` (len(t) if none), by bisection."""
@@ -78,7 +78,7 @@ def search_right(t: FloatArray, first: int, value: float) -> int:  # pragma: no 
     return lo
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def first_crossing(
     t: FloatArray, y: FloatArray, first: int, t0: float, s: float, s_level: float
 ) -> tuple[float, int]:  # pragma: no cover - compiled
@@ -98,7 +98,7 @@ def first_crossing(
     return math.nan, 0
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def last_exit(
     t: FloatArray, y: FloatArray, first: int, t0: float, center: float, band: float
 ) -> float:  # pragma: no cover - compiled
@@ -123,7 +123,7 @@ def last_exit(
     return tau_k + clip01((d_k - edge) / (d_k - d_k1)) * ((t[k + 1] - t0) - tau_k)
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def extremes(
     y: FloatArray, first: int, s: float, s_final: float, s_initial: float
 ) -> tuple[float, float, int]:  # pragma: no cover - compiled
@@ -147,7 +147,7 @@ def extremes(
     return (math.nan if hi_nan else hi), (math.nan if lo_nan else lo), at
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def deviation_peak(y: FloatArray, first: int, center: float) -> int:  # pragma: no cover - compiled
     """The index of the first largest |y - center| from ``first``, or of the first NaN (np.argmax)."""
     best, at = abs(y[first] - center), first
@@ -162,7 +162,7 @@ def deviation_peak(y: FloatArray, first: int, center: float) -> int:  # pragma: 
     return at
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def max_abs(y: FloatArray, first: int) -> float:  # pragma: no cover - compiled
     """max |y| over the row from ``first``, NaN if it holds a NaN (np.max)."""
     m = -math.inf

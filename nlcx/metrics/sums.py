@@ -15,12 +15,15 @@ The terms, sample pair (k, k+1), dt = t_{k+1} - t_k, by ``kind``:
 - :data:`INPUT`: ((u_{k+1}^2 + u_k^2) / 2) dt and |u_{k+1} - u_k| (effort, total variation).
 
 The ranges still to be added are kept on a small stack (:func:`stack`): the depth grows with
-the logarithm of the row's length, 64 levels hold any row.
+the logarithm of the row's length, 64 levels hold any row. Only compiled code calls these
+functions: they are compiled without the wrappers that would let Python call them
+(:func:`nlcx._numba_compat.inner_njit`).
 
-Each caller passes ``kind`` as a constant (:data:`ERRORS`, ...), so numba compiles
-:func:`pairwise_sums`, :func:`_block_sums` and :func:`_terms` once per kind, with the other
-kinds' branches removed: the block's loop then runs in vector code, several times faster than
-with a ``kind`` known only at run time. :func:`_terms` is a compiled function of its own, which
+:func:`pairwise_sums` takes ``kind`` as an int64 (callers pass ``np.int64(ERRORS)``, ...: a
+literal would compile it once per kind) and calls :func:`_block_sums` with each kind as a
+constant, so numba compiles :func:`_block_sums` and :func:`_terms` once per kind, with the
+other kinds' branches removed: the block's loop then runs in vector code, several times faster
+than with a ``kind`` known only at run time. :func:`_terms` is a compiled function of its own, which
 LLVM inlines into the block's loop; inlined by numba (``inline="always"``) at each of its
 eighteen call sites, the block would be typed eighteen times over and take several times longer
 to compile, for the same machine code.
@@ -31,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from nlcx._numba_compat import inner_njit
 from nlcx.kernel.signatures import FloatArray, IntArray, Sums
 
 ERRORS, TRAPEZOID, INPUT = 0, 1, 2
@@ -45,7 +49,7 @@ def stack() -> tuple[np.ndarray, np.ndarray]:
     return np.zeros((DEPTH, 3), dtype=np.int64), np.zeros((DEPTH, 3))
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _terms(
     kind: int, t: FloatArray, y: FloatArray, ref: FloatArray, start: float, k: int
 ) -> tuple[float, float, float]:  # pragma: no cover - compiled
@@ -62,7 +66,7 @@ def _terms(
     return ((u1 * u1 + u0 * u0) * 0.5) * dt, abs(u1 - u0), 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def _block_sums(
     kind: int, t: FloatArray, y: FloatArray, ref: FloatArray, start: float, lo: int, n: int
 ) -> Sums:  # pragma: no cover - compiled
@@ -125,7 +129,7 @@ def _left_half(n: int) -> int:  # pragma: no cover - compiled
     return half - half % _UNROLL
 
 
-@njit(cache=True, error_model="numpy")
+@inner_njit(cache=True, error_model="numpy")
 def pairwise_sums(
     kind: int,
     t: FloatArray,
@@ -149,7 +153,13 @@ def pairwise_sums(
             ranges[top + 1, 0], ranges[top + 1, 1], ranges[top + 1, 2] = ranges[top, 0], _left_half(count), 0
             top += 1
             continue
-        s0, s1, s2 = _block_sums(kind, t, y, ref, start, ranges[top, 0], count)
+        lo_block = ranges[top, 0]
+        if kind == ERRORS:  # each kind's block sums compiled apart (a constant kind: vector code)
+            s0, s1, s2 = _block_sums(ERRORS, t, y, ref, start, lo_block, count)
+        elif kind == TRAPEZOID:
+            s0, s1, s2 = _block_sums(TRAPEZOID, t, y, ref, start, lo_block, count)
+        else:
+            s0, s1, s2 = _block_sums(INPUT, t, y, ref, start, lo_block, count)
         while True:  # hand the sums to the range waiting for them
             top -= 1
             if top < 0:
