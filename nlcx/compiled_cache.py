@@ -82,17 +82,6 @@ def ensure_consistent(root: Path = PACKAGE, stamp: Path | None = None, depends: 
     return True
 
 
-def kernel_compiles(root: Path = PACKAGE) -> bool:
-    """Whether loading the kernel (:func:`nlcx.kernel.integrator.simulate`) compiles it: numba's
-    index of it is missing from the package's cache (after :func:`ready`, which removes a stale
-    cache). False where numba keeps its cache elsewhere (``NUMBA_CACHE_DIR``, or a read-only
-    install, whose cache numba keeps in the user's folders): unknown there."""
-    cache = root / "kernel" / "__pycache__"
-    if os.environ.get("NUMBA_CACHE_DIR") or not os.access(cache if cache.is_dir() else cache.parent, os.W_OK):
-        return False
-    return not any(cache.glob("integrator.simulate-*.nbi"))
-
-
 @functools.cache
 def ready() -> None:
     """Prepare this process to load the package's compiled functions (once; the processes it
@@ -110,7 +99,7 @@ def ready() -> None:
 #: What ``nlcx run`` prints on stderr when it finds numba's cache empty or stale (:class:`CompileHelper`).
 COMPILING = (
     "compiling nlcx's simulation kernel and this run's functions into numba's disk cache: once per install "
-    "(and after nlcx's source changes), about 10-25 s on 2 cores; later runs load them in under a second"
+    "(and after nlcx's source changes), about 10 s on 2 idle cores; later runs load them in under a second"
 )
 
 
@@ -130,11 +119,7 @@ class CompileHelper:
         self.notice = notice
         self.process: subprocess.Popen[bytes] | None = None
 
-    def start(self) -> None:
-        """Start the command now (once): a process that knows it will compile (:func:`kernel_compiles`)
-        need not wait for the first compile to notice it."""
-        if self.process is not None:
-            return
+    def _start(self) -> None:
         if self.notice is not None:
             self.notice()
         self.process = subprocess.Popen(
@@ -147,7 +132,7 @@ class CompileHelper:
         """Start the command (once) when numba compiles within the block."""
         from nlcx._numba_compat import on_first_compile
 
-        with on_first_compile(self.start):
+        with on_first_compile(self._start):
             yield
 
     def close(self, timeout: float = 120.0) -> None:

@@ -234,42 +234,6 @@ def test_the_compiling_notice_is_given_once_when_numba_compiles_and_never_on_a_c
     assert "\n" not in line and "numba" in line and "once per install" in line and " s " in line
 
 
-def test_a_helper_started_at_once_is_not_started_again_when_numba_compiles(tmp_path: Path) -> None:
-    """``start`` (a process that knows it will compile: the kernel's index is missing) starts
-    the command and says so once; the first compile in a watched step then starts nothing more."""
-    marker = tmp_path / "started"
-    command = [sys.executable, "-c", f"open({str(marker)!r}, 'a').write('x')"]
-    notices: list[str] = []
-    helper = compiled_cache.CompileHelper(command, notice=lambda: notices.append("compiling"))
-    helper.start()
-    first = helper.process
-    with helper.watching():
-        _compiled_now()
-    helper.start()
-    helper.close()
-    assert first is not None and helper.process is first and first.returncode == 0
-    assert notices == ["compiling"] and marker.read_text() == "x"
-
-
-def test_the_kernel_compiles_where_its_index_is_missing(tmp_path: Path, monkeypatch) -> None:
-    """kernel_compiles: True while the package's cache holds no index of the kernel, False once
-    it does, and False (unknown) where numba keeps its cache elsewhere (a read-only install,
-    NUMBA_CACHE_DIR)."""
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
-    cache = tmp_path / "kernel" / "__pycache__"
-    cache.mkdir(parents=True)
-    (cache / "integrator.rk_step-12.py311.nbi").write_bytes(b"")
-    assert compiled_cache.kernel_compiles(tmp_path)
-    (cache / "integrator.simulate-230.py311.nbi").write_bytes(b"")
-    assert not compiled_cache.kernel_compiles(tmp_path)
-    (cache / "integrator.simulate-230.py311.nbi").unlink()
-    monkeypatch.setattr(compiled_cache.os, "access", lambda path, mode: False)  # a read-only install
-    assert not compiled_cache.kernel_compiles(tmp_path)
-    monkeypatch.undo()
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
-    assert not compiled_cache.kernel_compiles(tmp_path)
-
-
 def _wait_for(condition: Any, timeout: float = 120.0) -> None:
     """Poll ``condition()`` until it holds; fail after ``timeout`` seconds (a hung process)."""
     deadline = time.monotonic() + timeout

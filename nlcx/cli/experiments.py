@@ -21,7 +21,7 @@ from nlcx.cli._app import (
     load_plugins,
     one_line_errors,
 )
-from nlcx.compiled_cache import COMPILING, CompileHelper, kernel_compiles
+from nlcx.compiled_cache import COMPILING, CompileHelper
 from nlcx.errors import NlcxError
 from nlcx.plugins import load_config_imports
 from nlcx.terminal import echo
@@ -119,14 +119,12 @@ def run(
         _sweep(config, overrides or [], out, "process", 2, None, False, False, not no_report, allow_env=allow_env)
         return
     resolved = cfg.interpolate(raw, allow_env=allow_env)  # a refused resolver stops here, before any process starts
+    painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
     flags = ["--allow-env"] if allow_env else []
     flags += [item for file in plugins or [] for item in ("--plugins", str(file.resolve()))]
     command = runtime.module_command("nlcx.cli", "prewarm", str(config), *flags, *(overrides or []))
     # a kernel that numba compiles (its disk cache empty or stale): said in one line on stderr (not with -q)
     helper = CompileHelper(command, notice=None if quiet else lambda: echo(COMPILING, err=True))
-    if kernel_compiles():  # known now: `nlcx prewarm` starts compiling beside this process's imports
-        helper.start()
-    painter = _painter(raw)  # imports matplotlib in another process while this one imports the engine
     try:
         from nlcx import engine, rundir
 
