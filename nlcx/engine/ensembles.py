@@ -36,8 +36,6 @@ from nlcx.engine.simulate import (
     plant_call,
     plant_forces,
 )
-from nlcx.kernel.friction import any_friction
-from nlcx.kernel.friction_path import FRICTIONAL, FRICTIONLESS
 from nlcx.kernel.signatures import ControllerStep
 from nlcx.kernel.structures import (
     ControllerCall,
@@ -48,7 +46,6 @@ from nlcx.kernel.structures import (
     PlantForces,
     method_of,
 )
-from nlcx.kernel.working_storage import working_storage
 from nlcx.plants.base import Plant
 
 #: The structures of a kernel call: (plant, controller, elements, forces).
@@ -278,7 +275,7 @@ def simulate_ensemble(
     the slots of each key: the calls :func:`nlcx.engine.simulate_items` makes for the variants'
     items (the same loops in the same kernel calls, so the same bits), their arrays packed from
     the columns instead of built per variant. No controller logs or friction forces are kept."""
-    from nlcx.kernel.integrator import simulate
+    from nlcx.kernel.integrator import integrate_batch
 
     sim = template.prepared.experiment.section.simulation
     grid = template.prepared.grid
@@ -291,9 +288,7 @@ def simulate_ensemble(
         n_b = n_variants * pattern.size
         records = empty_records([items[i] for i in pattern], grid.t.size, 1, n_rows=n_b)
         outcome = Outcome(*(np.zeros(n_b, dtype=np.int64) for _ in range(3)))
-        working = working_storage(integration, plant, controller, elements, forces, records, outcome)
-        simulate(integration, plant, controller, elements, forces, records, outcome,
-                 FRICTIONAL if any_friction(forces.friction) else FRICTIONLESS, working)  # fmt: skip
+        integrate_batch(integration, plant, controller, elements, forces, records, outcome)
         calls.append(EnsembleCall(
             variants=np.repeat(np.arange(n_variants), pattern.size), loops=np.tile(pattern, n_variants),
             X=records.X, U=records.U, status=outcome.status, n_valid=outcome.n_valid,

@@ -18,12 +18,10 @@ from nlcx.engine.batching import group_key, groups_of, kernel_calls
 from nlcx.engine.prepared import TABLEAUS, Item, Prepared, TimeGrid, items_of
 from nlcx.engine.results import Run
 from nlcx.kernel.abi import ELEMENT_ENTRY, HOOKS, STATUS_BOUND, STATUS_NONFINITE, callback_slots, element_slots
-from nlcx.kernel.friction import FRICTION_AXIS, any_friction
-from nlcx.kernel.friction_path import FRICTIONAL, FRICTIONLESS
+from nlcx.kernel.friction import FRICTION_AXIS
 from nlcx.kernel.signatures import ControllerStep
 from nlcx.kernel.structures import (
     ControllerCall,
-    FrictionPath,
     Integration,
     LoopElements,
     Outcome,
@@ -32,7 +30,6 @@ from nlcx.kernel.structures import (
     Records,
     method_of,
 )
-from nlcx.kernel.working_storage import working_storage
 from nlcx.plants.base import Plant, check_rows
 
 
@@ -69,7 +66,7 @@ def simulate_items(
     ``record_logs=False`` skips the controller logs and friction forces (``Run.log`` and
     ``Run.friction`` are None): a sweep that keeps only metrics does not need them.
     ``device="cuda"``: on the GPU (:mod:`nlcx.kernel.cuda_loop`), the same calls."""
-    from nlcx.kernel.integrator import simulate  # loaded (or compiled) on first use: see load_kernel
+    from nlcx.kernel.integrator import integrate_batch  # loaded (or compiled) on first use: see load_kernel
 
     tableau = TABLEAUS[integrator]
     integration = Integration(method=method_of(integrator), rk_a=tableau.a, rk_b=tableau.b, dt=grid.dt)
@@ -87,8 +84,7 @@ def simulate_items(
         if device == "cuda":
             on_gpu(integration, *arguments, records, outcome)
         else:
-            working = working_storage(integration, *arguments, records, outcome)
-            simulate(integration, *arguments, records, outcome, _friction_path(group), working)
+            integrate_batch(integration, *arguments, records, outcome)
         for array in records:
             array.flags.writeable = False
         for j, i in enumerate(call.indices):
@@ -175,11 +171,6 @@ def plant_forces(group: list[Item]) -> PlantForces:
         dist_map=np.ascontiguousarray(group[0].dist_map),
         friction=_stack([g.friction for g in group], (len(group[0].plant.inputs), FRICTION_AXIS.size)),
     )
-
-
-def _friction_path(group: list[Item]) -> FrictionPath:
-    """The friction path of a kernel call: compiled only for a call with friction."""
-    return FRICTIONAL if any(any_friction(g.friction) for g in group) else FRICTIONLESS
 
 
 def empty_records(group: list[Item], n_k: int, n_rec: int, n_rows: int | None = None) -> Records:

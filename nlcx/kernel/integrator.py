@@ -42,10 +42,11 @@ import numpy as np
 from numba import njit
 
 from nlcx.kernel.abi import ACTUATOR, ELEMENT_ENTRY, SENSOR, STATUS_BOUND, STATUS_NONFINITE, shared_row
+from nlcx.kernel.friction_path import FRICTIONAL, FRICTIONLESS
 from nlcx.kernel.signatures import BoolArray, ElementFunctions, FloatArray, IntArray
 from nlcx.kernel.stepping import SEQUENTIAL, add_disturbances, first_failing_state, hold_input, rk_step, sample_signals
 from nlcx.kernel.structures import CLASSIC_RK4, SIMULATE_SIG
-from nlcx.kernel.working_storage import clear_columns, compact
+from nlcx.kernel.working_storage import clear_columns, compact, working_storage
 
 if TYPE_CHECKING:
     from nlcx.kernel.structures import (
@@ -269,3 +270,20 @@ def simulate(
             if nb == 0:
                 break
             yv, rv, uv, xv, cpv, csv, logv = y[:nb], r[:nb], u[:nb], xrow[:nb], cpw[:nb], cs[:nb], log[:nb]
+
+
+def integrate_batch(
+    integration: Integration,
+    plant: PlantCall,
+    controller: ControllerCall,
+    elements: LoopElements,
+    forces: PlantForces,
+    records: Records,
+    outcome: Outcome,
+) -> None:
+    """One kernel call: its working storage built (:func:`~nlcx.kernel.working_storage.working_storage`),
+    its friction path chosen (:data:`~nlcx.kernel.friction_path.FRICTIONAL` only where a variant
+    has friction, so that a call without compiles none of it) and :func:`simulate` run."""
+    working = working_storage(integration, plant, controller, elements, forces, records, outcome)
+    path = FRICTIONAL if working.n_free < plant.x0.shape[0] else FRICTIONLESS
+    simulate(integration, plant, controller, elements, forces, records, outcome, path, working)

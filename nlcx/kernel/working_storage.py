@@ -54,7 +54,7 @@ def working_storage(
     every variant's ``outcome`` set to ok until it stops."""
     n_steps, n_u = records.X.shape[1] - 1, records.U.shape[2]
     slots, n_free = working_slots(plant, controller, forces.friction, n_u, records.LOG.shape[2])
-    xrow = slots_rows(plant.x0, slots.vid)
+    xrow = np.ascontiguousarray(slots.x.T)
     n_batch, n = xrow.shape
     signals = Signals(
         xrow=xrow, y=np.empty((n_batch, plant.C.shape[0])), r=np.empty((n_batch, controller.ref.shape[2])),
